@@ -1,0 +1,69 @@
+//! Picking the compute backend at the edge of the program.
+//!
+//! Burn 0.22 selects the backend at run time through a [`Device`] value, so the
+//! library never names a backend type: the CLI maps `--backend` to a device here
+//! and passes `&Device` down.
+
+#![allow(deprecated)] // `Device::ndarray()` is deprecated in favour of flex, but stays selectable.
+
+use burn::tensor::{Device, DeviceKind, DeviceType};
+use serde::{Deserialize, Serialize};
+
+use crate::{DomaError, Result};
+
+/// The compute backends that doma is built with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum BackendKind {
+    /// Burn's pure-Rust CPU backend (the default CPU device).
+    Flex,
+    /// The ndarray CPU backend.
+    Ndarray,
+    /// wgpu: Vulkan/Metal/DX12 GPUs, or Mesa's lavapipe on a machine without one.
+    Wgpu,
+}
+
+impl BackendKind {
+    /// The lower-case name used on the command line and in JSON records.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendKind::Flex => "flex",
+            BackendKind::Ndarray => "ndarray",
+            BackendKind::Wgpu => "wgpu",
+        }
+    }
+
+    /// A device of this backend (without autodiff), or an error naming why it
+    /// cannot run here (for wgpu: no adapter).
+    pub fn device(self) -> Result<Device> {
+        match self {
+            BackendKind::Flex => Ok(Device::flex()),
+            BackendKind::Ndarray => Ok(Device::ndarray()),
+            BackendKind::Wgpu => {
+                if wgpu_available() {
+                    Ok(Device::wgpu(DeviceKind::DefaultDevice))
+                } else {
+                    Err(DomaError::BackendUnavailable {
+                        backend: "wgpu".into(),
+                        reason: "no wgpu adapter was found (install a GPU driver, or Mesa's \
+                                 lavapipe: apt-get install mesa-vulkan-drivers libvulkan1)"
+                            .into(),
+                    })
+                }
+            }
+        }
+    }
+}
+
+impl std::fmt::Display for BackendKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Whether at least one wgpu adapter exists. Never panics: a missing Vulkan
+/// loader is reported as "no adapter".
+pub fn wgpu_available() -> bool {
+    let probe = std::panic::catch_unwind(|| Device::enumerate(DeviceType::Wgpu).into_vec().len());
+    matches!(probe, Ok(n) if n > 0)
+}

@@ -1,0 +1,128 @@
+//! Point trajectories and their splits.
+
+pub mod synthetic;
+
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::{DomaError, Result};
+
+/// The normalised time of frame `k` of `frames`: `t_k = −1 + 2k/(T−1)` (REFERENCE §1),
+/// so the canonical frame 0 is `t = −1` and the last frame `t = 1`. A single frame is
+/// at `t = −1`.
+pub fn normalized_time(k: usize, frames: usize) -> f64 {
+    if frames < 2 {
+        -1.0
+    } else {
+        -1.0 + 2.0 * k as f64 / (frames - 1) as f64
+    }
+}
+
+/// `T` frames of `N` corresponding points, `[T, N, 3]`, frame-major, `f32`.
+/// Point `i` is the same material point in every frame; frame 0 is canonical.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Trajectories {
+    frames: usize,
+    points: usize,
+    positions: Vec<f32>,
+}
+
+impl Trajectories {
+    /// Checks and wraps `positions` (`[T, N, 3]`, frame-major). Refuses an empty
+    /// sequence, a length that is not `T·N·3`, and non-finite coordinates.
+    pub fn new(frames: usize, points: usize, positions: Vec<f32>) -> Result<Self> {
+        if frames == 0 || points == 0 {
+            return Err(DomaError::InvalidData(format!(
+                "an empty sequence ({frames} frames, {points} points)"
+            )));
+        }
+        let expected = frames
+            .checked_mul(points)
+            .and_then(|v| v.checked_mul(3))
+            .ok_or_else(|| DomaError::InvalidData("frame × point count overflows".into()))?;
+        if positions.len() != expected {
+            return Err(DomaError::InvalidData(format!(
+                "{} coordinates for {frames} frames × {points} points × 3 = {expected}",
+                positions.len()
+            )));
+        }
+        if let Some(i) = positions.iter().position(|v| !v.is_finite()) {
+            let (f, p) = (i / (3 * points), (i / 3) % points);
+            return Err(DomaError::InvalidData(format!(
+                "coordinate {} of point {p} in frame {f} is {}",
+                i % 3,
+                positions[i]
+            )));
+        }
+        Ok(Trajectories {
+            frames,
+            points,
+            positions,
+        })
+    }
+
+    /// The number of frames `T`.
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
+    /// The number of points `N`.
+    pub fn points(&self) -> usize {
+        self.points
+    }
+
+    /// All positions, `[T, N, 3]` frame-major.
+    pub fn positions(&self) -> &[f32] {
+        &self.positions
+    }
+
+    /// Frame `k`'s positions, `[N, 3]` row-major.
+    pub fn frame(&self, k: usize) -> &[f32] {
+        let len = self.points * 3;
+        &self.positions[k * len..(k + 1) * len]
+    }
+
+    /// The normalised time of frame `k` ([`normalized_time`]).
+    pub fn time(&self, k: usize) -> f64 {
+        normalized_time(k, self.frames)
+    }
+
+    /// Frame `k` as a `[N, 3]` tensor on `device`.
+    pub fn frame_tensor(&self, k: usize, device: &Device) -> Tensor<2> {
+        Tensor::from_data(
+            TensorData::new(self.frame(k).to_vec(), [self.points, 3]),
+            device,
+        )
+    }
+
+    /// The trajectories of the points at `indices` (in that order).
+    pub fn select_points(&self, indices: &[usize]) -> Result<Self> {
+        if let Some(&bad) = indices.iter().find(|&&i| i >= self.points) {
+            return Err(DomaError::InvalidData(format!(
+                "point index {bad} out of range for {} points",
+                self.points
+            )));
+        }
+        let mut positions = Vec::with_capacity(self.frames * indices.len() * 3);
+        for k in 0..self.frames {
+            let frame = self.frame(k);
+            for &i in indices {
+                positions.extend_from_slice(&frame[3 * i..3 * i + 3]);
+            }
+        }
+        Trajectories::new(self.frames, indices.len(), positions)
+    }
+
+    /// Splits the points into the first `n_train` and the rest (the authors' split of
+    /// i.i.d. synthetic points, REFERENCE §6.1).
+    pub fn split_first(&self, n_train: usize) -> Result<(Self, Self)> {
+        if n_train == 0 || n_train >= self.points {
+            return Err(DomaError::InvalidData(format!(
+                "cannot split {} points into {n_train} training points and a non-empty rest",
+                self.points
+            )));
+        }
+        let train: Vec<usize> = (0..n_train).collect();
+        let test: Vec<usize> = (n_train..self.points).collect();
+        Ok((self.select_points(&train)?, self.select_points(&test)?))
+    }
+}

@@ -1,0 +1,67 @@
+//! The crate's error type.
+//!
+//! User data never causes a panic: readers, the fit loop and the CLI return
+//! [`DomaError`], which names the file or the iteration and the problem.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in doma's library code.
+#[derive(Debug, thiserror::Error)]
+pub enum DomaError {
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating-system error.
+        source: std::io::Error,
+    },
+    /// A file was read but its contents are not valid.
+    #[error("{path}: {reason}")]
+    Malformed {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// Data handed to the library is not usable (empty, NaN, mismatched shapes).
+    #[error("invalid data: {0}")]
+    InvalidData(String),
+    /// A configuration value is out of range.
+    #[error("invalid configuration: {0}")]
+    InvalidConfig(String),
+    /// The loss stopped being finite during a fit.
+    #[error("the loss became {value} at iteration {iteration} (frame {frame}); the fit was stopped")]
+    NonFiniteLoss {
+        /// The 0-based iteration (one pass over all frames).
+        iteration: usize,
+        /// The frame whose step produced the value.
+        frame: usize,
+        /// The offending value (NaN or ±inf).
+        value: f64,
+    },
+    /// The requested compute backend cannot run on this machine.
+    #[error("backend {backend} is not available: {reason}")]
+    BackendUnavailable {
+        /// The backend's name.
+        backend: String,
+        /// Why.
+        reason: String,
+    },
+    /// A tensor could not be read back from the device.
+    #[error("device error: {0}")]
+    Device(String),
+}
+
+impl DomaError {
+    /// An [`DomaError::Io`] for `path`.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        DomaError::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}
+
+/// The crate's result type.
+pub type Result<T, E = DomaError> = std::result::Result<T, E>;

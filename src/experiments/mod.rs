@@ -1,0 +1,3 @@
+//! The paper's experiments as library functions, shared by the CLI and the examples.
+
+pub mod synthetic;

@@ -1,0 +1,184 @@
+//! The synthetic benchmark (paper Tab. 2): fit each variant to each synthetic motion
+//! and report the EPE on the held-out points.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::backend::BackendKind;
+use crate::data::synthetic::{Motion, benchmark_sequence};
+use crate::field::{DomaFieldConfig, Variant};
+use crate::jacobian::JacobianKind;
+use crate::metrics::{EPE_SCALE, evaluate_epe};
+use crate::train::{FitConfig, fit};
+use crate::{DomaError, Result};
+
+/// The regulariser of a run: the rows "", "-E" and "-H" of Tab. 2.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Regularizer {
+    /// The trajectory loss alone.
+    None,
+    /// The smoothness loss `L_H` (Eq. 13, squared form).
+    H,
+    /// The elasticity loss (Nerfies).
+    E,
+}
+
+impl Regularizer {
+    /// The lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Regularizer::None => "none",
+            Regularizer::H => "h",
+            Regularizer::E => "e",
+        }
+    }
+
+    /// The suffix of the paper's row names ("", "-H", "-E").
+    pub fn suffix(self) -> &'static str {
+        match self {
+            Regularizer::None => "",
+            Regularizer::H => "-H",
+            Regularizer::E => "-E",
+        }
+    }
+}
+
+/// What to run.
+#[derive(Clone, Debug)]
+pub struct SyntheticJob {
+    /// The motions (columns).
+    pub motions: Vec<Motion>,
+    /// The variants (rows).
+    pub variants: Vec<Variant>,
+    /// The regulariser of every run.
+    pub reg: Regularizer,
+    /// `w_H` when `reg` is `H`.
+    pub h_weight: f64,
+    /// `w_E` when `reg` is `E`.
+    pub e_weight: f64,
+    /// Iterations per fit.
+    pub iterations: usize,
+    /// Hidden width.
+    pub hidden: usize,
+    /// The backend.
+    pub backend: BackendKind,
+    /// The Jacobian method.
+    pub jacobian: JacobianKind,
+    /// The seed of the weights and of the frame order (the points are always the
+    /// reference draw, numpy seed 0).
+    pub seed: u64,
+    /// No progress bars.
+    pub quiet: bool,
+}
+
+impl SyntheticJob {
+    /// The fit configuration of one run.
+    pub fn fit_config(&self, variant: Variant) -> FitConfig {
+        let (w_h, w_e) = match self.reg {
+            Regularizer::None => (0.0, 0.0),
+            Regularizer::H => (self.h_weight, 0.0),
+            Regularizer::E => (0.0, self.e_weight),
+        };
+        FitConfig::new(DomaFieldConfig::new(variant).with_hidden(self.hidden))
+            .with_iterations(self.iterations)
+            .with_smoothness_weight(w_h)
+            .with_elasticity_weight(w_e)
+            .with_jacobian(self.jacobian)
+            .with_seed(self.seed)
+            .with_quiet(self.quiet)
+    }
+}
+
+/// One run's record (one JSON object per run).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct SyntheticRun {
+    /// The motion.
+    pub motion: Motion,
+    /// The variant.
+    pub variant: Variant,
+    /// The regulariser.
+    pub reg: Regularizer,
+    /// Iterations.
+    pub iters: usize,
+    /// The backend.
+    pub backend: BackendKind,
+    /// The Jacobian method.
+    pub jacobian: JacobianKind,
+    /// EPE × 10⁴ on the 2250 test points.
+    pub epe_x1e4: f64,
+    /// Wall time of the fit loop, seconds.
+    pub seconds: f64,
+    /// Optimiser steps.
+    pub steps: usize,
+}
+
+/// Runs every (variant, motion) pair of `job`, calling `on_run` after each fit.
+pub fn run(job: &SyntheticJob, mut on_run: impl FnMut(&SyntheticRun)) -> Result<Vec<SyntheticRun>> {
+    let device = job.backend.device()?;
+    let mut runs = Vec::new();
+    for &motion in &job.motions {
+        let seq = benchmark_sequence(motion, 0)?;
+        for &variant in &job.variants {
+            let fitted = fit(&job.fit_config(variant), &seq.train, &device)?;
+            let epe = evaluate_epe(&fitted.field, &seq.test, &device)?;
+            let run = SyntheticRun {
+                motion,
+                variant,
+                reg: job.reg,
+                iters: job.iterations,
+                backend: job.backend,
+                jacobian: job.jacobian,
+                epe_x1e4: epe * EPE_SCALE,
+                seconds: fitted.seconds,
+                steps: fitted.steps,
+            };
+            on_run(&run);
+            runs.push(run);
+        }
+    }
+    Ok(runs)
+}
+
+/// A table like the paper's Tab. 2: one row per (variant, regulariser), one column per
+/// motion, EPE × 10⁴.
+pub fn table(runs: &[SyntheticRun]) -> String {
+    let mut motions: Vec<Motion> = Vec::new();
+    let mut rows: Vec<(Variant, Regularizer)> = Vec::new();
+    for r in runs {
+        if !motions.contains(&r.motion) {
+            motions.push(r.motion);
+        }
+        if !rows.contains(&(r.variant, r.reg)) {
+            rows.push((r.variant, r.reg));
+        }
+    }
+    motions.sort_by_key(|m| Motion::ALL.iter().position(|x| x == m));
+    let mut out = format!("{:<20}", "EPE (x1e-4)");
+    for m in &motions {
+        out += &format!(" | {:>11}", m.name());
+    }
+    out += "\n";
+    out += &"-".repeat(20 + 14 * motions.len());
+    out += "\n";
+    for (variant, reg) in rows {
+        out += &format!("{:<20}", format!("{}{}", variant.paper_name(), reg.suffix()));
+        for m in &motions {
+            let cell = runs
+                .iter()
+                .find(|r| r.variant == variant && r.reg == reg && r.motion == *m)
+                .map_or("-".to_string(), |r| format!("{:.2}", r.epe_x1e4));
+            out += &format!(" | {cell:>11}");
+        }
+        out += "\n";
+    }
+    out
+}
+
+/// Writes the runs as a JSON array, atomically.
+pub fn write_json(path: &Path, runs: &[SyntheticRun]) -> Result<()> {
+    let text = serde_json::to_string_pretty(runs)
+        .map_err(|e| DomaError::InvalidData(format!("cannot serialise the runs: {e}")))?;
+    crate::io::write_atomic(path, text.as_bytes())
+}

@@ -1,0 +1,33 @@
+//! # doma
+//!
+//! A Burn implementation of *Degrees of Freedom Matter: Inferring Dynamics from
+//! Point Trajectories* (Zhang et al., CVPR 2024, "DOMA").
+//!
+//! From observed 3-D point trajectories, doma fits one small SIREN `f(x, t)`
+//! ([`siren`]) whose outputs a head ([`field`]) turns into a local transformation
+//! `(A, u)`; any canonical point `x` then moves to `y = A x + u` (Eq. 4 of the paper).
+//! The variants (Trans, SE(3), Scaled SE(3), Affinity) differ only in the degrees of
+//! freedom of `A`. The smoothness loss `L_H` (Eq. 13) needs the spatial Jacobian of the
+//! network inside the loss; [`jacobian`] computes it in forward mode, so that Burn's
+//! first-order reverse mode gives exact parameter gradients through it.
+//!
+//! The backend is a runtime value ([`backend::BackendKind`] maps a name to a Burn
+//! `Device`); no code is generic over a backend type.
+//!
+//! Equation numbers refer to the CVPR 2024 paper (main text): Eq. 1 SIREN, Eq. 2 DPF,
+//! Eq. 4 the affinity field, Eq. 6 the SIREN Jacobian, Eq. 10–12 the Trans, SE(3) and
+//! Scaled SE(3) variants, Eq. 13 the smoothness loss.
+
+pub mod backend;
+pub mod data;
+pub mod error;
+pub mod experiments;
+pub mod field;
+pub mod io;
+pub mod jacobian;
+pub mod loss;
+pub mod metrics;
+pub mod siren;
+pub mod train;
+
+pub use error::{DomaError, Result};

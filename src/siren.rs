@@ -1,0 +1,221 @@
+//! The SIREN backbone (Eq. 1; Sitzmann et al. 2020) with the authors' initialisation.
+//!
+//! Layers `i = 0..=n` are sine layers `h_{i+1} = sin(ω (h_i W_i + b_i))`, and the
+//! output layer is linear, `o = h_{n+1} W_o + b_o` (the "outermost linear" form).
+//! `ω` multiplies the bias too (REFERENCE §1).
+
+use burn::config::Config;
+use burn::module::{Module, Param};
+use burn::nn::Linear;
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::jacobian::Dual;
+
+/// The shape of a SIREN.
+#[derive(Config, Debug)]
+pub struct SirenConfig {
+    /// Input width (4 for `[x, y, z, t]`).
+    #[config(default = 4)]
+    pub d_in: usize,
+    /// Hidden width `d` (the paper's 128).
+    #[config(default = 128)]
+    pub hidden: usize,
+    /// Number of hidden sine layers `n` after the first sine layer (the paper's 2).
+    #[config(default = 2)]
+    pub n_hidden: usize,
+    /// Output width (3 for Trans, 9 for SE(3), 10 for Scaled SE(3), 12 for Affinity).
+    pub d_out: usize,
+    /// The frequency `ω₀` of every sine layer.
+    #[config(default = 30.0)]
+    pub omega: f64,
+}
+
+impl SirenConfig {
+    /// The widths `(fan_in, fan_out)` of every layer, sine layers first, output last.
+    pub fn layer_shapes(&self) -> Vec<(usize, usize)> {
+        let mut shapes = vec![(self.d_in, self.hidden)];
+        shapes.extend((0..self.n_hidden).map(|_| (self.hidden, self.hidden)));
+        shapes.push((self.hidden, self.d_out));
+        shapes
+    }
+
+    /// The number of trainable parameters (weights and biases).
+    pub fn num_params(&self) -> usize {
+        self.layer_shapes().iter().map(|(i, o)| i * o + o).sum()
+    }
+
+    /// A SIREN initialised by [`SirenInitializer`] from `seed`, on `device`.
+    pub fn init(&self, seed: u64, device: &Device) -> Siren {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let layers = SirenInitializer::new(self.omega).init(self, &mut rng);
+        Siren::from_weights(&layers, self.omega, device)
+    }
+}
+
+/// Host-side weights of one layer: `weight` is `[fan_in, fan_out]` row-major
+/// (Burn's `y = x W + b` layout), `bias` is `[fan_out]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LayerWeights {
+    /// Input width.
+    pub fan_in: usize,
+    /// Output width.
+    pub fan_out: usize,
+    /// `[fan_in, fan_out]`, row-major.
+    pub weight: Vec<f64>,
+    /// `[fan_out]`.
+    pub bias: Vec<f64>,
+}
+
+/// Which kind of layer a weight bound is for (REFERENCE §1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LayerRole {
+    /// The first sine layer, fed `[x, t]`.
+    First,
+    /// A hidden sine layer.
+    Hidden,
+    /// The linear output layer.
+    Output,
+}
+
+/// The SIREN initialisation of the authors' code (REFERENCE §1):
+/// - first layer `W ~ U(±1/fan_in)`;
+/// - hidden and output layers `W ~ U(±√(6/fan_in)/ω₀)`;
+/// - every bias `U(±1/√fan_in)` (PyTorch's `nn.Linear` default, never re-initialised).
+#[derive(Clone, Copy, Debug)]
+pub struct SirenInitializer {
+    /// The sine frequency `ω₀`.
+    pub omega: f64,
+}
+
+impl SirenInitializer {
+    /// An initialiser for sine frequency `omega`.
+    pub fn new(omega: f64) -> Self {
+        SirenInitializer { omega }
+    }
+
+    /// The half-width of the uniform weight distribution of a layer.
+    pub fn weight_bound(&self, role: LayerRole, fan_in: usize) -> f64 {
+        match role {
+            LayerRole::First => 1.0 / fan_in as f64,
+            LayerRole::Hidden | LayerRole::Output => (6.0 / fan_in as f64).sqrt() / self.omega,
+        }
+    }
+
+    /// The half-width of the uniform bias distribution of a layer.
+    pub fn bias_bound(&self, fan_in: usize) -> f64 {
+        1.0 / (fan_in as f64).sqrt()
+    }
+
+    /// Draws every layer of `config`, sine layers first, output last.
+    pub fn init(&self, config: &SirenConfig, rng: &mut impl Rng) -> Vec<LayerWeights> {
+        let shapes = config.layer_shapes();
+        let last = shapes.len() - 1;
+        shapes
+            .iter()
+            .enumerate()
+            .map(|(i, &(fan_in, fan_out))| {
+                let role = match i {
+                    0 => LayerRole::First,
+                    i if i == last => LayerRole::Output,
+                    _ => LayerRole::Hidden,
+                };
+                let wb = self.weight_bound(role, fan_in);
+                let bb = self.bias_bound(fan_in);
+                LayerWeights {
+                    fan_in,
+                    fan_out,
+                    weight: (0..fan_in * fan_out)
+                        .map(|_| rng.random_range(-wb..wb))
+                        .collect(),
+                    bias: (0..fan_out).map(|_| rng.random_range(-bb..bb)).collect(),
+                }
+            })
+            .collect()
+    }
+}
+
+/// A SIREN with sine layers `sine[0..=n]` and a linear `output` layer (Eq. 1).
+#[derive(Module, Debug)]
+pub struct Siren {
+    /// The sine layers: the first (fed `[x, t]`) and the `n` hidden ones.
+    pub sine: Vec<Linear>,
+    /// The linear output layer.
+    pub output: Linear,
+    /// The sine frequency `ω₀`, which multiplies `h W + b`.
+    pub omega: f64,
+}
+
+fn linear_from(layer: &LayerWeights, device: &Device) -> Linear {
+    let w = TensorData::new(layer.weight.clone(), [layer.fan_in, layer.fan_out]);
+    let b = TensorData::new(layer.bias.clone(), [layer.fan_out]);
+    Linear {
+        weight: Param::from_data(w, device),
+        bias: Some(Param::from_data(b, device)),
+    }
+}
+
+fn read_back(t: Tensor<2>) -> Vec<f64> {
+    t.into_data()
+        .convert::<f64>()
+        .to_vec::<f64>()
+        .expect("a float tensor converts to f64")
+}
+
+impl Siren {
+    /// Builds a SIREN from host weights (sine layers first, output last).
+    pub fn from_weights(layers: &[LayerWeights], omega: f64, device: &Device) -> Self {
+        assert!(layers.len() >= 2, "a SIREN needs a sine layer and an output layer");
+        let (out, sine) = layers.split_last().expect("checked above");
+        Siren {
+            sine: sine.iter().map(|l| linear_from(l, device)).collect(),
+            output: linear_from(out, device),
+            omega,
+        }
+    }
+
+    /// Reads the weights back to the host (sine layers first, output last).
+    pub fn to_weights(&self) -> Vec<LayerWeights> {
+        self.sine
+            .iter()
+            .chain(std::iter::once(&self.output))
+            .map(|l| {
+                let [fan_in, fan_out] = l.weight.val().dims();
+                let bias = l.bias.as_ref().expect("SIREN layers have a bias").val();
+                LayerWeights {
+                    fan_in,
+                    fan_out,
+                    weight: read_back(l.weight.val()),
+                    bias: read_back(bias.unsqueeze_dim(0)),
+                }
+            })
+            .collect()
+    }
+
+    /// Output width.
+    pub fn d_out(&self) -> usize {
+        self.output.weight.val().dims()[1]
+    }
+
+    /// The network on a batch `[N, d_in]` → `[N, d_out]`.
+    pub fn forward(&self, input: Tensor<2>) -> Tensor<2> {
+        self.forward_dual(Dual::constant(input)).value
+    }
+
+    /// The network on duals: the tangents of the input are pushed through every
+    /// layer (`ż_i = ω ḣ_i W_i`, `ḣ_{i+1} = cos z_i ⊙ ż_i`, `J = ḣ_{n+1} W_o`; DESIGN §2).
+    pub fn forward_dual(&self, input: Dual) -> Dual {
+        let mut h = input;
+        for layer in &self.sine {
+            h = h
+                .linear(layer.weight.val(), layer.bias.as_ref().map(|b| b.val()))
+                .mul_scalar(self.omega)
+                .sin();
+        }
+        h.linear(
+            self.output.weight.val(),
+            self.output.bias.as_ref().map(|b| b.val()),
+        )
+    }
+}

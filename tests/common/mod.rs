@@ -1,0 +1,40 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+pub mod oracle;
+
+use std::sync::{Mutex, MutexGuard};
+
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Burn's `backward` must not run in parallel threads (burn#5573): tests that call it
+/// hold this lock.
+static BACKWARD: Mutex<()> = Mutex::new(());
+
+pub fn backward_lock() -> MutexGuard<'static, ()> {
+    BACKWARD.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+pub fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f64> {
+    t.into_data().convert::<f64>().to_vec::<f64>().unwrap()
+}
+
+pub fn tensor2(values: Vec<f64>, shape: [usize; 2], device: &Device) -> Tensor<2> {
+    Tensor::from_data(TensorData::new(values, shape), device)
+}
+
+/// `‖a − b‖ / ‖b‖` (Euclidean over all entries), guarded against a zero reference.
+pub fn rel_err(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len(), "length mismatch");
+    let diff: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>().sqrt();
+    let norm: f64 = b.iter().map(|y| y * y).sum::<f64>().sqrt();
+    diff / norm.max(1e-30)
+}
+
+/// `n` random points in `[-1, 1]^3`, row-major.
+pub fn random_points(n: usize, seed: u64) -> Vec<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..3 * n).map(|_| rng.random_range(-1.0..1.0)).collect()
+}

@@ -1,0 +1,155 @@
+//! The fit loop: it learns, it is deterministic, it stops on a non-finite loss, and
+//! every backend runs the same function to the same result.
+
+mod common;
+
+use burn::tensor::Device;
+use common::{backward_lock, rel_err, to_vec};
+use doma::DomaError;
+use doma::backend::{BackendKind, wgpu_available};
+use doma::data::Trajectories;
+use doma::data::synthetic::{Motion, benchmark_sequence};
+use doma::field::{DomaField, DomaFieldConfig, MotionField, Variant};
+use doma::train::{FitConfig, fit};
+
+/// A small piece of the synthetic protocol: 64 training points, 5 frames.
+fn small_data() -> (Trajectories, Trajectories) {
+    let seq = benchmark_sequence(Motion::Shearing, 0).unwrap();
+    let frames: Vec<usize> = (0..seq.train.frames()).step_by(4).collect();
+    let cut = |t: &Trajectories, n: usize| {
+        let pos: Vec<f32> = frames
+            .iter()
+            .flat_map(|&k| t.frame(k)[..3 * n].to_vec())
+            .collect();
+        Trajectories::new(frames.len(), n, pos).unwrap()
+    };
+    (cut(&seq.train, 64), cut(&seq.test, 64))
+}
+
+fn config(variant: Variant, iters: usize) -> FitConfig {
+    FitConfig::new(DomaFieldConfig::new(variant).with_hidden(32))
+        .with_iterations(iters)
+        .with_quiet(true)
+}
+
+fn predictions(field: &DomaField, data: &Trajectories, device: &Device) -> Vec<f64> {
+    to_vec(field.warp(data.frame_tensor(0, device), data.time(3)))
+}
+
+#[test]
+fn a_fit_reduces_the_loss_and_counts_its_steps() {
+    let _g = backward_lock();
+    let (train, _) = small_data();
+    let device = Device::flex();
+    let fitted = fit(&config(Variant::Trans, 40).with_learning_rate(1e-3), &train, &device).unwrap();
+    assert_eq!(fitted.history.len(), 40);
+    assert_eq!(fitted.steps, 40 * 5);
+    let first = fitted.history[0].trajectory_loss;
+    let last = fitted.history[39].trajectory_loss;
+    assert!(last < 0.5 * first, "L1 went from {first} to {last}");
+}
+
+#[test]
+fn the_smoothness_term_is_added_to_the_loss() {
+    let _g = backward_lock();
+    let (train, _) = small_data();
+    let device = Device::flex();
+    for variant in Variant::ALL {
+        let h = fit(&config(variant, 1).with_smoothness_weight(0.1), &train, &device).unwrap();
+        let r = &h.history[0];
+        assert!(r.total_loss > r.trajectory_loss, "{variant:?}: {r:?}");
+        let e = fit(&config(variant, 1).with_elasticity_weight(0.1), &train, &device).unwrap();
+        let r = &e.history[0];
+        assert!(r.total_loss > r.trajectory_loss, "{variant:?}: {r:?}");
+    }
+}
+
+#[test]
+fn the_same_seed_gives_the_same_fit() {
+    let _g = backward_lock();
+    let (train, test) = small_data();
+    let device = Device::flex();
+    let c = config(Variant::Affinity, 3).with_smoothness_weight(0.1);
+    let a = fit(&c, &train, &device).unwrap();
+    let b = fit(&c, &train, &device).unwrap();
+    assert_eq!(predictions(&a.field, &test, &device), predictions(&b.field, &test, &device));
+    let other = fit(&c.clone().with_seed(1), &train, &device).unwrap();
+    assert_ne!(predictions(&a.field, &test, &device), predictions(&other.field, &test, &device));
+}
+
+#[test]
+fn the_learning_rate_schedule_is_the_authors_lambda_lr() {
+    let c = config(Variant::Trans, 1000);
+    assert_eq!(c.lr_factor(0), 1.0);
+    assert_eq!(c.lr_factor(10), 1.0);
+    assert!((c.lr_factor(11) - (1.0 - 1.0 / 991.0)).abs() < 1e-15);
+    assert!((c.lr_factor(999) - 2.0 / 991.0).abs() < 1e-15);
+    // Short runs never decay, and never divide by zero.
+    let short = config(Variant::Trans, 9);
+    assert!((0..9).all(|e| short.lr_factor(e) == 1.0));
+}
+
+#[test]
+fn bad_configs_are_refused() {
+    let (train, _) = small_data();
+    let device = Device::flex();
+    for c in [
+        config(Variant::Trans, 0),
+        config(Variant::Trans, 1).with_learning_rate(-1.0),
+        config(Variant::Trans, 1).with_smoothness_weight(f64::NAN),
+        config(Variant::Trans, 1).with_smoothness_points(Some(0)),
+    ] {
+        assert!(matches!(fit(&c, &train, &device), Err(DomaError::InvalidConfig(_))));
+    }
+}
+
+#[test]
+fn a_non_finite_loss_stops_the_fit_and_names_the_iteration() {
+    let _g = backward_lock();
+    // Finite f32 coordinates whose L1 sum overflows to +inf.
+    let huge = Trajectories::new(2, 16, vec![3.0e38; 96]).unwrap();
+    let err = fit(&config(Variant::Trans, 5), &huge, &Device::flex()).unwrap_err();
+    match err {
+        DomaError::NonFiniteLoss { iteration, .. } => assert_eq!(iteration, 0),
+        other => panic!("expected NonFiniteLoss, got {other}"),
+    }
+    assert!(err_message_names_iteration());
+}
+
+fn err_message_names_iteration() -> bool {
+    let msg = DomaError::NonFiniteLoss {
+        iteration: 7,
+        frame: 3,
+        value: f64::NAN,
+    }
+    .to_string();
+    msg.contains("iteration 7") && msg.contains("NaN")
+}
+
+/// Fits Affinity-H for 3 iterations on `backend` and returns the test predictions.
+fn short_fit_on(backend: BackendKind) -> Vec<f64> {
+    let (train, test) = small_data();
+    let device = backend.device().unwrap();
+    let c = config(Variant::Affinity, 3).with_smoothness_weight(0.1);
+    let fitted = fit(&c, &train, &device).unwrap();
+    predictions(&fitted.field, &test, &device)
+}
+
+#[test]
+fn ndarray_agrees_with_flex() {
+    let _g = backward_lock();
+    let e = rel_err(&short_fit_on(BackendKind::Ndarray), &short_fit_on(BackendKind::Flex));
+    assert!(e < 1e-4, "ndarray vs flex: relative difference {e:e}");
+}
+
+#[test]
+fn wgpu_agrees_with_flex() {
+    let _g = backward_lock();
+    if !wgpu_available() {
+        eprintln!("SKIPPED wgpu_agrees_with_flex: no wgpu adapter on this machine");
+        return;
+    }
+    let e = rel_err(&short_fit_on(BackendKind::Wgpu), &short_fit_on(BackendKind::Flex));
+    eprintln!("wgpu vs flex after 3 Affinity-H iterations: relative difference {e:e}");
+    assert!(e < 1e-4, "wgpu vs flex: relative difference {e:e}");
+}

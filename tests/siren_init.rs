@@ -1,0 +1,93 @@
+//! The SIREN initialiser against REFERENCE §1, and the parameter counts.
+
+use doma::field::{DomaFieldConfig, MotionField, Variant};
+use doma::siren::{LayerRole, SirenConfig, SirenInitializer};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+fn check_uniform(values: &[f64], bound: f64, what: &str) {
+    let n = values.len() as f64;
+    let max = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(max <= bound, "{what}: |value| {max} exceeds the bound {bound}");
+    // The sample should fill the interval: the largest |value| is close to the bound.
+    assert!(max > 0.9 * bound, "{what}: max |value| {max} far below the bound {bound}");
+    let mean = values.iter().sum::<f64>() / n;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    let expected_var = bound * bound / 3.0;
+    // Standard error of a uniform's sample variance: sqrt(4/45)·b²/sqrt(n) ≈ 0.3·b²/sqrt(n).
+    let tol = 5.0 * 0.3 * bound * bound / n.sqrt();
+    assert!(
+        (var - expected_var).abs() < tol,
+        "{what}: variance {var} vs U(±{bound}) variance {expected_var} (tol {tol})"
+    );
+    let mean_tol = 5.0 * bound / (3.0 * n).sqrt();
+    assert!(mean.abs() < mean_tol, "{what}: mean {mean} (tol {mean_tol})");
+}
+
+#[test]
+fn every_layer_follows_the_reference_distributions() {
+    let config = SirenConfig::new(12).with_hidden(256).with_n_hidden(2);
+    let init = SirenInitializer::new(30.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let layers = init.init(&config, &mut rng);
+    assert_eq!(layers.len(), 4);
+
+    // First layer: W ~ U(±1/4), b ~ U(±1/2). Its 1024 weights are enough for the test.
+    assert_eq!((layers[0].fan_in, layers[0].fan_out), (4, 256));
+    check_uniform(&layers[0].weight, 0.25, "first weight");
+    assert!((init.weight_bound(LayerRole::First, 4) - 0.25).abs() < 1e-15);
+    assert!((init.bias_bound(4) - 0.5).abs() < 1e-15);
+
+    // Hidden layers: W ~ U(±√(6/256)/30), b ~ U(±1/16).
+    let hidden_bound = (6.0f64 / 256.0).sqrt() / 30.0;
+    for (i, layer) in layers[1..3].iter().enumerate() {
+        check_uniform(&layer.weight, hidden_bound, &format!("hidden {i} weight"));
+    }
+    // Output layer: the same weight bound as the hidden layers (not zero-initialised).
+    check_uniform(&layers[3].weight, hidden_bound, "output weight");
+    assert!((init.weight_bound(LayerRole::Output, 128) - 0.007_216_878).abs() < 1e-8);
+
+    // Biases keep PyTorch's fan-in bound. Pool the hidden biases for a usable sample.
+    let biases: Vec<f64> = layers[1..].iter().flat_map(|l| l.bias.clone()).collect();
+    check_uniform(&biases, 1.0 / 16.0, "hidden and output biases");
+    let first_biases = &layers[0].bias;
+    assert!(first_biases.iter().all(|b| b.abs() <= 0.5));
+}
+
+#[test]
+fn the_same_seed_gives_the_same_weights() {
+    let config = SirenConfig::new(3).with_hidden(16);
+    let init = SirenInitializer::new(30.0);
+    let a = init.init(&config, &mut ChaCha8Rng::seed_from_u64(3));
+    let b = init.init(&config, &mut ChaCha8Rng::seed_from_u64(3));
+    let c = init.init(&config, &mut ChaCha8Rng::seed_from_u64(4));
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+}
+
+#[test]
+fn parameter_counts_equal_the_authors_code() {
+    let device = burn::tensor::Device::flex();
+    let count = |v: Variant| DomaFieldConfig::new(v).init(0, &device).param_count();
+    assert_eq!(count(Variant::Affinity), 35_212);
+    assert_eq!(count(Variant::Trans), 34_051);
+    // 4·128+128 + 2·(128²+128) + 128·O + O.
+    assert_eq!(count(Variant::Se3), 33_664 + 129 * 9);
+    assert_eq!(count(Variant::ScaledSe3), 33_664 + 129 * 10);
+    assert_eq!(SirenConfig::new(12).num_params(), 35_212);
+}
+
+#[test]
+fn weights_survive_a_round_trip_through_the_device() {
+    let device = burn::tensor::Device::flex();
+    let config = SirenConfig::new(12).with_hidden(8).with_n_hidden(1);
+    let layers = SirenInitializer::new(30.0).init(&config, &mut ChaCha8Rng::seed_from_u64(1));
+    let siren = doma::siren::Siren::from_weights(&layers, 30.0, &device);
+    let back = siren.to_weights();
+    for (a, b) in layers.iter().zip(&back) {
+        assert_eq!((a.fan_in, a.fan_out), (b.fan_in, b.fan_out));
+        for (x, y) in a.weight.iter().zip(&b.weight) {
+            assert_eq!(*x as f32, *y as f32);
+        }
+    }
+}
