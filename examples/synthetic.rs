@@ -20,17 +20,19 @@ fn main() -> anyhow::Result<()> {
         Some("wgpu") => BackendKind::Wgpu,
         Some(other) => anyhow::bail!("unknown backend `{other}` (flex, ndarray or wgpu)"),
     };
-    let iterations: usize = match args.next() {
-        Some(s) => s
-            .parse()
-            .ok()
-            .filter(|&n| n > 0)
-            .ok_or_else(|| anyhow::anyhow!("ITERATIONS must be a positive integer, not `{s}`"))?,
-        None => 1000,
-    };
+    let iterations: usize =
+        match args.next() {
+            Some(s) => s.parse().ok().filter(|&n| n > 0).ok_or_else(|| {
+                anyhow::anyhow!("ITERATIONS must be a positive integer, not `{s}`")
+            })?,
+            None => 1000,
+        };
     let device = backend.device()?;
 
-    println!("{:<14} {:>10} {:>10} {:>10} {:>12}", "EPE (x1e-4)", "rotation", "scaling", "shearing", "translation");
+    println!(
+        "{:<14} {:>10} {:>10} {:>10} {:>12}",
+        "EPE (x1e-4)", "rotation", "scaling", "shearing", "translation"
+    );
     for (name, h_weight) in [("Affinity", 0.0), ("Affinity-H", 0.1)] {
         let mut row = format!("{name:<14}");
         for motion in Motion::ALL {

@@ -31,7 +31,9 @@ pub enum DomaError {
     #[error("invalid configuration: {0}")]
     InvalidConfig(String),
     /// The loss stopped being finite during a fit.
-    #[error("the loss became {value} at iteration {iteration} (frame {frame}); the fit was stopped")]
+    #[error(
+        "the loss became {value} at iteration {iteration} (frame {frame}); the fit was stopped"
+    )]
     NonFiniteLoss {
         /// The 0-based iteration (one pass over all frames).
         iteration: usize,

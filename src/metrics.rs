@@ -43,15 +43,17 @@ pub fn epe(predicted: &Trajectories, truth: &Trajectories) -> Result<f64> {
 }
 
 /// Warps the canonical points of `truth` (its frame 0) to every frame with `field`.
-pub fn predict(field: &dyn MotionField, truth: &Trajectories, device: &Device) -> Result<Trajectories> {
+pub fn predict(
+    field: &dyn MotionField,
+    truth: &Trajectories,
+    device: &Device,
+) -> Result<Trajectories> {
     let x0 = truth.frame_tensor(0, device);
     let mut positions = Vec::with_capacity(truth.positions().len());
     for k in 0..truth.frames() {
         let y = field.warp(x0.clone(), truth.time(k));
         let values = y
-            .into_data()
-            .convert::<f32>()
-            .to_vec::<f32>()
+            .try_into_vec_as::<f32>()
             .map_err(|e| DomaError::Device(format!("{e:?}")))?;
         positions.extend(values);
     }

@@ -157,16 +157,17 @@ fn linear_from(layer: &LayerWeights, device: &Device) -> Linear {
 }
 
 fn read_back(t: Tensor<2>) -> Vec<f64> {
-    t.into_data()
-        .convert::<f64>()
-        .to_vec::<f64>()
+    t.try_into_vec_as::<f64>()
         .expect("a float tensor converts to f64")
 }
 
 impl Siren {
     /// Builds a SIREN from host weights (sine layers first, output last).
     pub fn from_weights(layers: &[LayerWeights], omega: f64, device: &Device) -> Self {
-        assert!(layers.len() >= 2, "a SIREN needs a sine layer and an output layer");
+        assert!(
+            layers.len() >= 2,
+            "a SIREN needs a sine layer and an output layer"
+        );
         let (out, sine) = layers.split_last().expect("checked above");
         Siren {
             sine: sine.iter().map(|l| linear_from(l, device)).collect(),

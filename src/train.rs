@@ -98,7 +98,10 @@ impl FitConfig {
             return bad("iterations must be at least 1".into());
         }
         if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
-            return bad(format!("learning rate {} must be positive", self.learning_rate));
+            return bad(format!(
+                "learning rate {} must be positive",
+                self.learning_rate
+            ));
         }
         for (name, w) in [
             ("smoothness weight", self.smoothness_weight),
@@ -117,7 +120,9 @@ impl FitConfig {
         if let Some(j) = self.smoothness_jitter
             && !(j.is_finite() && j >= 0.0)
         {
-            return bad(format!("smoothness jitter {j} must be finite and non-negative"));
+            return bad(format!(
+                "smoothness jitter {j} must be finite and non-negative"
+            ));
         }
         Ok(())
     }
@@ -162,7 +167,12 @@ pub fn fit(config: &FitConfig, data: &Trajectories, device: &Device) -> Result<F
 
 /// Draws the `L_H` sample points: a random subset of at most `max` rows of `x0`
 /// (`[N, 3]`, host), jittered by Gaussian noise of standard deviation `sigma`.
-fn smoothness_samples(x0: &[f32], max: Option<usize>, sigma: f64, rng: &mut impl Rng) -> (Vec<f32>, usize) {
+fn smoothness_samples(
+    x0: &[f32],
+    max: Option<usize>,
+    sigma: f64,
+    rng: &mut impl Rng,
+) -> (Vec<f32>, usize) {
     let n = x0.len() / 3;
     let mut rows: Vec<usize> = (0..n).collect();
     let take = max.map_or(n, |m| m.min(n));
@@ -173,7 +183,11 @@ fn smoothness_samples(x0: &[f32], max: Option<usize>, sigma: f64, rng: &mut impl
     let mut out = Vec::with_capacity(take * 3);
     for &i in &rows {
         for c in 0..3 {
-            let noise = if sigma > 0.0 { sigma * gaussian(rng) } else { 0.0 };
+            let noise = if sigma > 0.0 {
+                sigma * gaussian(rng)
+            } else {
+                0.0
+            };
             out.push((x0[3 * i + c] as f64 + noise) as f32);
         }
     }
@@ -209,13 +223,19 @@ pub struct Trainer<'a, M> {
 impl<'a, M: MotionField + Module> Trainer<'a, M> {
     /// Prepares a fit of `field` (whose parameters live on `device.autodiff()`) to the
     /// training trajectories `data`.
-    pub fn new(field: M, config: &'a FitConfig, data: &'a Trajectories, device: &Device) -> Result<Self> {
+    pub fn new(
+        field: M,
+        config: &'a FitConfig,
+        data: &'a Trajectories,
+        device: &Device,
+    ) -> Result<Self> {
         config.validate()?;
         let ad = device.clone().autodiff();
         let (h_points, h_jitter) = config.smoothness_sampling();
         let w_h = config.smoothness_weight;
         // L_H gets its own points when they differ from the training points.
-        let separate_h = w_h > 0.0 && (h_jitter > 0.0 || h_points.is_some_and(|m| m < data.points()));
+        let separate_h =
+            w_h > 0.0 && (h_jitter > 0.0 || h_points.is_some_and(|m| m < data.points()));
         let warp_needs_jacobian = config.elasticity_weight > 0.0 || (w_h > 0.0 && !separate_h);
         Ok(Trainer {
             field: Some(field),
@@ -226,7 +246,9 @@ impl<'a, M: MotionField + Module> Trainer<'a, M> {
             rng: ChaCha8Rng::seed_from_u64(config.seed.wrapping_add(0x00D0_4A5E)),
             x0_host: data.frame(0).to_vec(),
             x0: data.frame_tensor(0, &ad),
-            targets: (0..data.frames()).map(|k| data.frame_tensor(k, &ad)).collect(),
+            targets: (0..data.frames())
+                .map(|k| data.frame_tensor(k, &ad))
+                .collect(),
             ad,
             separate_h,
             warp_needs_jacobian,
@@ -241,7 +263,11 @@ impl<'a, M: MotionField + Module> Trainer<'a, M> {
         let config = self.config;
         let method = self.method.as_ref();
         let t = self.data.time(k);
-        let out = field.warp_dual(self.x0.clone(), t, self.warp_needs_jacobian.then_some(method));
+        let out = field.warp_dual(
+            self.x0.clone(),
+            t,
+            self.warp_needs_jacobian.then_some(method),
+        );
         let l1 = loss::trajectory_l1(out.warped.value, self.targets[k].clone());
         let mut total = l1.clone();
         if config.smoothness_weight > 0.0 {
@@ -255,10 +281,14 @@ impl<'a, M: MotionField + Module> Trainer<'a, M> {
             };
             let tangent = raw.tangent.expect("a Jacobian method yields tangents");
             total = total
-                + loss::smoothness(tangent, config.smoothness_norm).mul_scalar(config.smoothness_weight);
+                + loss::smoothness(tangent, config.smoothness_norm)
+                    .mul_scalar(config.smoothness_weight);
         }
         if config.elasticity_weight > 0.0 {
-            let tangent = out.warped.tangent.expect("a Jacobian method yields tangents");
+            let tangent = out
+                .warped
+                .tangent
+                .expect("a Jacobian method yields tangents");
             total = total + loss::elasticity(tangent).mul_scalar(config.elasticity_weight);
         }
         let losses = Tensor::cat(vec![l1.detach(), total.clone().detach()], 0);
@@ -277,9 +307,7 @@ impl<'a, M: MotionField + Module> Trainer<'a, M> {
         let step_losses: Vec<Tensor<1>> = order.iter().map(|&k| self.step(k, lr)).collect();
         // [T, 2] (trajectory, total) in step order.
         let losses = Tensor::stack::<2>(step_losses, 0)
-            .into_data()
-            .convert::<f64>()
-            .to_vec::<f64>()
+            .try_into_vec_as::<f64>()
             .map_err(|e| DomaError::Device(format!("{e:?}")))?;
         if let Some(i) = losses.iter().position(|v| !v.is_finite()) {
             return Err(DomaError::NonFiniteLoss {

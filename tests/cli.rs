@@ -31,7 +31,10 @@ fn bad_flags_are_refused_with_a_message() {
     ] {
         let (ok, _, err) = doma(&args);
         assert!(!ok, "{args:?} was accepted");
-        assert!(err.contains(needle), "{args:?}: message does not name `{needle}`:\n{err}");
+        assert!(
+            err.contains(needle),
+            "{args:?}: message does not name `{needle}`:\n{err}"
+        );
         assert!(!err.contains("panicked"), "{args:?} panicked:\n{err}");
     }
 }
@@ -71,12 +74,18 @@ fn a_tiny_run_prints_the_table_and_writes_json() {
         json.to_str().unwrap(),
     ]);
     assert!(ok, "{stderr}");
-    assert!(stdout.contains("translation") && stdout.contains("Trans-H"), "{stdout}");
-    let runs: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!(
+        stdout.contains("translation") && stdout.contains("Trans-H"),
+        "{stdout}"
+    );
+    let runs: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let runs = runs.as_array().unwrap();
     assert_eq!(runs.len(), 1);
     let r = &runs[0];
-    for key in ["motion", "variant", "reg", "iters", "backend", "jacobian", "epe_x1e4", "seconds", "steps"] {
+    for key in [
+        "motion", "variant", "reg", "iters", "backend", "jacobian", "epe_x1e4", "seconds", "steps",
+    ] {
         assert!(r.get(key).is_some(), "missing {key} in {r}");
     }
     assert_eq!(r["motion"], "translation");

@@ -15,9 +15,18 @@ fn mt19937_matches_numpy_legacy_seed_0() {
 fn the_reference_points_are_numpy_rand_times_2_minus_1() {
     // numpy: seed(0); p = rand(3000, 3) * 2 - 1; p[0], p[749], p[2999].
     let p = synthetic::uniform_points(0, 3000);
-    assert_eq!(p[0], [0.0976270078546495, 0.43037873274483895, 0.20552675214328775]);
-    assert_eq!(p[749], [0.9340110478607333, -0.22486565315291274, 0.3733800596337222]);
-    assert_eq!(p[2999], [-0.861697219857154, 0.5161279567099879, 0.8640120032885088]);
+    assert_eq!(
+        p[0],
+        [0.0976270078546495, 0.43037873274483895, 0.20552675214328775]
+    );
+    assert_eq!(
+        p[749],
+        [0.9340110478607333, -0.22486565315291274, 0.3733800596337222]
+    );
+    assert_eq!(
+        p[2999],
+        [-0.861697219857154, 0.5161279567099879, 0.8640120032885088]
+    );
 }
 
 #[test]
@@ -27,12 +36,27 @@ fn the_motions_follow_their_schedules() {
     // Frame 0 of rotation, scaling's 1.0 never exactly hit: check the ends and a middle frame.
     assert!(close(Motion::Rotation.apply(p, 0, 20), p));
     assert!(close(Motion::Rotation.apply(p, 10, 20), [0.25, 0.5, 0.75])); // 90° about z
-    assert!(close(Motion::Scaling.apply(p, 0, 20), [0.25, -0.125, 0.375]));
-    assert!(close(Motion::Scaling.apply(p, 19, 20), [0.75, -0.375, 1.125]));
+    assert!(close(
+        Motion::Scaling.apply(p, 0, 20),
+        [0.25, -0.125, 0.375]
+    ));
+    assert!(close(
+        Motion::Scaling.apply(p, 19, 20),
+        [0.75, -0.375, 1.125]
+    ));
     assert!(close(Motion::Shearing.apply(p, 0, 20), p));
-    assert!(close(Motion::Shearing.apply(p, 19, 20), [0.5 + 1.5 * 0.75, -0.25, 0.75]));
-    assert!(close(Motion::Translation.apply(p, 0, 20), [-0.5, -1.25, -0.25]));
-    assert!(close(Motion::Translation.apply(p, 19, 20), [1.5, 0.75, 1.75]));
+    assert!(close(
+        Motion::Shearing.apply(p, 19, 20),
+        [0.5 + 1.5 * 0.75, -0.25, 0.75]
+    ));
+    assert!(close(
+        Motion::Translation.apply(p, 0, 20),
+        [-0.5, -1.25, -0.25]
+    ));
+    assert!(close(
+        Motion::Translation.apply(p, 19, 20),
+        [1.5, 0.75, 1.75]
+    ));
 }
 
 #[test]

@@ -27,7 +27,12 @@ fn apply(a: &[[f64; 3]; 3], u: [f64; 3], p: &[f64]) -> Vec<f64> {
 }
 
 /// Runs `variant`'s head on the same raw output row for every point.
-fn head_warp(variant: Variant, raw_row: &[f64], points: &[f64], device: &Device) -> (Vec<f64>, Vec<f64>) {
+fn head_warp(
+    variant: Variant,
+    raw_row: &[f64],
+    points: &[f64],
+    device: &Device,
+) -> (Vec<f64>, Vec<f64>) {
     let n = points.len() / 3;
     let raw: Vec<f64> = (0..n).flat_map(|_| raw_row.iter().copied()).collect();
     let raw = Dual::constant(tensor2(raw, [n, raw_row.len()], device));
@@ -57,7 +62,12 @@ fn trans_head_translates() {
     let (y, a) = head_warp(Variant::Trans, &u, &p, &device);
     let eye = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     assert_close(&y, &apply(&eye, u, &p), 1e-6, "y");
-    assert_close(&a[..9], &[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], 0.0, "A");
+    assert_close(
+        &a[..9],
+        &[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        0.0,
+        "A",
+    );
 }
 
 #[test]
@@ -120,7 +130,10 @@ fn gram_schmidt_gives_rotations_and_the_identity() {
         for j in 0..3 {
             for k in 0..3 {
                 let expected = if j == k { 1.0 } else { 0.0 };
-                assert!((dot(col(j), col(k)) - expected).abs() < 1e-5, "RᵀR ≠ I at row {i}");
+                assert!(
+                    (dot(col(j), col(k)) - expected).abs() < 1e-5,
+                    "RᵀR ≠ I at row {i}"
+                );
             }
         }
         let (a, b, c) = (col(0), col(1), col(2));

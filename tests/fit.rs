@@ -41,7 +41,12 @@ fn a_fit_reduces_the_loss_and_counts_its_steps() {
     let _g = backward_lock();
     let (train, _) = small_data();
     let device = Device::flex();
-    let fitted = fit(&config(Variant::Trans, 40).with_learning_rate(1e-3), &train, &device).unwrap();
+    let fitted = fit(
+        &config(Variant::Trans, 40).with_learning_rate(1e-3),
+        &train,
+        &device,
+    )
+    .unwrap();
     assert_eq!(fitted.history.len(), 40);
     assert_eq!(fitted.steps, 40 * 5);
     let first = fitted.history[0].trajectory_loss;
@@ -55,10 +60,20 @@ fn the_smoothness_term_is_added_to_the_loss() {
     let (train, _) = small_data();
     let device = Device::flex();
     for variant in Variant::ALL {
-        let h = fit(&config(variant, 1).with_smoothness_weight(0.1), &train, &device).unwrap();
+        let h = fit(
+            &config(variant, 1).with_smoothness_weight(0.1),
+            &train,
+            &device,
+        )
+        .unwrap();
         let r = &h.history[0];
         assert!(r.total_loss > r.trajectory_loss, "{variant:?}: {r:?}");
-        let e = fit(&config(variant, 1).with_elasticity_weight(0.1), &train, &device).unwrap();
+        let e = fit(
+            &config(variant, 1).with_elasticity_weight(0.1),
+            &train,
+            &device,
+        )
+        .unwrap();
         let r = &e.history[0];
         assert!(r.total_loss > r.trajectory_loss, "{variant:?}: {r:?}");
     }
@@ -72,9 +87,15 @@ fn the_same_seed_gives_the_same_fit() {
     let c = config(Variant::Affinity, 3).with_smoothness_weight(0.1);
     let a = fit(&c, &train, &device).unwrap();
     let b = fit(&c, &train, &device).unwrap();
-    assert_eq!(predictions(&a.field, &test, &device), predictions(&b.field, &test, &device));
+    assert_eq!(
+        predictions(&a.field, &test, &device),
+        predictions(&b.field, &test, &device)
+    );
     let other = fit(&c.clone().with_seed(1), &train, &device).unwrap();
-    assert_ne!(predictions(&a.field, &test, &device), predictions(&other.field, &test, &device));
+    assert_ne!(
+        predictions(&a.field, &test, &device),
+        predictions(&other.field, &test, &device)
+    );
 }
 
 #[test]
@@ -99,7 +120,10 @@ fn bad_configs_are_refused() {
         config(Variant::Trans, 1).with_smoothness_weight(f64::NAN),
         config(Variant::Trans, 1).with_smoothness_points(Some(0)),
     ] {
-        assert!(matches!(fit(&c, &train, &device), Err(DomaError::InvalidConfig(_))));
+        assert!(matches!(
+            fit(&c, &train, &device),
+            Err(DomaError::InvalidConfig(_))
+        ));
     }
 }
 
@@ -138,7 +162,10 @@ fn short_fit_on(backend: BackendKind) -> Vec<f64> {
 #[test]
 fn ndarray_agrees_with_flex() {
     let _g = backward_lock();
-    let e = rel_err(&short_fit_on(BackendKind::Ndarray), &short_fit_on(BackendKind::Flex));
+    let e = rel_err(
+        &short_fit_on(BackendKind::Ndarray),
+        &short_fit_on(BackendKind::Flex),
+    );
     assert!(e < 1e-4, "ndarray vs flex: relative difference {e:e}");
 }
 
@@ -149,7 +176,10 @@ fn wgpu_agrees_with_flex() {
         eprintln!("SKIPPED wgpu_agrees_with_flex: no wgpu adapter on this machine");
         return;
     }
-    let e = rel_err(&short_fit_on(BackendKind::Wgpu), &short_fit_on(BackendKind::Flex));
+    let e = rel_err(
+        &short_fit_on(BackendKind::Wgpu),
+        &short_fit_on(BackendKind::Flex),
+    );
     eprintln!("wgpu vs flex after 3 Affinity-H iterations: relative difference {e:e}");
     assert!(e < 1e-4, "wgpu vs flex: relative difference {e:e}");
 }

@@ -3,7 +3,9 @@
 mod common;
 
 use burn::tensor::Device;
-use common::oracle::{Output, check_against_reverse, forward_jacobian, reverse_jacobian, small_field, N};
+use common::oracle::{
+    N, Output, check_against_reverse, forward_jacobian, reverse_jacobian, small_field,
+};
 use common::{backward_lock, random_points, rel_err};
 use doma::field::Variant;
 

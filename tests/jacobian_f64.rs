@@ -9,8 +9,8 @@ use std::sync::OnceLock;
 
 use burn::tensor::{Device, FloatDType};
 use common::oracle::{
-    Output, autodiff_theta_grad, check_against_reverse, fd_jacobian, fd_theta_grad, forward_jacobian,
-    small_field, N,
+    N, Output, autodiff_theta_grad, check_against_reverse, fd_jacobian, fd_theta_grad,
+    forward_jacobian, small_field,
 };
 use common::{backward_lock, random_points, rel_err};
 use doma::field::Variant;
@@ -42,7 +42,10 @@ fn forward_mode_matches_finite_differences() {
             let fwd = forward_jacobian(&field, &x, which, &device);
             let fd = fd_jacobian(&field, &x, which, &device, 1e-6);
             let e = rel_err(&fwd, &fd);
-            assert!(e < 1e-6, "{variant:?} {which:?}: J vs finite differences {e:e}");
+            assert!(
+                e < 1e-6,
+                "{variant:?} {which:?}: J vs finite differences {e:e}"
+            );
         }
     }
 }

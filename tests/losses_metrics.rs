@@ -61,18 +61,30 @@ fn elasticity_of_known_singular_values() {
     let d = Device::flex();
     // diag(2, 1, 1): σ = (2, 1, 1), q = ln² 2.
     let q = 2f64.ln().powi(2);
-    let got = scalar(loss::elasticity(warp_tangent([[2.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], 4, &d)));
+    let got = scalar(loss::elasticity(warp_tangent(
+        [[2.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        4,
+        &d,
+    )));
     assert!((got - rho(q)).abs() < 1e-4, "{got} vs {}", rho(q));
 
     // [[1, 2, 0], [0, 1, 0], [0, 0, 0.9]]: the 2×2 block has σ = √2 ± 1 (det 1, σ₁² + σ₂² = 6).
     let s = 2f64.sqrt();
     let q = (s + 1.0).ln().powi(2) + (s - 1.0).ln().powi(2) + 0.9f64.ln().powi(2);
-    let got = scalar(loss::elasticity(warp_tangent([[1.0, 2.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.9]], 3, &d)));
+    let got = scalar(loss::elasticity(warp_tangent(
+        [[1.0, 2.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.9]],
+        3,
+        &d,
+    )));
     assert!((got - rho(q)).abs() < 1e-4, "{got} vs {}", rho(q));
 
     // A rotation has σ = 1: no elastic energy.
     let (sn, cs) = 0.8f64.sin_cos();
-    let got = scalar(loss::elasticity(warp_tangent([[cs, -sn, 0.0], [sn, cs, 0.0], [0.0, 0.0, 1.0]], 5, &d)));
+    let got = scalar(loss::elasticity(warp_tangent(
+        [[cs, -sn, 0.0], [sn, cs, 0.0], [0.0, 0.0, 1.0]],
+        5,
+        &d,
+    )));
     assert!(got.abs() < 1e-6, "{got}");
 }
 
@@ -151,7 +163,10 @@ fn a_perfect_field_has_zero_epe() {
         siren: zero_out,
         variant: field.variant,
     };
-    let p: Vec<f32> = common::random_points(10, 1).iter().map(|v| *v as f32).collect();
+    let p: Vec<f32> = common::random_points(10, 1)
+        .iter()
+        .map(|v| *v as f32)
+        .collect();
     let still = Trajectories::new(3, 10, [p.clone(), p.clone(), p].concat()).unwrap();
     assert_eq!(metrics::evaluate_epe(&field, &still, &d).unwrap(), 0.0);
 }

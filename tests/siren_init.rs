@@ -8,9 +8,15 @@ use rand_chacha::ChaCha8Rng;
 fn check_uniform(values: &[f64], bound: f64, what: &str) {
     let n = values.len() as f64;
     let max = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    assert!(max <= bound, "{what}: |value| {max} exceeds the bound {bound}");
+    assert!(
+        max <= bound,
+        "{what}: |value| {max} exceeds the bound {bound}"
+    );
     // The sample should fill the interval: the largest |value| is close to the bound.
-    assert!(max > 0.9 * bound, "{what}: max |value| {max} far below the bound {bound}");
+    assert!(
+        max > 0.9 * bound,
+        "{what}: max |value| {max} far below the bound {bound}"
+    );
     let mean = values.iter().sum::<f64>() / n;
     let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
     let expected_var = bound * bound / 3.0;
@@ -21,7 +27,10 @@ fn check_uniform(values: &[f64], bound: f64, what: &str) {
         "{what}: variance {var} vs U(±{bound}) variance {expected_var} (tol {tol})"
     );
     let mean_tol = 5.0 * bound / (3.0 * n).sqrt();
-    assert!(mean.abs() < mean_tol, "{what}: mean {mean} (tol {mean_tol})");
+    assert!(
+        mean.abs() < mean_tol,
+        "{what}: mean {mean} (tol {mean_tol})"
+    );
 }
 
 #[test]

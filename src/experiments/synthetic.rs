@@ -163,7 +163,10 @@ pub fn table(runs: &[SyntheticRun]) -> String {
     out += &"-".repeat(20 + 14 * motions.len());
     out += "\n";
     for (variant, reg) in rows {
-        out += &format!("{:<20}", format!("{}{}", variant.paper_name(), reg.suffix()));
+        out += &format!(
+            "{:<20}",
+            format!("{}{}", variant.paper_name(), reg.suffix())
+        );
         for m in &motions {
             let cell = runs
                 .iter()

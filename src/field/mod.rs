@@ -145,12 +145,7 @@ pub trait MotionField {
 
     /// Evaluates the field at `x: [N, 3]`, time `t`. With `jacobian`, the outputs
     /// carry their spatial tangents.
-    fn warp_dual(
-        &self,
-        x: Tensor<2>,
-        t: f64,
-        jacobian: Option<&dyn JacobianMethod>,
-    ) -> WarpOutput;
+    fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput;
 
     /// The local transformation `(A [N, 3, 3], u [N, 3])` at `x`, `t` (Eq. 4).
     fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>);
@@ -224,12 +219,7 @@ impl MotionField for DomaField {
         }
     }
 
-    fn warp_dual(
-        &self,
-        x: Tensor<2>,
-        t: f64,
-        jacobian: Option<&dyn JacobianMethod>,
-    ) -> WarpOutput {
+    fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput {
         let raw = self.raw_dual(x.clone(), t, jacobian);
         let x = match jacobian {
             Some(_) => Dual::seed_spatial(x),

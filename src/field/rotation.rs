@@ -14,10 +14,7 @@ pub fn dot(a: Dual, b: Dual) -> Dual {
 
 /// `v / max(‖v‖, 1e-12)` for `v: [N, 3]`.
 pub fn normalize(v: Dual) -> Dual {
-    let inv_norm = dot(v.clone(), v.clone())
-        .sqrt()
-        .clamp_min(NORM_EPS)
-        .recip();
+    let inv_norm = dot(v.clone(), v.clone()).sqrt().clamp_min(NORM_EPS).recip();
     v.mul(inv_norm)
 }
 

@@ -51,7 +51,10 @@ impl Dual {
     /// are held fixed. `input` is `[N, C]` with `C ≥ 3`.
     pub fn seed_spatial(input: Tensor<2>) -> Self {
         let [n, c] = input.dims();
-        assert!(c >= 3, "a spatial seed needs at least 3 input columns, got {c}");
+        assert!(
+            c >= 3,
+            "a spatial seed needs at least 3 input columns, got {c}"
+        );
         let device = input.device();
         let mut eye = vec![0.0f32; 3 * c];
         for k in 0..3 {
@@ -140,7 +143,7 @@ impl Dual {
             t * lift(&mask)
         });
         Dual {
-            value: self.value.relu(),
+            value: activation::relu(self.value),
             tangent,
         }
     }
@@ -183,9 +186,7 @@ impl Dual {
     /// The reciprocal `1 / v`, with tangent `−v̇ / v²`.
     pub fn recip(self) -> Self {
         let inv = self.value.recip();
-        let tangent = self
-            .tangent
-            .map(|t| t * lift(&inv.clone().square().neg()));
+        let tangent = self.tangent.map(|t| t * lift(&inv.clone().square().neg()));
         Dual {
             value: inv,
             tangent,

@@ -18,7 +18,7 @@ pub fn backward_lock() -> MutexGuard<'static, ()> {
 }
 
 pub fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f64> {
-    t.into_data().convert::<f64>().to_vec::<f64>().unwrap()
+    t.try_into_vec_as::<f64>().unwrap()
 }
 
 pub fn tensor2(values: Vec<f64>, shape: [usize; 2], device: &Device) -> Tensor<2> {
@@ -28,7 +28,12 @@ pub fn tensor2(values: Vec<f64>, shape: [usize; 2], device: &Device) -> Tensor<2
 /// `‖a − b‖ / ‖b‖` (Euclidean over all entries), guarded against a zero reference.
 pub fn rel_err(a: &[f64], b: &[f64]) -> f64 {
     assert_eq!(a.len(), b.len(), "length mismatch");
-    let diff: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>().sqrt();
+    let diff: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).powi(2))
+        .sum::<f64>()
+        .sqrt();
     let norm: f64 = b.iter().map(|y| y * y).sum::<f64>().sqrt();
     diff / norm.max(1e-30)
 }

@@ -20,7 +20,12 @@ pub enum Output {
     Warp,
 }
 
-fn pick(field: &DomaField, x: Tensor<2>, which: Output, jac: Option<&dyn JacobianMethod>) -> (Tensor<2>, Option<Tensor<3>>) {
+fn pick(
+    field: &DomaField,
+    x: Tensor<2>,
+    which: Output,
+    jac: Option<&dyn JacobianMethod>,
+) -> (Tensor<2>, Option<Tensor<3>>) {
     let out = field.warp_dual(x, T, jac);
     let d = match which {
         Output::Raw => out.raw,
@@ -30,12 +35,19 @@ fn pick(field: &DomaField, x: Tensor<2>, which: Output, jac: Option<&dyn Jacobia
 }
 
 pub fn small_field(variant: Variant, device: &Device) -> DomaField {
-    DomaFieldConfig::new(variant).with_hidden(16).init(11, device)
+    DomaFieldConfig::new(variant)
+        .with_hidden(16)
+        .init(11, device)
 }
 
 /// The forward-mode Jacobian, laid out `[3, N, C]`.
 pub fn forward_jacobian(field: &DomaField, x: &[f64], which: Output, device: &Device) -> Vec<f64> {
-    let (_, tangent) = pick(field, tensor2(x.to_vec(), [N, 3], device), which, Some(&Autodiff));
+    let (_, tangent) = pick(
+        field,
+        tensor2(x.to_vec(), [N, 3], device),
+        which,
+        Some(&Autodiff),
+    );
     to_vec(tangent.expect("tangents"))
 }
 
@@ -59,14 +71,23 @@ pub fn reverse_jacobian(field: &DomaField, x: &[f64], which: Output, ad: &Device
 }
 
 /// Central differences of the outputs in `x`, `[3, N, C]`.
-pub fn fd_jacobian(field: &DomaField, x: &[f64], which: Output, device: &Device, h: f64) -> Vec<f64> {
+pub fn fd_jacobian(
+    field: &DomaField,
+    x: &[f64],
+    which: Output,
+    device: &Device,
+    h: f64,
+) -> Vec<f64> {
     let eval = |p: Vec<f64>| to_vec(pick(field, tensor2(p, [N, 3], device), which, None).0);
     let channels = eval(x.to_vec()).len() / N;
     let mut jac = vec![0.0; 3 * N * channels];
     for k in 0..3 {
         // Every point moves along axis k at once: the field acts point by point.
         let shifted = |s: f64| -> Vec<f64> {
-            x.iter().enumerate().map(|(i, v)| if i % 3 == k { v + s } else { *v }).collect()
+            x.iter()
+                .enumerate()
+                .map(|(i, v)| if i % 3 == k { v + s } else { *v })
+                .collect()
         };
         let (plus, minus) = (eval(shifted(h)), eval(shifted(-h)));
         for i in 0..N * channels {
@@ -107,22 +128,40 @@ pub fn probes(field: &DomaField) -> Vec<(usize, bool, usize)> {
 pub fn autodiff_theta_grad(field: &DomaField, x: &[f64], elastic: bool, ad: &Device) -> Vec<f64> {
     let grads = jacobian_loss(field, x, elastic, ad).backward();
     let siren = &field.siren;
-    let layers: Vec<&burn::nn::Linear> = siren.sine.iter().chain(std::iter::once(&siren.output)).collect();
+    let layers: Vec<&burn::nn::Linear> = siren
+        .sine
+        .iter()
+        .chain(std::iter::once(&siren.output))
+        .collect();
     probes(field)
         .into_iter()
         .map(|(l, bias, i)| {
+            // No gradient means the loss does not depend on the parameter (for example
+            // the output bias under L_H, which only sees ∂o/∂x): its derivative is 0.
             let g = if bias {
-                to_vec(layers[l].bias.as_ref().unwrap().val().grad(&grads).unwrap())
+                layers[l]
+                    .bias
+                    .as_ref()
+                    .unwrap()
+                    .val()
+                    .grad(&grads)
+                    .map(|g| to_vec(g))
             } else {
-                to_vec(layers[l].weight.val().grad(&grads).unwrap())
+                layers[l].weight.val().grad(&grads).map(|g| to_vec(g))
             };
-            g[i]
+            g.map_or(0.0, |g| g[i])
         })
         .collect()
 }
 
 /// The θ-gradient by central differences on the host weights.
-pub fn fd_theta_grad(field: &DomaField, x: &[f64], elastic: bool, device: &Device, h: f64) -> Vec<f64> {
+pub fn fd_theta_grad(
+    field: &DomaField,
+    x: &[f64],
+    elastic: bool,
+    device: &Device,
+    h: f64,
+) -> Vec<f64> {
     let base = field.siren.to_weights();
     let loss_at = |l: usize, bias: bool, i: usize, s: f64| {
         let mut w = base.clone();
@@ -153,7 +192,10 @@ pub fn check_against_reverse(device: &Device, tol: f64) {
             let fwd = forward_jacobian(&field, &x, which, &ad);
             let rev = reverse_jacobian(&field, &x, which, &ad);
             let e = rel_err(&fwd, &rev);
-            assert!(e < tol, "{variant:?} {which:?}: forward vs reverse relative error {e:e} ≥ {tol:e}");
+            assert!(
+                e < tol,
+                "{variant:?} {which:?}: forward vs reverse relative error {e:e} ≥ {tol:e}"
+            );
         }
     }
 }
