@@ -263,11 +263,11 @@ impl<'a, M: MotionField + Module> Trainer<'a, M> {
         let config = self.config;
         let method = self.method.as_ref();
         let t = self.data.time(k);
-        let out = field.warp_dual(
-            self.x0.clone(),
-            t,
-            self.warp_needs_jacobian.then_some(method),
-        );
+        let out = if self.warp_needs_jacobian {
+            field.warp_dual(self.x0.clone(), t, Some(method))
+        } else {
+            field.warp_values(self.x0.clone(), t, method)
+        };
         let l1 = loss::trajectory_l1(out.warped.value, self.targets[k].clone());
         let mut total = l1.clone();
         if config.smoothness_weight > 0.0 {

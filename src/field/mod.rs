@@ -15,6 +15,7 @@ use burn::config::Config;
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
+use std::ops::{Add, Mul};
 
 use crate::jacobian::{Dual, JacobianMethod};
 use crate::siren::{Siren, SirenConfig};
@@ -147,6 +148,14 @@ pub trait MotionField {
     /// carry their spatial tangents.
     fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput;
 
+    /// Like `warp_dual(x, t, None)` (no tangents), but through `method`'s value path,
+    /// which a method may fuse ([`crate::jacobian::Analytic`] does). The fit loop uses it
+    /// for the trajectory loss.
+    fn warp_values(&self, x: Tensor<2>, t: f64, method: &dyn JacobianMethod) -> WarpOutput {
+        let _ = method;
+        self.warp_dual(x, t, None)
+    }
+
     /// The local transformation `(A [N, 3, 3], u [N, 3])` at `x`, `t` (Eq. 4).
     fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>);
 
@@ -226,6 +235,15 @@ impl MotionField for DomaField {
             None => Dual::constant(x),
         };
         let warped = self.variant.local_affine(raw.clone()).apply(x);
+        WarpOutput { raw, warped }
+    }
+
+    fn warp_values(&self, x: Tensor<2>, t: f64, method: &dyn JacobianMethod) -> WarpOutput {
+        let raw = Dual::constant(method.forward(&self.siren, time_input(x.clone(), t)));
+        let warped = self
+            .variant
+            .local_affine(raw.clone())
+            .apply(Dual::constant(x));
         WarpOutput { raw, warped }
     }
 

@@ -3,6 +3,7 @@
 //! that its Jacobian comes out in forward mode.
 
 use crate::jacobian::Dual;
+use std::ops::{Mul, Sub};
 
 /// The smallest norm that [`normalize`] divides by (PyTorch's `F.normalize` default).
 pub const NORM_EPS: f64 = 1e-12;

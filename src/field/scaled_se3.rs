@@ -4,6 +4,7 @@
 
 use super::{LocalAffine, rotation};
 use crate::jacobian::Dual;
+use std::ops::Mul;
 
 /// Raw outputs per point.
 pub const OUTPUTS: usize = 10;

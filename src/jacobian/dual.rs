@@ -193,29 +193,6 @@ impl Dual {
         }
     }
 
-    /// Elementwise sum (shapes broadcast as in Burn).
-    pub fn add(self, other: Dual) -> Self {
-        Dual {
-            value: self.value + other.value,
-            tangent: add_tangents(self.tangent, other.tangent),
-        }
-    }
-
-    /// Elementwise difference.
-    pub fn sub(self, other: Dual) -> Self {
-        self.add(other.mul_scalar(-1.0))
-    }
-
-    /// Elementwise product, by the product rule; `[N, 1]` broadcasts against `[N, C]`.
-    pub fn mul(self, other: Dual) -> Self {
-        let da = self.tangent.map(|t| t * lift(&other.value));
-        let db = other.tangent.map(|t| t * lift(&self.value));
-        Dual {
-            value: self.value * other.value,
-            tangent: add_tangents(da, db),
-        }
-    }
-
     /// Channels `start..start + len`.
     pub fn narrow(self, start: usize, len: usize) -> Self {
         Dual {
@@ -273,5 +250,37 @@ impl Dual {
     /// `None` if no tangents were carried.
     pub fn jacobian(&self) -> Option<Tensor<3>> {
         self.tangent.as_ref().map(|t| t.clone().permute([1, 2, 0]))
+    }
+}
+
+/// Elementwise sum (shapes broadcast as in Burn).
+impl std::ops::Add for Dual {
+    type Output = Dual;
+    fn add(self, other: Dual) -> Dual {
+        Dual {
+            value: self.value + other.value,
+            tangent: add_tangents(self.tangent, other.tangent),
+        }
+    }
+}
+
+/// Elementwise difference.
+impl std::ops::Sub for Dual {
+    type Output = Dual;
+    fn sub(self, other: Dual) -> Dual {
+        self + other.mul_scalar(-1.0)
+    }
+}
+
+/// Elementwise product, by the product rule; `[N, 1]` broadcasts against `[N, C]`.
+impl std::ops::Mul for Dual {
+    type Output = Dual;
+    fn mul(self, other: Dual) -> Dual {
+        let da = self.tangent.map(|t| t * lift(&other.value));
+        let db = other.tangent.map(|t| t * lift(&self.value));
+        Dual {
+            value: self.value * other.value,
+            tangent: add_tangents(da, db),
+        }
     }
 }

@@ -7,8 +7,10 @@
 //! gives exact θ-gradients through it. The fit loop only sees the trait, so methods
 //! plug in without touching it.
 
+pub mod analytic;
 mod dual;
 
+pub use analytic::Analytic;
 pub use dual::Dual;
 
 use burn::tensor::Tensor;
@@ -20,6 +22,12 @@ use crate::siren::Siren;
 pub trait JacobianMethod: std::fmt::Debug + Send + Sync {
     /// A short name for tables and JSON records.
     fn name(&self) -> &'static str;
+
+    /// The SIREN's outputs `[N, O]` for inputs `xt: [N, 4]`, without tangents (Eq. 1).
+    /// The default is the plain [`Siren::forward`]; a method may fuse it.
+    fn forward(&self, siren: &Siren, xt: Tensor<2>) -> Tensor<2> {
+        siren.forward(xt)
+    }
 
     /// The SIREN's outputs `[N, O]` for inputs `xt: [N, 4]` (`[x, y, z, t]`), with their
     /// tangents `[3, N, O]` with respect to the three spatial inputs.
@@ -48,6 +56,8 @@ impl JacobianMethod for Autodiff {
 pub enum JacobianKind {
     /// [`Autodiff`]: automatic forward mode on dual tensors.
     Autodiff,
+    /// [`Analytic`]: hand-derived fused sine layers with a hand-written backward.
+    Analytic,
 }
 
 impl JacobianKind {
@@ -55,6 +65,7 @@ impl JacobianKind {
     pub fn method(self) -> Box<dyn JacobianMethod> {
         match self {
             JacobianKind::Autodiff => Box::new(Autodiff),
+            JacobianKind::Analytic => Box::new(Analytic),
         }
     }
 
@@ -62,6 +73,7 @@ impl JacobianKind {
     pub fn name(self) -> &'static str {
         match self {
             JacobianKind::Autodiff => "autodiff",
+            JacobianKind::Analytic => "analytic",
         }
     }
 }

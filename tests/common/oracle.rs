@@ -40,15 +40,50 @@ pub fn small_field(variant: Variant, device: &Device) -> DomaField {
         .init(11, device)
 }
 
-/// The forward-mode Jacobian, laid out `[3, N, C]`.
-pub fn forward_jacobian(field: &DomaField, x: &[f64], which: Output, device: &Device) -> Vec<f64> {
+/// The forward-mode Jacobian of `method`, laid out `[3, N, C]`.
+pub fn method_jacobian(
+    field: &DomaField,
+    x: &[f64],
+    which: Output,
+    method: &dyn JacobianMethod,
+    device: &Device,
+) -> Vec<f64> {
     let (_, tangent) = pick(
         field,
         tensor2(x.to_vec(), [N, 3], device),
         which,
-        Some(&Autodiff),
+        Some(method),
     );
     to_vec(tangent.expect("tangents"))
+}
+
+/// The outputs computed alongside `method`'s Jacobian, `[N, C]`.
+pub fn method_outputs(
+    field: &DomaField,
+    x: &[f64],
+    which: Output,
+    method: &dyn JacobianMethod,
+    device: &Device,
+) -> Vec<f64> {
+    to_vec(
+        pick(
+            field,
+            tensor2(x.to_vec(), [N, 3], device),
+            which,
+            Some(method),
+        )
+        .0,
+    )
+}
+
+/// The plain outputs (no Jacobian requested), `[N, C]`.
+pub fn plain_outputs(field: &DomaField, x: &[f64], which: Output, device: &Device) -> Vec<f64> {
+    to_vec(pick(field, tensor2(x.to_vec(), [N, 3], device), which, None).0)
+}
+
+/// The forward-mode Jacobian of [`Autodiff`], laid out `[3, N, C]`.
+pub fn forward_jacobian(field: &DomaField, x: &[f64], which: Output, device: &Device) -> Vec<f64> {
+    method_jacobian(field, x, which, &Autodiff, device)
 }
 
 /// The Jacobian from reverse mode, one backward per output channel, `[3, N, C]`.
@@ -99,8 +134,14 @@ pub fn fd_jacobian(
 
 /// The loss whose θ-gradient is checked: `L_H` (squared) on the raw Jacobian, plus the
 /// elasticity of the warp's Jacobian when `elastic`.
-pub fn jacobian_loss(field: &DomaField, x: &[f64], elastic: bool, device: &Device) -> Tensor<1> {
-    let out = field.warp_dual(tensor2(x.to_vec(), [N, 3], device), T, Some(&Autodiff));
+pub fn jacobian_loss(
+    field: &DomaField,
+    x: &[f64],
+    elastic: bool,
+    method: &dyn JacobianMethod,
+    device: &Device,
+) -> Tensor<1> {
+    let out = field.warp_dual(tensor2(x.to_vec(), [N, 3], device), T, Some(method));
     let mut l = loss::smoothness(out.raw.tangent.unwrap(), SmoothnessNorm::Squared);
     if elastic {
         l = l + loss::elasticity(out.warped.tangent.unwrap());
@@ -124,32 +165,71 @@ pub fn probes(field: &DomaField) -> Vec<(usize, bool, usize)> {
     out
 }
 
-/// The θ-gradient from Burn's reverse mode through the forward-mode Jacobian.
+/// Every (layer, is_bias, flat index) of the SIREN: all of θ.
+pub fn all_parameters(field: &DomaField) -> Vec<(usize, bool, usize)> {
+    let mut out = Vec::new();
+    for (l, w) in field.siren.to_weights().iter().enumerate() {
+        out.extend((0..w.weight.len()).map(|i| (l, false, i)));
+        out.extend((0..w.bias.len()).map(|i| (l, true, i)));
+    }
+    out
+}
+
+/// The θ-gradient from Burn's reverse mode through the Jacobian of [`Autodiff`].
 pub fn autodiff_theta_grad(field: &DomaField, x: &[f64], elastic: bool, ad: &Device) -> Vec<f64> {
-    let grads = jacobian_loss(field, x, elastic, ad).backward();
+    method_theta_grad(field, x, elastic, &Autodiff, ad)
+}
+
+/// The θ-gradient from a backward pass through the Jacobian of `method` (for `Analytic`,
+/// its hand-written backward).
+pub fn method_theta_grad(
+    field: &DomaField,
+    x: &[f64],
+    elastic: bool,
+    method: &dyn JacobianMethod,
+    ad: &Device,
+) -> Vec<f64> {
+    theta_grad_at(field, x, elastic, method, ad, &probes(field))
+}
+
+/// The θ-gradient through the Jacobian of `method`, at the given parameters.
+pub fn theta_grad_at(
+    field: &DomaField,
+    x: &[f64],
+    elastic: bool,
+    method: &dyn JacobianMethod,
+    ad: &Device,
+    params: &[(usize, bool, usize)],
+) -> Vec<f64> {
+    let grads = jacobian_loss(field, x, elastic, method, ad).backward();
     let siren = &field.siren;
     let layers: Vec<&burn::nn::Linear> = siren
         .sine
         .iter()
         .chain(std::iter::once(&siren.output))
         .collect();
-    probes(field)
-        .into_iter()
-        .map(|(l, bias, i)| {
-            // No gradient means the loss does not depend on the parameter (for example
-            // the output bias under L_H, which only sees ∂o/∂x): its derivative is 0.
-            let g = if bias {
-                layers[l]
-                    .bias
-                    .as_ref()
-                    .unwrap()
-                    .val()
-                    .grad(&grads)
-                    .map(|g| to_vec(g))
+    // No gradient means the loss does not depend on the parameter (for example the
+    // output bias under L_H, which only sees ∂o/∂x): its derivative is 0.
+    let host = |t: Option<Tensor<2>>, len: usize| t.map_or(vec![0.0; len], to_vec);
+    let per_layer: Vec<(Vec<f64>, Vec<f64>)> = layers
+        .iter()
+        .map(|layer| {
+            let w = layer.weight.val();
+            let nw = w.dims()[0] * w.dims()[1];
+            let b = layer.bias.as_ref().unwrap().val();
+            let nb = b.dims()[0];
+            let gb = b.grad(&grads).map_or(vec![0.0; nb], to_vec);
+            (host(w.grad(&grads), nw), gb)
+        })
+        .collect();
+    params
+        .iter()
+        .map(|&(l, bias, i)| {
+            if bias {
+                per_layer[l].1[i]
             } else {
-                layers[l].weight.val().grad(&grads).map(|g| to_vec(g))
-            };
-            g.map_or(0.0, |g| g[i])
+                per_layer[l].0[i]
+            }
         })
         .collect()
 }
@@ -161,6 +241,18 @@ pub fn fd_theta_grad(
     elastic: bool,
     device: &Device,
     h: f64,
+) -> Vec<f64> {
+    fd_theta_grad_at(field, x, elastic, device, h, &probes(field))
+}
+
+/// Central differences of the loss at the given parameters.
+pub fn fd_theta_grad_at(
+    field: &DomaField,
+    x: &[f64],
+    elastic: bool,
+    device: &Device,
+    h: f64,
+    params: &[(usize, bool, usize)],
 ) -> Vec<f64> {
     let base = field.siren.to_weights();
     let loss_at = |l: usize, bias: bool, i: usize, s: f64| {
@@ -174,11 +266,11 @@ pub fn fd_theta_grad(
             siren: Siren::from_weights(&w, field.siren.omega, device),
             variant: field.variant,
         };
-        to_vec(jacobian_loss(&f, x, elastic, device))[0]
+        to_vec(jacobian_loss(&f, x, elastic, &Autodiff, device))[0]
     };
-    probes(field)
-        .into_iter()
-        .map(|(l, b, i)| (loss_at(l, b, i, h) - loss_at(l, b, i, -h)) / (2.0 * h))
+    params
+        .iter()
+        .map(|&(l, b, i)| (loss_at(l, b, i, h) - loss_at(l, b, i, -h)) / (2.0 * h))
         .collect()
 }
 
