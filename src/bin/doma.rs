@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use doma::backend::BackendKind;
 use doma::data::synthetic::Motion;
+use doma::experiments::speed;
 use doma::experiments::synthetic::{self, Regularizer, SyntheticJob};
 use doma::field::Variant;
 use doma::jacobian::JacobianKind;
@@ -22,6 +23,47 @@ struct Cli {
 enum Command {
     /// Fit the synthetic benchmark (paper Tab. 2) and print the EPE table.
     Synthetic(SyntheticArgs),
+    /// Time the Jacobian step and the training step per backend and Jacobian method.
+    Bench(BenchArgs),
+}
+
+/// A backend, or every one that can run here.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum BackendArg {
+    Flex,
+    Ndarray,
+    Wgpu,
+    All,
+}
+
+/// A Jacobian method, or both.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum MethodArg {
+    Autodiff,
+    Analytic,
+    All,
+}
+
+#[derive(clap::Args, Debug)]
+struct BenchArgs {
+    /// The backend to time (`all`: flex, ndarray and wgpu when an adapter exists).
+    #[arg(long, value_enum, default_value = "flex")]
+    backend: BackendArg,
+    /// The Jacobian method to time.
+    #[arg(long, value_enum, default_value = "all")]
+    jacobian: MethodArg,
+    /// Point counts of the `jacobian` rows, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1024,16384", value_parser = clap::value_parser!(u64).range(1..))]
+    points: Vec<u64>,
+    /// Untimed warm-up steps per row.
+    #[arg(long, default_value_t = 3)]
+    warmup: u64,
+    /// Timed steps per row; the median is reported.
+    #[arg(long, default_value_t = 15, value_parser = clap::value_parser!(u64).range(1..))]
+    steps: u64,
+    /// Also write one JSON record per row (kind, backend, method, points, ms, gflops).
+    #[arg(long)]
+    json: Option<PathBuf>,
 }
 
 /// A motion, or all four.
@@ -111,12 +153,7 @@ fn run_synthetic(args: SyntheticArgs) -> anyhow::Result<()> {
     };
     if let Some(path) = &args.json {
         // Fail before hours of fitting, not after.
-        let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
-        if let Some(dir) = dir
-            && !dir.is_dir()
-        {
-            anyhow::bail!("{}: the folder does not exist", dir.display());
-        }
+        check_output_folder(path)?;
     }
     let job = SyntheticJob {
         motions,
@@ -153,10 +190,67 @@ fn run_synthetic(args: SyntheticArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Fails early when `path`'s folder does not exist, before minutes of work.
+fn check_output_folder(path: &std::path::Path) -> anyhow::Result<()> {
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
+    if let Some(dir) = dir
+        && !dir.is_dir()
+    {
+        anyhow::bail!("{}: the folder does not exist", dir.display());
+    }
+    Ok(())
+}
+
+fn run_bench(args: BenchArgs) -> anyhow::Result<()> {
+    if let Some(path) = &args.json {
+        check_output_folder(path)?;
+    }
+    let backends = match args.backend {
+        BackendArg::Flex => vec![BackendKind::Flex],
+        BackendArg::Ndarray => vec![BackendKind::Ndarray],
+        BackendArg::Wgpu => vec![BackendKind::Wgpu],
+        BackendArg::All => {
+            let mut b = vec![BackendKind::Flex, BackendKind::Ndarray];
+            if doma::backend::wgpu_available() {
+                b.push(BackendKind::Wgpu);
+            } else {
+                eprintln!("no wgpu adapter: skipping wgpu");
+            }
+            b
+        }
+    };
+    let methods = match args.jacobian {
+        MethodArg::Autodiff => vec![JacobianKind::Autodiff],
+        MethodArg::Analytic => vec![JacobianKind::Analytic],
+        MethodArg::All => vec![JacobianKind::Autodiff, JacobianKind::Analytic],
+    };
+    let job = speed::BenchJob {
+        backends,
+        methods,
+        points: args.points.iter().map(|&p| p as usize).collect(),
+        warmup: args.warmup as usize,
+        steps: args.steps as usize,
+    };
+    let rows = speed::run(&job, |r| {
+        eprintln!(
+            "{:?} {} {} {} points: {:.2} ms",
+            r.kind, r.backend, r.method, r.points, r.ms
+        )
+    })?;
+    println!();
+    print!("{}", speed::table(&rows));
+    if let Some(path) = &args.json {
+        speed::write_json(path, &rows)?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Synthetic(args) => run_synthetic(args),
+        Command::Bench(args) => run_bench(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

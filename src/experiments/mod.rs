@@ -1,3 +1,4 @@
 //! The paper's experiments as library functions, shared by the CLI and the examples.
 
+pub mod speed;
 pub mod synthetic;
