@@ -12,6 +12,7 @@ use doma::jacobian::JacobianKind;
 use doma::train::{FitConfig, Trainer};
 
 fn fit_step(c: &mut Criterion) {
+    doma::backend::tune_allocator();
     let seq = benchmark_sequence(Motion::Rotation, 0).expect("the synthetic data");
     let mut group = c.benchmark_group("fit_step");
     group.sample_size(30);

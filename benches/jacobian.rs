@@ -14,6 +14,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 fn jacobian(c: &mut Criterion) {
+    doma::backend::tune_allocator();
     let mut group = c.benchmark_group("jacobian");
     group.sample_size(10);
     let mut backends = vec![BackendKind::Flex, BackendKind::Ndarray];

@@ -9,6 +9,7 @@ use doma::backend::{BackendKind, wgpu_available};
 use doma::experiments::speed::{self, BenchJob};
 
 fn main() -> anyhow::Result<()> {
+    doma::backend::tune_allocator();
     let mut args = std::env::args().skip(1);
     let backends = match args.next().as_deref() {
         None | Some("flex") => vec![BackendKind::Flex],
@@ -29,7 +30,7 @@ fn main() -> anyhow::Result<()> {
             .ok()
             .filter(|&n: &usize| n > 0)
             .ok_or_else(|| anyhow::anyhow!("STEPS must be a positive integer, not `{s}`"))?,
-        None => 15,
+        None => 30,
     };
     let job = BenchJob {
         backends,

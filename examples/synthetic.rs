@@ -13,6 +13,7 @@ use doma::metrics::{EPE_SCALE, evaluate_epe};
 use doma::train::{FitConfig, fit};
 
 fn main() -> anyhow::Result<()> {
+    doma::backend::tune_allocator();
     let mut args = std::env::args().skip(1);
     let backend = match args.next().as_deref() {
         None | Some("flex") => BackendKind::Flex,

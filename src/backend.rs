@@ -67,3 +67,22 @@ pub fn wgpu_available() -> bool {
     let probe = std::panic::catch_unwind(|| Device::enumerate(DeviceType::Wgpu).into_vec().len());
     matches!(probe, Ok(n) if n > 0)
 }
+
+/// Tunes glibc's allocator for training loops (a no-op elsewhere): keep freed memory in
+/// the heap instead of returning it to the kernel, and serve large blocks from the heap
+/// instead of fresh `mmap`s.
+///
+/// A training step allocates and frees tensors of a few MB each; with glibc's defaults
+/// each one is a fresh `mmap` whose pages fault in on first touch, which measured 10–30 %
+/// of an `Analytic` step on flex (README, speed section). Process-wide, so it is for
+/// binaries to call at start-up (the `doma` CLI, the examples and benches do); a library
+/// that embeds doma decides for itself.
+pub fn tune_allocator() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only changes allocator parameters; it is safe to call at any time.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 256 << 20);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, 1 << 30);
+        libc::mallopt(libc::M_TOP_PAD, 64 << 20);
+    }
+}

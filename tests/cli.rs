@@ -28,6 +28,10 @@ fn bad_flags_are_refused_with_a_message() {
         (vec!["synthetic", "--h-weight", "nan"], "non-negative"),
         (vec!["synthetic", "--hidden", "0"], "--hidden"),
         (vec!["frobnicate"], "frobnicate"),
+        (vec!["bench", "--steps", "0"], "--steps"),
+        (vec!["bench", "--points", "0"], "--points"),
+        (vec!["bench", "--jacobian", "numeric"], "numeric"),
+        (vec!["bench", "--backend", "tpu"], "tpu"),
     ] {
         let (ok, _, err) = doma(&args);
         assert!(!ok, "{args:?} was accepted");
@@ -93,8 +97,51 @@ fn a_tiny_run_prints_the_table_and_writes_json() {
     assert_eq!(r["reg"], "h");
     assert_eq!(r["iters"], 2);
     assert_eq!(r["backend"], "flex");
-    assert_eq!(r["jacobian"], "autodiff");
+    assert_eq!(r["jacobian"], "analytic");
     assert_eq!(r["steps"], 40);
     assert!(r["epe_x1e4"].as_f64().unwrap() > 0.0);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn bench_prints_the_table_and_writes_exactly_the_record_fields() {
+    let dir = std::env::temp_dir().join(format!("doma-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let json = dir.join("bench.json");
+    let (ok, stdout, stderr) = doma(&[
+        "bench",
+        "--points",
+        "16",
+        "--warmup",
+        "0",
+        "--steps",
+        "1",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stdout.contains("fit_step") && stdout.contains("GFLOP/s"),
+        "{stdout}"
+    );
+    let rows: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let rows = rows.as_array().unwrap();
+    // flex × {autodiff, analytic} × {fit_step, jacobian at 16 points}.
+    assert_eq!(rows.len(), 4);
+    for r in rows {
+        let mut keys: Vec<&str> = r.as_object().unwrap().keys().map(|k| k.as_str()).collect();
+        keys.sort_unstable();
+        assert_eq!(
+            keys,
+            ["backend", "gflops", "kind", "method", "ms", "points"]
+        );
+        assert_eq!(r["backend"], "flex");
+        assert!(r["ms"].as_f64().unwrap() > 0.0 && r["gflops"].as_f64().unwrap() > 0.0);
+    }
+    assert_eq!(rows[0]["kind"], "fit_step");
+    assert_eq!(rows[0]["points"], 750);
+    assert_eq!(rows[3]["kind"], "jacobian");
+    assert_eq!(rows[3]["method"], "analytic");
     std::fs::remove_dir_all(&dir).unwrap();
 }

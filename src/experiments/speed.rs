@@ -71,8 +71,8 @@ impl Default for BenchJob {
             backends: vec![BackendKind::Flex],
             methods: vec![JacobianKind::Autodiff, JacobianKind::Analytic],
             points: vec![1024, 16384],
-            warmup: 3,
-            steps: 15,
+            warmup: 5,
+            steps: 30,
         }
     }
 }
