@@ -96,6 +96,7 @@ pub fn sin_cos_f32(x: f32) -> (f32, f32) {
 /// the sine/cosine loops run 2–4× faster on the wider units.
 macro_rules! simd_kernel {
     ($name:ident, ($($arg:ident : $ty:ty),* $(,)?), $body:block) => {
+        #[allow(clippy::too_many_arguments)] // one slice per block of the stacked matrix
         mod $name {
             #[allow(unused_imports)]
             use super::*;
