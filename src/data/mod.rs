@@ -1,6 +1,7 @@
 //! Point trajectories and their splits.
 
 pub mod synthetic;
+pub mod traj;
 
 use burn::tensor::{Device, Tensor, TensorData};
 
