@@ -1,5 +1,6 @@
 //! Point trajectories and their splits.
 
+pub mod anime;
 pub mod synthetic;
 pub mod traj;
 
