@@ -72,7 +72,8 @@ pub fn sin_cos_f32(x: f32) -> (f32, f32) {
     const P3: f32 = 7.549_789_948_768_648e-8;
     // Round to nearest by the 1.5·2²³ trick: `f32::round` is a libm call on baseline x86-64.
     const SHIFT: f32 = 12_582_912.0;
-    let k = (x * FRAC_2_PI + SHIFT) - SHIFT;
+    let shifted = x * FRAC_2_PI + SHIFT;
+    let k = shifted - SHIFT;
     let r = ((x - k * P1) - k * P2) - k * P3;
     let r2 = r * r;
     let s = r + r * r2 * (-1.666_665_46e-1 + r2 * (8.332_160_87e-3 + r2 * -1.951_529_59e-4));
@@ -80,11 +81,13 @@ pub fn sin_cos_f32(x: f32) -> (f32, f32) {
         1.0 - 0.5 * r2 + r2 * r2 * (4.166_664_57e-2 + r2 * (-1.388_731_6e-3 + r2 * 2.443_315_7e-5));
     // sin x = [s, c, −s, −c][q], cos x = [c, −s, −c, s][q] for the quadrant q = k mod 4;
     // selects and sign-bit flips, so that the loop around this vectorises.
-    let q = k as i32;
+    // After the shift, k's low bits are the mantissa's low bits (no float→int conversion,
+    // which is a saturating, slow-to-vectorise cast in Rust).
+    let q = shifted.to_bits();
     let odd = q & 1 != 0;
     let (sin, cos) = (if odd { c } else { s }, if odd { s } else { c });
-    let sin_sign = ((q & 2) as u32) << 30;
-    let cos_sign = (((q + 1) & 2) as u32) << 30;
+    let sin_sign = (q & 2) << 30;
+    let cos_sign = (q.wrapping_add(1) & 2) << 30;
     (
         f32::from_bits(sin.to_bits() ^ sin_sign),
         f32::from_bits(cos.to_bits() ^ cos_sign),
