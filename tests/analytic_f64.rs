@@ -5,27 +5,13 @@
 
 mod common;
 
-use std::sync::OnceLock;
-
-use burn::tensor::{Device, FloatDType};
 use common::oracle::{
     N, Output, all_parameters, fd_jacobian, fd_theta_grad_at, method_jacobian, method_outputs,
     plain_outputs, small_field, theta_grad_at,
 };
-use common::{backward_lock, random_points, rel_err};
+use common::{backward_lock, f64_flex, random_points, rel_err};
 use doma::field::Variant;
 use doma::jacobian::Analytic;
-
-fn f64_flex() -> Device {
-    static DEVICE: OnceLock<Device> = OnceLock::new();
-    DEVICE
-        .get_or_init(|| {
-            let mut d = Device::flex();
-            d.configure(FloatDType::F64).expect("flex runs in f64");
-            d
-        })
-        .clone()
-}
 
 #[test]
 fn analytic_jacobian_matches_finite_differences() {

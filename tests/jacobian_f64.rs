@@ -5,26 +5,12 @@
 
 mod common;
 
-use std::sync::OnceLock;
-
-use burn::tensor::{Device, FloatDType};
 use common::oracle::{
     N, Output, autodiff_theta_grad, check_against_reverse, fd_jacobian, fd_theta_grad,
     forward_jacobian, small_field,
 };
-use common::{backward_lock, random_points, rel_err};
+use common::{backward_lock, f64_flex, random_points, rel_err};
 use doma::field::Variant;
-
-fn f64_flex() -> Device {
-    static DEVICE: OnceLock<Device> = OnceLock::new();
-    DEVICE
-        .get_or_init(|| {
-            let mut d = Device::flex();
-            d.configure(FloatDType::F64).expect("flex runs in f64");
-            d
-        })
-        .clone()
-}
 
 #[test]
 fn forward_mode_matches_reverse_mode() {

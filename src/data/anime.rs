@@ -75,14 +75,10 @@ pub fn parse_anime(bytes: &[u8]) -> std::result::Result<AnimatedMesh, String> {
         .try_fold(12usize, |acc, &v| acc.checked_add(v))
         .ok_or_else(overflow)?;
     if bytes.len() != expected {
-        let what = if bytes.len() < expected {
-            "truncated"
-        } else {
-            "oversized"
-        };
-        return Err(format!(
-            "{what}: {} bytes, but {nf} frames, {nv} vertices and {nt} triangles need {expected}",
-            bytes.len()
+        return Err(super::size_mismatch(
+            bytes.len(),
+            expected,
+            &format!("{nf} frames, {nv} vertices and {nt} triangles need"),
         ));
     }
     let base_at = 12;

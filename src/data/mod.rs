@@ -8,6 +8,17 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::{DomaError, Result};
 
+/// The message for a file of `actual` bytes whose header says `expected`: "truncated" or
+/// "oversized", then `need` and the expected size.
+pub(crate) fn size_mismatch(actual: usize, expected: usize, need: &str) -> String {
+    let what = if actual < expected {
+        "truncated"
+    } else {
+        "oversized"
+    };
+    format!("{what}: {actual} bytes, but {need} {expected}")
+}
+
 /// The normalised time of frame `k` of `frames`: `t_k = −1 + 2k/(T−1)` (REFERENCE §1),
 /// so the canonical frame 0 is `t = −1` and the last frame `t = 1`. A single frame is
 /// at `t = −1`.

@@ -66,14 +66,10 @@ pub fn parse_traj(bytes: &[u8]) -> std::result::Result<Trajectories, String> {
         .and_then(|v| v.checked_add(HEADER))
         .ok_or_else(|| format!("{frames} frames × {points} points overflows"))?;
     if bytes.len() != expected {
-        let what = if bytes.len() < expected {
-            "truncated"
-        } else {
-            "oversized"
-        };
-        return Err(format!(
-            "{what}: {} bytes, but {frames} frames × {points} points need 16 + 12·T·N = {expected}",
-            bytes.len()
+        return Err(super::size_mismatch(
+            bytes.len(),
+            expected,
+            &format!("{frames} frames × {points} points need 16 + 12·T·N ="),
         ));
     }
     let positions: Vec<f32> = bytes[HEADER..]

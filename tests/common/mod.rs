@@ -3,9 +3,9 @@
 
 pub mod oracle;
 
-use std::sync::{Mutex, MutexGuard};
+use std::sync::{Mutex, MutexGuard, OnceLock};
 
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, FloatDType, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -42,4 +42,16 @@ pub fn rel_err(a: &[f64], b: &[f64]) -> f64 {
 pub fn random_points(n: usize, seed: u64) -> Vec<f64> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     (0..3 * n).map(|_| rng.random_range(-1.0..1.0)).collect()
+}
+
+/// A flex device computing in f64 (one per process: a device's float type is set once).
+pub fn f64_flex() -> Device {
+    static DEVICE: OnceLock<Device> = OnceLock::new();
+    DEVICE
+        .get_or_init(|| {
+            let mut d = Device::flex();
+            d.configure(FloatDType::F64).expect("flex runs in f64");
+            d
+        })
+        .clone()
 }

@@ -226,42 +226,51 @@ pub fn activation(zs: &FlexTensor, bias: &FlexTensor, omega: f64) -> Option<Flex
     }
 }
 
-fn activation_typed<E: Real>(zs: &FlexTensor, bias: &FlexTensor, omega: f64) -> FlexTensor {
-    let [r, d] = zs.shape().dims::<2>();
-    let n = r / 4;
-    let (zs, bias) = (contiguous(zs.clone()), contiguous(bias.clone()));
-    let (zv, b) = (slice::<E>(&zs), slice::<E>(&bias));
-    let w = E::from_f64(omega);
-    let mut out = vec![E::zero(); r * d];
-    let (top, tangents) = out.split_at_mut(n * d);
-    let (t0, rest) = tangents.split_at_mut(n * d);
-    let (t1, t2) = rest.split_at_mut(n * d);
-    let chunk = ROWS_PER_TASK * d;
+/// A fresh `[4N, d]` stacked output, filled in parallel: `row(at, [h, ḣ_x, ḣ_y, ḣ_z])` gets
+/// the offset `at` of one row inside a block and that row of each of the four blocks.
+fn stacked_rows<E: Real>(
+    n: usize,
+    d: usize,
+    row: impl Fn(usize, [&mut [E]; 4]) + Sync,
+) -> FlexTensor {
     let nd = n * d;
+    let mut out = vec![E::zero(); 4 * nd];
+    let (top, tangents) = out.split_at_mut(nd);
+    let (t0, rest) = tangents.split_at_mut(nd);
+    let (t1, t2) = rest.split_at_mut(nd);
+    let chunk = ROWS_PER_TASK * d;
     top.par_chunks_mut(chunk)
         .zip(t0.par_chunks_mut(chunk))
         .zip(t1.par_chunks_mut(chunk))
         .zip(t2.par_chunks_mut(chunk))
         .enumerate()
         .for_each(|(c, (((h, h0), h1), h2))| {
-            for row in 0..h.len() / d {
-                let at = c * chunk + row * d;
-                let o = row * d..(row + 1) * d;
-                dual_forward_row::run::<E>(
-                    w,
-                    &zv[at..at + d],
-                    b,
-                    &zv[nd + at..nd + at + d],
-                    &zv[2 * nd + at..2 * nd + at + d],
-                    &zv[3 * nd + at..3 * nd + at + d],
-                    &mut h[o.clone()],
-                    &mut h0[o.clone()],
-                    &mut h1[o.clone()],
-                    &mut h2[o],
+            for r in 0..h.len() / d {
+                let o = r * d..(r + 1) * d;
+                row(
+                    c * chunk + r * d,
+                    [
+                        &mut h[o.clone()],
+                        &mut h0[o.clone()],
+                        &mut h1[o.clone()],
+                        &mut h2[o],
+                    ],
                 );
             }
         });
-    FlexTensor::from_data(TensorData::new(out, [r, d]))
+    FlexTensor::from_data(TensorData::new(out, [4 * n, d]))
+}
+
+fn activation_typed<E: Real>(zs: &FlexTensor, bias: &FlexTensor, omega: f64) -> FlexTensor {
+    let [r, d] = zs.shape().dims::<2>();
+    let (n, nd) = (r / 4, r / 4 * d);
+    let (zs, bias) = (contiguous(zs.clone()), contiguous(bias.clone()));
+    let (zv, b) = (slice::<E>(&zs), slice::<E>(&bias));
+    let w = E::from_f64(omega);
+    stacked_rows::<E>(n, d, |at, [h, h0, h1, h2]| {
+        let zp = |k: usize| &zv[k * nd + at..k * nd + at + d];
+        dual_forward_row::run::<E>(w, zp(0), b, zp(1), zp(2), zp(3), h, h0, h1, h2);
+    })
 }
 
 /// The gradient with respect to `zs`:
@@ -286,7 +295,7 @@ fn backward_typed<E: Real>(
     omega: f64,
 ) -> FlexTensor {
     let [r, d] = zs.shape().dims::<2>();
-    let n = r / 4;
+    let (n, nd) = (r / 4, r / 4 * d);
     let (zs, bias, grad) = (
         contiguous(zs.clone()),
         contiguous(bias.clone()),
@@ -294,38 +303,12 @@ fn backward_typed<E: Real>(
     );
     let (zv, b, g) = (slice::<E>(&zs), slice::<E>(&bias), slice::<E>(&grad));
     let w = E::from_f64(omega);
-    let mut out = vec![E::zero(); r * d];
-    let (top, tangents) = out.split_at_mut(n * d);
-    let (t0, rest) = tangents.split_at_mut(n * d);
-    let (t1, t2) = rest.split_at_mut(n * d);
-    let chunk = ROWS_PER_TASK * d;
-    let nd = n * d;
-    top.par_chunks_mut(chunk)
-        .zip(t0.par_chunks_mut(chunk))
-        .zip(t1.par_chunks_mut(chunk))
-        .zip(t2.par_chunks_mut(chunk))
-        .enumerate()
-        .for_each(|(c, (((gz, g0), g1), g2))| {
-            for row in 0..gz.len() / d {
-                let at = c * chunk + row * d;
-                let o = row * d..(row + 1) * d;
-                let zp = |k: usize| &zv[k * nd + at..k * nd + at + d];
-                let gp = |k: usize| &g[k * nd + at..k * nd + at + d];
-                dual_backward_row::run::<E>(
-                    w,
-                    zp(0),
-                    b,
-                    gp(0),
-                    [zp(1), zp(2), zp(3)],
-                    [gp(1), gp(2), gp(3)],
-                    &mut gz[o.clone()],
-                    &mut g0[o.clone()],
-                    &mut g1[o.clone()],
-                    &mut g2[o],
-                );
-            }
-        });
-    FlexTensor::from_data(TensorData::new(out, [r, d]))
+    stacked_rows::<E>(n, d, |at, [gz, g0, g1, g2]| {
+        let zp = |k: usize| &zv[k * nd + at..k * nd + at + d];
+        let gp = |k: usize| &g[k * nd + at..k * nd + at + d];
+        let (zk, gk) = ([zp(1), zp(2), zp(3)], [gp(1), gp(2), gp(3)]);
+        dual_backward_row::run::<E>(w, zp(0), b, gp(0), zk, gk, gz, g0, g1, g2);
+    })
 }
 
 /// The value-only layer: `sin(ω(zs + b))`. `None` for other dtypes.
