@@ -177,19 +177,7 @@ pub fn all_parameters(field: &DomaField) -> Vec<(usize, bool, usize)> {
 
 /// The θ-gradient from Burn's reverse mode through the Jacobian of [`Autodiff`].
 pub fn autodiff_theta_grad(field: &DomaField, x: &[f64], elastic: bool, ad: &Device) -> Vec<f64> {
-    method_theta_grad(field, x, elastic, &Autodiff, ad)
-}
-
-/// The θ-gradient from a backward pass through the Jacobian of `method` (for `Analytic`,
-/// its hand-written backward).
-pub fn method_theta_grad(
-    field: &DomaField,
-    x: &[f64],
-    elastic: bool,
-    method: &dyn JacobianMethod,
-    ad: &Device,
-) -> Vec<f64> {
-    theta_grad_at(field, x, elastic, method, ad, &probes(field))
+    theta_grad_at(field, x, elastic, &Autodiff, ad, &probes(field))
 }
 
 /// The θ-gradient through the Jacobian of `method`, at the given parameters.

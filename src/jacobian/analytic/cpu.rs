@@ -8,11 +8,14 @@
 //! In f32 the sine and cosine come from [`sin_cos_f32`], a branch-free polynomial that the
 //! compiler vectorises (error below 1e-7 absolute for |z| < 10⁴); in f64 from `std`.
 
+use burn::backend::Flex;
 use burn::backend::TensorMetadata;
 use burn::backend::flex::FlexTensor;
 use burn::tensor::DType;
 use burn::tensor::TensorData;
 use rayon::prelude::*;
+
+use super::forward;
 
 /// Rows per parallel task: large enough that splitting costs nothing measurable.
 const ROWS_PER_TASK: usize = 64;
@@ -216,13 +219,13 @@ fn slice<E: Real>(t: &FlexTensor) -> &[E] {
         .expect("a contiguous tensor of the matching dtype")
 }
 
-/// `[sin z; cos z ⊙ ż]` with `z = ω(zs[0..N] + b)`, `ż = ω zs[N..4N]`. `None` when the
-/// dtype is neither f32 nor f64 (the caller then uses the primitive path).
-pub fn activation(zs: &FlexTensor, bias: &FlexTensor, omega: f64) -> Option<FlexTensor> {
+/// `[sin z; cos z ⊙ ż]` with `z = ω(zs[0..N] + b)`, `ż = ω zs[N..4N]`. Other dtypes than
+/// f32 and f64 take the primitive path.
+pub fn activation(zs: FlexTensor, bias: FlexTensor, omega: f64) -> FlexTensor {
     match zs.dtype() {
-        DType::F32 => Some(activation_typed::<f32>(zs, bias, omega)),
-        DType::F64 => Some(activation_typed::<f64>(zs, bias, omega)),
-        _ => None,
+        DType::F32 => activation_typed::<f32>(&zs, &bias, omega),
+        DType::F64 => activation_typed::<f64>(&zs, &bias, omega),
+        _ => forward::activation::<Flex>(zs, bias, omega),
     }
 }
 
@@ -274,17 +277,17 @@ fn activation_typed<E: Real>(zs: &FlexTensor, bias: &FlexTensor, omega: f64) -> 
 }
 
 /// The gradient with respect to `zs`:
-/// `ω [g_h ⊙ cos z − sin z ⊙ Σ_k g_ḣ,k ⊙ ż_k ; g_ḣ ⊙ cos z]`. `None` for other dtypes.
+/// `ω [g_h ⊙ cos z − sin z ⊙ Σ_k g_ḣ,k ⊙ ż_k ; g_ḣ ⊙ cos z]`.
 pub fn activation_backward(
-    zs: &FlexTensor,
-    bias: &FlexTensor,
-    grad: &FlexTensor,
+    zs: FlexTensor,
+    bias: FlexTensor,
+    grad: FlexTensor,
     omega: f64,
-) -> Option<FlexTensor> {
+) -> FlexTensor {
     match zs.dtype() {
-        DType::F32 => Some(backward_typed::<f32>(zs, bias, grad, omega)),
-        DType::F64 => Some(backward_typed::<f64>(zs, bias, grad, omega)),
-        _ => None,
+        DType::F32 => backward_typed::<f32>(&zs, &bias, &grad, omega),
+        DType::F64 => backward_typed::<f64>(&zs, &bias, &grad, omega),
+        _ => forward::activation_backward::<Flex>(zs, bias, grad, omega),
     }
 }
 
@@ -311,26 +314,26 @@ fn backward_typed<E: Real>(
     })
 }
 
-/// The value-only layer: `sin(ω(zs + b))`. `None` for other dtypes.
-pub fn plain_activation(zs: &FlexTensor, bias: &FlexTensor, omega: f64) -> Option<FlexTensor> {
+/// The value-only layer: `sin(ω(zs + b))`.
+pub fn plain_activation(zs: FlexTensor, bias: FlexTensor, omega: f64) -> FlexTensor {
     match zs.dtype() {
-        DType::F32 => Some(plain_typed::<f32>(zs, bias, None, omega)),
-        DType::F64 => Some(plain_typed::<f64>(zs, bias, None, omega)),
-        _ => None,
+        DType::F32 => plain_typed::<f32>(&zs, &bias, None, omega),
+        DType::F64 => plain_typed::<f64>(&zs, &bias, None, omega),
+        _ => forward::plain_activation::<Flex>(zs, bias, omega),
     }
 }
 
-/// Its backward: `ω g ⊙ cos(ω(zs + b))`. `None` for other dtypes.
+/// Its backward: `ω g ⊙ cos(ω(zs + b))`.
 pub fn plain_activation_backward(
-    zs: &FlexTensor,
-    bias: &FlexTensor,
-    grad: &FlexTensor,
+    zs: FlexTensor,
+    bias: FlexTensor,
+    grad: FlexTensor,
     omega: f64,
-) -> Option<FlexTensor> {
+) -> FlexTensor {
     match zs.dtype() {
-        DType::F32 => Some(plain_typed::<f32>(zs, bias, Some(grad), omega)),
-        DType::F64 => Some(plain_typed::<f64>(zs, bias, Some(grad), omega)),
-        _ => None,
+        DType::F32 => plain_typed::<f32>(&zs, &bias, Some(&grad), omega),
+        DType::F64 => plain_typed::<f64>(&zs, &bias, Some(&grad), omega),
+        _ => forward::plain_activation_backward::<Flex>(zs, bias, grad, omega),
     }
 }
 

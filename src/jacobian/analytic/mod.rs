@@ -102,10 +102,7 @@ impl SirenBackend for burn::backend::Flex {
         bias: FloatTensor<Self>,
         omega: f64,
     ) -> FloatTensor<Self> {
-        match cpu::activation(&zs, &bias, omega) {
-            Some(out) => out,
-            None => forward::activation::<Self>(zs, bias, omega),
-        }
+        cpu::activation(zs, bias, omega)
     }
 
     fn sine_dual_activation_backward(
@@ -114,10 +111,7 @@ impl SirenBackend for burn::backend::Flex {
         grad: FloatTensor<Self>,
         omega: f64,
     ) -> FloatTensor<Self> {
-        match cpu::activation_backward(&zs, &bias, &grad, omega) {
-            Some(out) => out,
-            None => forward::activation_backward::<Self>(zs, bias, grad, omega),
-        }
+        cpu::activation_backward(zs, bias, grad, omega)
     }
 
     fn sine_activation(
@@ -125,10 +119,7 @@ impl SirenBackend for burn::backend::Flex {
         bias: FloatTensor<Self>,
         omega: f64,
     ) -> FloatTensor<Self> {
-        match cpu::plain_activation(&zs, &bias, omega) {
-            Some(out) => out,
-            None => forward::plain_activation::<Self>(zs, bias, omega),
-        }
+        cpu::plain_activation(zs, bias, omega)
     }
 
     fn sine_activation_backward(
@@ -137,12 +128,10 @@ impl SirenBackend for burn::backend::Flex {
         grad: FloatTensor<Self>,
         omega: f64,
     ) -> FloatTensor<Self> {
-        match cpu::plain_activation_backward(&zs, &bias, &grad, omega) {
-            Some(out) => out,
-            None => forward::plain_activation_backward::<Self>(zs, bias, grad, omega),
-        }
+        cpu::plain_activation_backward(zs, bias, grad, omega)
     }
 }
+
 impl SirenBackend for burn::backend::NdArray {}
 
 /// One sine layer of the analytic method on high-level tensors (see [`SirenBackend::sine_dual_layer`]).
