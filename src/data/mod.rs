@@ -1,6 +1,8 @@
 //! Point trajectories and their splits.
 
 pub mod anime;
+pub mod mesh;
+pub mod npy;
 pub mod synthetic;
 pub mod traj;
 
@@ -17,6 +19,24 @@ pub(crate) fn size_mismatch(actual: usize, expected: usize, need: &str) -> Strin
         "oversized"
     };
     format!("{what}: {actual} bytes, but {need} {expected}")
+}
+
+/// Parses a frame range `A..B` (B excluded) or `A..=B` (B included).
+pub fn parse_frame_range(s: &str) -> std::result::Result<std::ops::Range<usize>, String> {
+    let bad = || format!("`{s}` is not a frame range like 0..40 or 0..=39");
+    let (a, b, inclusive) = if let Some((a, b)) = s.split_once("..=") {
+        (a, b, true)
+    } else {
+        let (a, b) = s.split_once("..").ok_or_else(bad)?;
+        (a, b, false)
+    };
+    let a: usize = a.trim().parse().map_err(|_| bad())?;
+    let b: usize = b.trim().parse().map_err(|_| bad())?;
+    let end = if inclusive { b + 1 } else { b };
+    if end <= a {
+        return Err(format!("the frame range `{s}` is empty"));
+    }
+    Ok(a..end)
 }
 
 /// The normalised time of frame `k` of `frames`: `t_k = −1 + 2k/(T−1)` (REFERENCE §1),
@@ -123,6 +143,53 @@ impl Trajectories {
             }
         }
         Trajectories::new(self.frames, indices.len(), positions)
+    }
+
+    /// The frames `range` (a contiguous clip), every `stride`-th, as a new sequence whose
+    /// first selected frame is canonical. Refuses an empty selection or frames past the end.
+    pub fn select_frames(&self, range: std::ops::Range<usize>, stride: usize) -> Result<Self> {
+        if stride == 0 || range.start >= range.end || range.end > self.frames {
+            return Err(DomaError::InvalidData(format!(
+                "frames {}..{} (stride {stride}) do not select a clip of the {} frames",
+                range.start, range.end, self.frames
+            )));
+        }
+        let mut positions = Vec::new();
+        let mut count = 0;
+        for k in range.step_by(stride) {
+            positions.extend_from_slice(self.frame(k));
+            count += 1;
+        }
+        Trajectories::new(count, self.points, positions)
+    }
+
+    /// The sequence moved and scaled so that frame 0's bounding box is centred at the
+    /// origin with its longest side spanning `[−1, 1]` (SIREN's `ω₀ = 30` assumes inputs of
+    /// about that range). Returns the new sequence, the centre and the scale `s`
+    /// (`x' = (x − c) / s`).
+    pub fn normalized(&self) -> (Self, [f32; 3], f32) {
+        let mut lo = [f32::INFINITY; 3];
+        let mut hi = [f32::NEG_INFINITY; 3];
+        for p in self.frame(0).chunks_exact(3) {
+            for c in 0..3 {
+                lo[c] = lo[c].min(p[c]);
+                hi[c] = hi[c].max(p[c]);
+            }
+        }
+        let center: [f32; 3] = std::array::from_fn(|c| 0.5 * (lo[c] + hi[c]));
+        let half = (0..3).map(|c| 0.5 * (hi[c] - lo[c])).fold(0f32, f32::max);
+        let scale = if half > 0.0 { half } else { 1.0 };
+        let positions = self
+            .positions
+            .chunks_exact(3)
+            .flat_map(|p| (0..3).map(move |c| (p[c] - center[c]) / scale))
+            .collect();
+        let out = Trajectories {
+            frames: self.frames,
+            points: self.points,
+            positions,
+        };
+        (out, center, scale)
     }
 
     /// Splits the points into the first `n_train` and the rest (the authors' split of
