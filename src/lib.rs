@@ -19,6 +19,7 @@
 //! Scaled SE(3) variants, Eq. 13 the smoothness loss.
 
 pub mod backend;
+pub mod checkpoint;
 pub mod data;
 pub mod error;
 pub mod experiments;
@@ -27,6 +28,7 @@ pub mod io;
 pub mod jacobian;
 pub mod loss;
 pub mod metrics;
+pub mod register;
 pub mod siren;
 pub mod train;
 

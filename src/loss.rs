@@ -102,3 +102,144 @@ pub fn elastic_robustifier(q: Tensor<2>) -> Tensor<2> {
     let z = q.div_scalar(ELASTIC_SCALE).square();
     z.clone().mul_scalar(2.0) / z.add_scalar(4.0)
 }
+
+/// The neighbourhoods of the as-isometric-as-possible loss (AIAP, DPF Eq. 13; REFERENCE
+/// §4.4), computed once on the canonical points: each point's `K` nearest neighbours
+/// (itself included) from a k-d tree, and their pairwise canonical distances.
+#[derive(Clone, Debug)]
+pub struct AiapNeighbourhoods {
+    /// `[N·K]` neighbour indices, row-major, closest first.
+    pub indices: Vec<usize>,
+    /// `K`.
+    pub k: usize,
+    /// `[N, P]` canonical distances of the `P = K(K−1)/2` pairs `i < j` of each
+    /// neighbourhood.
+    pub rest_lengths: Vec<f32>,
+}
+
+/// The pairs `(i, j)`, `i < j`, of a `k`-neighbourhood.
+fn neighbourhood_pairs(k: usize) -> Vec<(usize, usize)> {
+    (0..k)
+        .flat_map(|i| (i + 1..k).map(move |j| (i, j)))
+        .collect()
+}
+
+impl AiapNeighbourhoods {
+    /// The `k`-nearest neighbourhoods of `canonical` (`k ≥ 2`, at most the point count).
+    pub fn new(canonical: &[[f32; 3]], k: usize) -> crate::Result<Self> {
+        if k < 2 || k > canonical.len() {
+            return Err(crate::DomaError::InvalidConfig(format!(
+                "AIAP needs 2 ≤ K ≤ {} neighbours, not {k}",
+                canonical.len()
+            )));
+        }
+        let tree = crate::metrics::PointTree::new(canonical)?;
+        let indices: Vec<usize> = canonical
+            .iter()
+            .flat_map(|q| tree.nearest_k(q, k))
+            .collect();
+        let pairs = neighbourhood_pairs(k);
+        let rest_lengths = indices
+            .chunks_exact(k)
+            .flat_map(|nb| {
+                pairs.iter().map(move |&(i, j)| {
+                    let (a, b) = (canonical[nb[i]], canonical[nb[j]]);
+                    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+                })
+            })
+            .collect();
+        Ok(AiapNeighbourhoods {
+            indices,
+            k,
+            rest_lengths,
+        })
+    }
+
+    /// The number of points.
+    pub fn points(&self) -> usize {
+        self.indices.len() / self.k
+    }
+}
+
+/// Keeps the distance's derivative finite when two neighbours coincide.
+const AIAP_EPS: f64 = 1e-12;
+
+/// The AIAP loss (DPF Eq. 13, REFERENCE §4.4): the mean absolute difference between the
+/// pairwise distances inside each canonical neighbourhood and the same distances after the
+/// warp, over all `N × K × K` entries. `deformed` is `[N, 3]`, the warped canonical points
+/// in the order of `neighbourhoods`. The diagonal entries are zero on both sides and the
+/// matrix is symmetric, so this sums the `i < j` pairs and scales by `2 / K²`: the same
+/// number, without `√0` in the graph.
+pub fn aiap(deformed: Tensor<2>, neighbourhoods: &AiapNeighbourhoods) -> Tensor<1> {
+    let device = deformed.device();
+    let k = neighbourhoods.k;
+    let n = neighbourhoods.points();
+    let pairs = neighbourhood_pairs(k);
+    let p = pairs.len();
+    let (mut left, mut right) = (Vec::with_capacity(n * p), Vec::with_capacity(n * p));
+    for nb in neighbourhoods.indices.chunks_exact(k) {
+        for &(i, j) in &pairs {
+            left.push(nb[i] as i64);
+            right.push(nb[j] as i64);
+        }
+    }
+    let index = |v: Vec<i64>| {
+        Tensor::<1, burn::tensor::Int>::from_data(
+            burn::tensor::TensorData::new(v, [n * p]),
+            &device,
+        )
+    };
+    let a = deformed.clone().select(0, index(left));
+    let b = deformed.select(0, index(right));
+    let lengths = (a - b).square().sum_dim(1).add_scalar(AIAP_EPS).sqrt(); // [N·P, 1]
+    let rest = Tensor::<2>::from_data(
+        burn::tensor::TensorData::new(neighbourhoods.rest_lengths.clone(), [n * p, 1]),
+        &device,
+    );
+    (lengths - rest)
+        .abs()
+        .sum()
+        .mul_scalar(2.0 / (n * k * k) as f64)
+}
+
+/// Rows of `a` per block of the Chamfer loss: a block's distance matrix is
+/// `CHAMFER_BLOCK × M`, so 10k × 40k clouds stay at 2048 × 40 000 × 4 B = 328 MB at once.
+pub const CHAMFER_BLOCK: usize = 2048;
+
+/// The mean over `from`'s rows of the squared distance to the nearest row of `to`, in
+/// blocks of [`CHAMFER_BLOCK`] rows. `|a|² + |b|² − 2 a·b` makes each block one matmul.
+fn chamfer_one_way(from: Tensor<2>, to: Tensor<2>) -> Tensor<1> {
+    let n = from.dims()[0];
+    let to_sq = to.clone().square().sum_dim(1).transpose(); // [1, M]
+    let to_t = to.transpose(); // [3, M]
+    let mut total: Option<Tensor<1>> = None;
+    let mut start = 0;
+    while start < n {
+        let len = CHAMFER_BLOCK.min(n - start);
+        let a = from.clone().narrow(0, start, len);
+        let a_sq = a.clone().square().sum_dim(1); // [len, 1]
+        let d2 = (a_sq + to_sq.clone() - a.matmul(to_t.clone()).mul_scalar(2.0)).clamp_min(0.0);
+        let part = d2.min_dim(1).sum();
+        total = Some(match total {
+            Some(t) => t + part,
+            None => part,
+        });
+        start += len;
+    }
+    total.expect("a non-empty cloud").div_scalar(n as f64)
+}
+
+/// The Chamfer loss (Eq. 12, REFERENCE §4.5) between `a` (`[N, 3]`, e.g. warped canonical
+/// samples) and `b` (`[M, 3]`, target samples): the mean squared nearest-neighbour distance
+/// from `a` to `b` plus from `b` to `a`. On the device, differentiable, and blocked so that
+/// it never holds an `N × M` matrix at once.
+///
+/// # Panics
+/// If either cloud is empty (a programming error; the fit loops check their inputs).
+pub fn chamfer(a: Tensor<2>, b: Tensor<2>) -> Tensor<1> {
+    assert!(
+        a.dims()[0] > 0 && b.dims()[0] > 0,
+        "chamfer: empty point cloud"
+    );
+    chamfer_one_way(a.clone(), b.clone()) + chamfer_one_way(b, a)
+}

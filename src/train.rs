@@ -196,7 +196,7 @@ fn smoothness_samples(
 
 /// A standard normal draw (Box–Muller), so that the samples are the same on every
 /// backend for a given seed.
-fn gaussian(rng: &mut impl Rng) -> f64 {
+pub(crate) fn gaussian(rng: &mut impl Rng) -> f64 {
     let u1: f64 = 1.0 - rng.random::<f64>(); // (0, 1]
     let u2: f64 = rng.random();
     (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()

@@ -1,0 +1,108 @@
+//! Checkpoints: a fitted field's parameters as a burnpack (`.bpk`) file, written atomically
+//! (to a temporary file in the same folder, then renamed), optionally in `f16`, next to the
+//! `config.json` that rebuilds the module (DESIGN §5). Tab. 3 reports their size.
+
+use std::path::{Path, PathBuf};
+
+use burn::module::{Module, ModuleMapper, Param};
+use burn::store::ModuleRecord;
+use burn::tensor::{DType, Tensor};
+use serde::{Deserialize, Serialize};
+
+use crate::io::write_atomic;
+use crate::{DomaError, Result};
+
+/// The float precision of a checkpoint's parameters.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Precision {
+    /// 32-bit floats: loads back bit-exactly.
+    #[default]
+    F32,
+    /// 16-bit floats: half the bytes; loads back rounded to `f16` and cast to the
+    /// module's precision.
+    F16,
+}
+
+/// Casts every float parameter to `dtype`.
+struct CastTo(DType);
+
+impl ModuleMapper for CastTo {
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        let dtype = self.0;
+        param.map(|t| t.cast(dtype))
+    }
+}
+
+/// The burnpack bytes of `module`'s parameters in `precision`.
+pub fn encode_checkpoint<M: Module>(module: M, precision: Precision) -> Result<Vec<u8>> {
+    let module = match precision {
+        Precision::F32 => module,
+        Precision::F16 => module.map(&mut CastTo(DType::F16)),
+    };
+    let bytes = module
+        .into_record()
+        .into_bytes()
+        .map_err(|e| DomaError::Device(format!("cannot serialise the checkpoint: {e}")))?;
+    Ok(bytes.to_vec())
+}
+
+/// Writes `module`'s parameters to `path` (a `.bpk` file) atomically; returns its size in
+/// bytes.
+pub fn save_checkpoint<M: Module>(module: M, path: &Path, precision: Precision) -> Result<u64> {
+    let bytes = encode_checkpoint(module, precision)?;
+    write_atomic(path, &bytes)?;
+    Ok(bytes.len() as u64)
+}
+
+/// Loads the parameters in `path` into `module` (a freshly initialised module of the same
+/// shape, e.g. from its `config.json`), casting them to the module's precision. A file that
+/// is not a burnpack, or that holds other shapes, is [`DomaError::Malformed`].
+pub fn load_checkpoint<M: Module>(module: M, path: &Path) -> Result<M> {
+    let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
+    let malformed = |reason: String| DomaError::Malformed {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let record = ModuleRecord::from_bytes(burn::tensor::Bytes::from_bytes_vec(bytes))
+        .map_err(|e| malformed(format!("not a burnpack checkpoint: {e}")))?
+        .cast_to_module_dtype();
+    module
+        .try_load_record(record)
+        .map_err(|e| malformed(format!("does not fit the model: {e}")))
+}
+
+/// Writes `config` as pretty JSON to `path`, atomically.
+pub fn save_json<T: Serialize>(config: &T, path: &Path) -> Result<()> {
+    let text = serde_json::to_string_pretty(config)
+        .map_err(|e| DomaError::InvalidData(format!("cannot serialise {}: {e}", path.display())))?;
+    write_atomic(path, text.as_bytes())
+}
+
+/// Reads JSON from `path`; a parse error is [`DomaError::Malformed`] naming the file.
+pub fn load_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| DomaError::io(path, e))?;
+    serde_json::from_str(&text).map_err(|e| DomaError::Malformed {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })
+}
+
+/// The file names of a saved field inside a folder.
+#[derive(Clone, Debug)]
+pub struct CheckpointPaths {
+    /// `model.bpk`.
+    pub model: PathBuf,
+    /// `config.json`.
+    pub config: PathBuf,
+}
+
+impl CheckpointPaths {
+    /// The paths inside `dir`.
+    pub fn in_dir(dir: &Path) -> Self {
+        CheckpointPaths {
+            model: dir.join("model.bpk"),
+            config: dir.join("config.json"),
+        }
+    }
+}

@@ -1,0 +1,185 @@
+//! The frame-wise DPF baseline (DESIGN §1, REFERENCE §2): one 3-D-input SIREN per frame,
+//! `g_k(x) = x + u_k(x)`, with no time input and nothing shared between frames.
+//!
+//! The `T` networks are **one** module: every layer's weights are stacked into
+//! `[T, fan_in, fan_out]` and its biases into `[T, fan_out]`. A fit step on frame `k`
+//! slices frame `k`'s weights (one matmul per layer); [`Dpf::warp_all`] evaluates every
+//! frame at once with one batched matmul per layer. The parameter count grows as `O(T)`,
+//! which is what Tab. 3 compares. Like the authors' code, it has `T` nets (frame 0 too;
+//! the paper says `T − 1`).
+//!
+//! Training note: the fit loop's Adam sees the whole stacked tensor, so the slices of the
+//! frames not in a step get a zero gradient and Adam's momentum keeps moving them for a
+//! few steps; PyTorch's Adam skips the authors' separate nets instead. This is a
+//! difference in the baseline's optimiser, stated here and in the README.
+
+use burn::config::Config;
+use burn::module::{Module, Param};
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use super::{LocalAffine, MotionField, WarpOutput};
+use crate::jacobian::{Dual, JacobianMethod};
+use crate::siren::{SirenConfig, SirenInitializer};
+
+/// The shape of a DPF model.
+#[derive(Config, Debug)]
+pub struct DpfConfig {
+    /// The number of frames `T` (one SIREN each).
+    pub frames: usize,
+    /// Hidden width `d`.
+    #[config(default = 128)]
+    pub hidden: usize,
+    /// Hidden sine layers `n` after the first.
+    #[config(default = 2)]
+    pub n_hidden: usize,
+    /// Sine frequency `ω₀`.
+    #[config(default = 30.0)]
+    pub omega: f64,
+}
+
+impl DpfConfig {
+    /// One frame's SIREN: input `x` (3), output the displacement `u_k` (3).
+    pub fn siren(&self) -> SirenConfig {
+        SirenConfig::new(3)
+            .with_d_in(3)
+            .with_hidden(self.hidden)
+            .with_n_hidden(self.n_hidden)
+            .with_omega(self.omega)
+    }
+
+    /// `T ×` the per-frame SIREN's parameters.
+    pub fn num_params(&self) -> usize {
+        self.frames * self.siren().num_params()
+    }
+
+    /// A model whose frame nets are drawn, one after another, by the authors' SIREN
+    /// initialiser (REFERENCE §1) from one stream seeded by `seed`.
+    ///
+    /// # Panics
+    /// If `frames` is 0 (a programming error; the callers check their data).
+    pub fn init(&self, seed: u64, device: &Device) -> Dpf {
+        assert!(self.frames > 0, "DPF needs at least one frame");
+        let siren = self.siren();
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let nets: Vec<_> = (0..self.frames)
+            .map(|_| SirenInitializer::new(self.omega).init(&siren, &mut rng))
+            .collect();
+        let shapes = siren.layer_shapes();
+        let mut weights = Vec::with_capacity(shapes.len());
+        let mut biases = Vec::with_capacity(shapes.len());
+        for (l, &(fan_in, fan_out)) in shapes.iter().enumerate() {
+            let w: Vec<f64> = nets.iter().flat_map(|n| n[l].weight.clone()).collect();
+            let b: Vec<f64> = nets.iter().flat_map(|n| n[l].bias.clone()).collect();
+            weights.push(Param::from_data(
+                TensorData::new(w, [self.frames, fan_in, fan_out]),
+                device,
+            ));
+            biases.push(Param::from_data(
+                TensorData::new(b, [self.frames, fan_out]),
+                device,
+            ));
+        }
+        Dpf {
+            weights,
+            biases,
+            omega: self.omega,
+            frames: self.frames,
+        }
+    }
+}
+
+/// `T` stacked SIRENs `x ↦ u_k(x)`; the warp to frame `k` is `x + u_k(x)`.
+#[derive(Module, Debug)]
+pub struct Dpf {
+    /// Per layer (sine layers first, output last): `[T, fan_in, fan_out]`.
+    pub weights: Vec<Param<Tensor<3>>>,
+    /// Per layer: `[T, fan_out]`.
+    pub biases: Vec<Param<Tensor<2>>>,
+    /// The sine frequency `ω₀`.
+    pub omega: f64,
+    /// `T`.
+    pub frames: usize,
+}
+
+impl Dpf {
+    /// The frame whose net answers normalised time `t` (`t_k = −1 + 2k/(T−1)`, rounded
+    /// to the nearest frame and clamped).
+    pub fn frame_of(&self, t: f64) -> usize {
+        if self.frames < 2 {
+            return 0;
+        }
+        let k = ((t + 1.0) * 0.5 * (self.frames - 1) as f64).round();
+        k.clamp(0.0, (self.frames - 1) as f64) as usize
+    }
+
+    /// Frame `k`'s displacement `u_k(x)` on duals, `x: [N, 3]`.
+    pub fn displacement_dual(&self, x: Dual, k: usize) -> Dual {
+        let last = self.weights.len() - 1;
+        let mut h = x;
+        for (l, (w, b)) in self.weights.iter().zip(&self.biases).enumerate() {
+            let [_, fan_in, fan_out] = w.dims();
+            let w = w.val().narrow(0, k, 1).reshape([fan_in, fan_out]);
+            let b = b.val().narrow(0, k, 1).reshape([fan_out]);
+            h = h.linear(w, Some(b));
+            if l < last {
+                h = h.mul_scalar(self.omega).sin();
+            }
+        }
+        h
+    }
+
+    /// Every frame's warp of the same points at once, `x: [N, 3]` → `[T, N, 3]`: one
+    /// batched `[T, N, d_in] × [T, d_in, d_out]` matmul per layer.
+    pub fn warp_all(&self, x: Tensor<2>) -> Tensor<3> {
+        let [n, _] = x.dims();
+        let x3 = x.unsqueeze_dim::<3>(0).repeat_dim(0, self.frames); // [T, N, 3]
+        let last = self.weights.len() - 1;
+        let mut h = x3.clone();
+        for (l, (w, b)) in self.weights.iter().zip(&self.biases).enumerate() {
+            h = h.matmul(w.val()) + b.val().unsqueeze_dim::<3>(1);
+            if l < last {
+                h = h.mul_scalar(self.omega).sin();
+            }
+        }
+        debug_assert_eq!(h.dims(), [self.frames, n, 3]);
+        x3 + h
+    }
+}
+
+impl MotionField for Dpf {
+    /// The raw output is the displacement `u_k(x)` of the frame nearest `t`. Any
+    /// `jacobian` method gets the forward mode on duals (the Analytic kernels are
+    /// SIREN-with-time specific).
+    fn raw_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> Dual {
+        let x = match jacobian {
+            Some(_) => Dual::seed_spatial(x),
+            None => Dual::constant(x),
+        };
+        self.displacement_dual(x, self.frame_of(t))
+    }
+
+    fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput {
+        let raw = self.raw_dual(x.clone(), t, jacobian);
+        let x = match jacobian {
+            Some(_) => Dual::seed_spatial(x),
+            None => Dual::constant(x),
+        };
+        let warped = x + raw.clone();
+        WarpOutput { raw, warped }
+    }
+
+    fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {
+        let u = self.raw_dual(x, t, None);
+        LocalAffine {
+            columns: None,
+            translation: u,
+        }
+        .matrices()
+    }
+
+    fn param_count(&self) -> usize {
+        self.num_params()
+    }
+}
