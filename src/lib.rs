@@ -29,6 +29,7 @@ pub mod jacobian;
 pub mod loss;
 pub mod metrics;
 pub mod register;
+pub mod run;
 pub mod siren;
 pub mod train;
 

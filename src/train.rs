@@ -202,6 +202,45 @@ pub(crate) fn gaussian(rng: &mut impl Rng) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
 }
 
+/// The position of a ChaCha8 stream, to resume it exactly.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RngState {
+    /// The 32-byte key.
+    pub seed: [u8; 32],
+    /// The stream number.
+    pub stream: u64,
+    /// The word position.
+    pub word_pos: u128,
+}
+
+impl RngState {
+    fn of(rng: &ChaCha8Rng) -> Self {
+        RngState {
+            seed: rng.get_seed(),
+            stream: rng.get_stream(),
+            word_pos: rng.get_word_pos(),
+        }
+    }
+
+    fn restore(&self) -> ChaCha8Rng {
+        let mut rng = ChaCha8Rng::from_seed(self.seed);
+        rng.set_stream(self.stream);
+        rng.set_word_pos(self.word_pos);
+        rng
+    }
+}
+
+/// A fit's resumable state ([`Trainer::snapshot`]).
+#[derive(Clone, Debug)]
+pub struct TrainerSnapshot {
+    /// The field's parameters, a burnpack.
+    pub model: Vec<u8>,
+    /// Adam's state, a burnpack.
+    pub optimizer: Vec<u8>,
+    /// The random stream.
+    pub rng: RngState,
+}
+
 /// The state of a fit in progress: the field on the autodiff device, Adam's state, the
 /// data on the device and the random stream. [`Trainer::step`] is one optimiser step on
 /// one frame; [`Trainer::run`] is the whole loop. Benchmarks drive `step` directly.
@@ -318,6 +357,51 @@ impl<'a, M: MotionField + Module> Trainer<'a, M> {
         }
         let mean = |c: usize| losses.iter().skip(c).step_by(2).sum::<f64>() / frames as f64;
         Ok((mean(0), mean(1)))
+    }
+
+    /// The field being fitted (parameters on the autodiff device).
+    pub fn field(&self) -> &M {
+        self.field.as_ref().expect("the field is always put back")
+    }
+
+    /// Everything a resumed fit needs besides the config and the data: the field's
+    /// parameters, Adam's state and the random stream's position.
+    pub fn snapshot(&self) -> Result<TrainerSnapshot> {
+        let optimizer = self
+            .optim
+            .into_bytes()
+            .map_err(|e| DomaError::Device(format!("cannot serialise Adam's state: {e}")))?
+            .to_vec();
+        Ok(TrainerSnapshot {
+            model: crate::checkpoint::encode_checkpoint(
+                self.field().clone(),
+                crate::checkpoint::Precision::F32,
+            )?,
+            optimizer,
+            rng: RngState::of(&self.rng),
+        })
+    }
+
+    /// Puts a [`Trainer::snapshot`] back: the field's parameters (with their ids, which
+    /// key Adam's state), Adam's state and the random stream.
+    pub fn restore(&mut self, snapshot: &TrainerSnapshot) -> Result<()> {
+        let field = self.field.take().expect("the field is always put back");
+        let record = burn::store::ModuleRecord::from_bytes(burn::tensor::Bytes::from_bytes_vec(
+            snapshot.model.clone(),
+        ))
+        .and_then(|r| field.try_load_record(r))
+        .map_err(|e| DomaError::InvalidData(format!("the saved model does not fit: {e}")))?;
+        self.field = Some(record);
+        let optim = std::mem::replace(&mut self.optim, AdamConfig::new().init());
+        self.optim = optim
+            .from_bytes(burn::tensor::Bytes::from_bytes_vec(
+                snapshot.optimizer.clone(),
+            ))
+            .map_err(|e| {
+                DomaError::InvalidData(format!("the saved Adam state is unreadable: {e}"))
+            })?;
+        self.rng = snapshot.rng.restore();
+        Ok(())
     }
 
     /// The whole fit: `config.iterations` iterations, with a progress bar unless quiet.

@@ -145,3 +145,299 @@ fn bench_prints_the_table_and_writes_exactly_the_record_fields() {
     assert_eq!(rows[3]["method"], "analytic");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn mesh_experiments_refuse_bad_flags_and_bad_data_naming_the_file() {
+    let dir = std::env::temp_dir().join(format!("doma-cli-mesh-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let no_faces = dir.join("points.npy");
+    std::fs::write(
+        &no_faces,
+        doma::data::npy::encode_npy(&[3, 4, 3], &[0.5; 36]),
+    )
+    .unwrap();
+    let truncated = dir.join("cut.traj");
+    std::fs::write(&truncated, b"TRAJ\x01\x00\x00\x00").unwrap();
+    let missing = dir.join("missing.traj");
+    let faerie = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
+    for (args, needles) in [
+        (
+            vec!["novel-points", "--frames", "5..2"],
+            vec!["--frames", "empty"],
+        ),
+        (
+            vec!["novel-points", "--frames", "a..b"],
+            vec!["frame range"],
+        ),
+        (vec!["novel-points", "--stride", "0"], vec!["--stride"]),
+        (vec!["novel-points", "--variant", "bones"], vec!["bones"]),
+        (vec!["mesh-alignment", "--reg", "x"], vec!["--reg"]),
+        (vec!["mesh-alignment", "--model", "banmo"], vec!["banmo"]),
+        (
+            vec!["novel-points", "--data", missing.to_str().unwrap()],
+            vec!["missing.traj", "No such file"],
+        ),
+        (
+            vec!["novel-points", "--data", truncated.to_str().unwrap()],
+            vec!["cut.traj", "truncated"],
+        ),
+        (
+            vec!["mesh-alignment", "--data", no_faces.to_str().unwrap()],
+            vec!["needs faces"],
+        ),
+        (
+            vec!["novel-points", "--data", faerie, "--frames", "190..250"],
+            vec!["190..250", "198 frames"],
+        ),
+        (
+            vec![
+                "novel-points",
+                "--data",
+                faerie,
+                "--mesh",
+                concat!(env!("CARGO_MANIFEST_DIR"), "/data/cdp_male_wave.obj"),
+            ],
+            vec!["cdp_male_wave.obj", "9293 vertices"],
+        ),
+    ] {
+        let (ok, _, err) = doma(&args);
+        assert!(!ok, "{args:?} was accepted");
+        assert!(!err.contains("panicked"), "{args:?} panicked:\n{err}");
+        for needle in needles {
+            assert!(err.contains(needle), "{args:?}: no `{needle}` in:\n{err}");
+        }
+    }
+}
+
+#[test]
+fn a_tiny_novel_points_run_writes_its_records() {
+    let dir = std::env::temp_dir().join(format!("doma-cli-np-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let json = dir.join("np.json");
+    let faerie = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
+    let (ok, out, err) = doma(&[
+        "novel-points",
+        "--data",
+        faerie,
+        "--frames",
+        "112..=122",
+        "--iters",
+        "2",
+        "--variant",
+        "trans,affinity",
+        "--samples",
+        "2000",
+        "--quiet",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("Affinity") && out.contains("CD x1e-4"),
+        "{out}"
+    );
+    let records: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(records.len(), 2);
+    for key in [
+        "experiment",
+        "variant",
+        "reg",
+        "epe_x1e4",
+        "cd_x1e4",
+        "cdn",
+        "params",
+        "checkpoint_bytes",
+        "seconds",
+    ] {
+        assert!(records[1].get(key).is_some(), "no {key} in {}", records[1]);
+    }
+    assert_eq!(records[1]["params"], 35_212);
+    assert_eq!(records[0]["sequence"], "md2_faerie[112..123]");
+}
+
+/// Runs `doma` and returns (exit code, stderr).
+fn doma_code(args: &[&str]) -> (Option<i32>, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_doma"))
+        .args(args)
+        .env("RUST_BACKTRACE", "1")
+        .output()
+        .expect("the binary runs");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn the_user_subcommands_refuse_bad_input_with_one_line_naming_the_file() {
+    let dir = std::env::temp_dir().join(format!("doma-cli-bad-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    std::fs::write(p("cut.traj"), b"TRAJ\x01\x00\x00\x00\x02\x00").unwrap();
+    std::fs::write(
+        p("magic.traj"),
+        b"JART\x01\x00\x00\x00\x01\x00\x00\x00\x01\x00\x00\x00\0\0\0\0\0\0\0\0\0\0\0\0",
+    )
+    .unwrap();
+    let mut nan = b"TRAJ\x01\x00\x00\x00\x01\x00\x00\x00\x01\x00\x00\x00".to_vec();
+    for v in [0.0f32, f32::NAN, 1.0] {
+        nan.extend_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(p("nan.traj"), nan).unwrap();
+    let empty = b"TRAJ\x01\x00\x00\x00\x00\x00\x00\x00\x05\x00\x00\x00";
+    std::fs::write(p("empty.traj"), empty).unwrap();
+    std::fs::create_dir_all(p("frames")).unwrap();
+    std::fs::write(p("frames/a.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    std::fs::write(p("frames/b.obj"), "v 0 0 0\nv 1 0 0\nf 1 2 1\n").unwrap();
+    std::fs::create_dir_all(p("no_frames")).unwrap();
+    std::fs::create_dir_all(p("not_a_run")).unwrap();
+    std::fs::write(p("a_file"), b"x").unwrap();
+    let faerie = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
+    let out = p("out");
+    let cases: Vec<(Vec<String>, Vec<String>)> = vec![
+        (
+            vec!["fit".into(), p("missing.traj"), "--out".into(), out.clone()],
+            vec!["missing.traj".into(), "No such file".into()],
+        ),
+        (
+            vec!["fit".into(), p("cut.traj"), "--out".into(), out.clone()],
+            vec!["cut.traj".into(), "truncated".into()],
+        ),
+        (
+            vec!["fit".into(), p("magic.traj"), "--out".into(), out.clone()],
+            vec!["magic.traj".into(), "magic".into()],
+        ),
+        (
+            vec!["fit".into(), p("nan.traj"), "--out".into(), out.clone()],
+            vec!["nan.traj".into(), "NaN".into()],
+        ),
+        (
+            vec!["fit".into(), p("empty.traj"), "--out".into(), out.clone()],
+            vec!["empty.traj".into(), "empty sequence".into()],
+        ),
+        (
+            vec!["fit".into(), p("frames"), "--out".into(), out.clone()],
+            vec!["b.obj".into(), "vertices".into()],
+        ),
+        (
+            vec!["fit".into(), p("no_frames"), "--out".into(), out.clone()],
+            vec!["no_frames".into(), "no .obj".into()],
+        ),
+        (
+            vec![
+                "fit".into(),
+                faerie.into(),
+                "--out".into(),
+                p("a_file/run"),
+                "--iters".into(),
+                "1".into(),
+            ],
+            vec!["a_file".into()],
+        ),
+        (
+            vec!["fit".into(), "--resume".into(), p("not_a_run")],
+            vec!["not_a_run".into(), "not a doma run".into()],
+        ),
+        (
+            vec!["eval".into(), p("not_a_run")],
+            vec!["not_a_run".into(), "not a doma run".into()],
+        ),
+        (
+            vec!["info".into(), p("not_a_run")],
+            vec!["not_a_run".into(), "not a doma run".into()],
+        ),
+        (
+            vec![
+                "warp".into(),
+                p("not_a_run"),
+                "--mesh".into(),
+                p("x.obj"),
+                "--out".into(),
+                out.clone(),
+            ],
+            vec!["not_a_run".into()],
+        ),
+        (
+            vec![
+                "fit".into(),
+                faerie.into(),
+                "--out".into(),
+                out.clone(),
+                "--test-fraction".into(),
+                "1.5".into(),
+            ],
+            vec!["--test-fraction".into()],
+        ),
+    ];
+    for (args, needles) in cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (code, err) = doma_code(&args);
+        // 1: a refused input, one line; 2: clap's refusal of a flag value.
+        assert!(
+            matches!(code, Some(1 | 2)),
+            "{args:?}: exit {code:?}\n{err}"
+        );
+        assert!(
+            !err.contains("panicked") && !err.contains("stack backtrace"),
+            "{args:?}:\n{err}"
+        );
+        if code == Some(1) {
+            assert_eq!(
+                err.trim_end().lines().count(),
+                1,
+                "{args:?}: not one line:\n{err}"
+            );
+        }
+        for n in needles {
+            assert!(err.contains(&n), "{args:?}: no `{n}` in:\n{err}");
+        }
+    }
+    // None of the failures left a half-made run behind.
+    assert!(!std::path::Path::new(&out).join("model.bpk").exists());
+}
+
+#[test]
+fn ctrl_c_saves_a_checkpoint_and_the_fit_resumes() {
+    let dir = std::env::temp_dir().join(format!("doma-cli-sigint-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let faerie = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
+    let run = dir.join("run");
+    let child = Command::new(env!("CARGO_BIN_EXE_doma"))
+        .args([
+            "fit", faerie, "--frames", "112..118", "--iters", "100000", "--quiet",
+        ])
+        .arg("--out")
+        .arg(&run)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the fit is running (its config is written first), then interrupt it.
+    for _ in 0..200 {
+        if run.join("config.json").exists() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    // SAFETY: sending a signal to our own child.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{err}");
+    assert!(err.contains("--resume"), "{err}");
+    assert!(run.join("resume.ckpt").is_file());
+    let history: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(run.join("history.json")).unwrap()).unwrap();
+    assert!(!history.is_empty());
+    // Shorten the fit, then resume it to the end.
+    let config = run.join("config.json");
+    let mut c: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&config).unwrap()).unwrap();
+    c["fit"]["iterations"] = serde_json::json!(history.len() + 2);
+    std::fs::write(&config, c.to_string()).unwrap();
+    let (ok, _, err) = doma(&["fit", "--resume", run.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    assert!(run.join("model.bpk").is_file() && run.join("report.json").is_file());
+}

@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use doma::backend::BackendKind;
 use doma::data::synthetic::Motion;
+use doma::experiments::meshes;
 use doma::experiments::speed;
 use doma::experiments::synthetic::{self, Regularizer, SyntheticJob};
 use doma::field::Variant;
@@ -25,6 +26,438 @@ enum Command {
     Synthetic(SyntheticArgs),
     /// Time the Jacobian step and the training step per backend and Jacobian method.
     Bench(BenchArgs),
+    /// Fit 25 % of an animated mesh's vertices, predict the rest (paper Tab. 1): EPE, CD, CDN.
+    NovelPoints(NovelPointsArgs),
+    /// Align the frame-0 template to every frame with guidance keypoints (paper Tab. 3).
+    MeshAlignment(MeshAlignmentArgs),
+    /// Fit a motion field to your own data into a run folder (resumable).
+    Fit(FitArgs),
+    /// Print the metrics of a fitted run, on its held-out points or on new data.
+    Eval(EvalArgs),
+    /// Warp a canonical mesh through a fitted run and write an OBJ sequence.
+    Warp(WarpArgs),
+    /// Print a run's variant, parameter count, checkpoint size and data shape.
+    Info(InfoArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct FitArgs {
+    /// The data: .traj, .anime, .npy, .npz, or a folder of OBJ frames with equal vertex counts.
+    #[arg(required_unless_present = "resume")]
+    data: Option<PathBuf>,
+    /// The run folder to create (it must not hold a run yet).
+    #[arg(long, required_unless_present = "resume", conflicts_with = "resume")]
+    out: Option<PathBuf>,
+    /// Continue the interrupted run in this folder from its last checkpoint.
+    #[arg(long, conflicts_with_all = ["data", "config", "variant", "iters", "test_fraction", "mesh", "frames", "stride", "jacobian", "h_weight", "seed", "checkpoint_every"])]
+    resume: Option<PathBuf>,
+    /// A fit config (JSON, the `fit` part of a run's config.json); flags override it.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// The DOMA variant.
+    #[arg(long, value_enum)]
+    variant: Option<Variant>,
+    /// The compute backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    backend: BackendKind,
+    /// How the spatial Jacobian is computed.
+    #[arg(long, value_enum)]
+    jacobian: Option<JacobianKind>,
+    /// Iterations (passes over all frames).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    iters: Option<u64>,
+    /// The fraction of points held out for the report.
+    #[arg(long, value_parser = fraction)]
+    test_fraction: Option<f64>,
+    /// The weight of the smoothness loss L_H (0 = off).
+    #[arg(long, value_parser = non_negative, allow_negative_numbers = true)]
+    h_weight: Option<f64>,
+    /// An OBJ whose vertices are the points in order (for the faces).
+    #[arg(long)]
+    mesh: Option<PathBuf>,
+    /// A clip of the frames, `A..B` (B excluded) or `A..=B`.
+    #[arg(long, value_parser = doma::data::parse_frame_range)]
+    frames: Option<std::ops::Range<usize>>,
+    /// Keep every N-th frame of the clip.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    stride: Option<u64>,
+    /// Iterations between checkpoints.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    checkpoint_every: Option<u64>,
+    /// Seed of the weights, the split and the frame order.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+#[derive(clap::Args, Debug)]
+struct EvalArgs {
+    /// The run folder.
+    run: PathBuf,
+    /// Evaluate on every point of this data instead of the run's held-out points.
+    data: Option<PathBuf>,
+    /// The compute backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    backend: BackendKind,
+}
+
+#[derive(clap::Args, Debug)]
+struct WarpArgs {
+    /// The run folder.
+    run: PathBuf,
+    /// The canonical mesh (frame 0, in the data's units).
+    #[arg(long)]
+    mesh: PathBuf,
+    /// The folder to write frame_0000.obj, … into.
+    #[arg(long)]
+    out: PathBuf,
+    /// Which frames, `A..B` or `A..=B` (default: all of the run's frames).
+    #[arg(long, value_parser = doma::data::parse_frame_range)]
+    frames: Option<std::ops::Range<usize>>,
+    /// The compute backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    backend: BackendKind,
+}
+
+#[derive(clap::Args, Debug)]
+struct InfoArgs {
+    /// The run folder.
+    run: PathBuf,
+}
+
+/// A fraction strictly between 0 and 1.
+fn fraction(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|_| format!("`{s}` is not a number"))?;
+    if v > 0.0 && v < 1.0 {
+        Ok(v)
+    } else {
+        Err(format!("`{s}` must be strictly between 0 and 1"))
+    }
+}
+
+/// Set by SIGINT; the fit loop polls it after every iteration.
+static INTERRUPTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+extern "C" fn on_sigint(_: libc::c_int) {
+    INTERRUPTED.store(true, std::sync::atomic::Ordering::SeqCst);
+}
+
+fn run_fit(args: FitArgs) -> anyhow::Result<()> {
+    use doma::run::{FitOutcome, RunConfig, RunDir, fit_run};
+    // Ctrl-C finishes the iteration, saves a checkpoint and exits cleanly.
+    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+    unsafe {
+        libc::signal(libc::SIGINT, on_sigint as *const () as libc::sighandler_t);
+    }
+    let (run, config) = match &args.resume {
+        Some(dir) => {
+            let run = RunDir::new(dir);
+            // A folder that is not a run fails here, before anything else.
+            run.load_config()?;
+            (run, None)
+        }
+        None => {
+            let data = args
+                .data
+                .clone()
+                .expect("clap requires DATA without --resume");
+            let data = std::fs::canonicalize(&data)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", data.display()))?;
+            let mut fit = match &args.config {
+                Some(path) => doma::checkpoint::load_json::<doma::train::FitConfig>(path)?,
+                None => doma::train::FitConfig::new(doma::field::DomaFieldConfig::new(
+                    Variant::Affinity,
+                ))
+                .with_jacobian(JacobianKind::Analytic),
+            };
+            if let Some(v) = args.variant {
+                fit.field.variant = v;
+            }
+            if let Some(j) = args.jacobian {
+                fit.jacobian = j;
+            }
+            if let Some(i) = args.iters {
+                fit.iterations = i as usize;
+            }
+            if let Some(w) = args.h_weight {
+                fit.smoothness_weight = w;
+            }
+            if let Some(s) = args.seed {
+                fit.seed = s;
+            }
+            fit.quiet = args.quiet;
+            let mut config = RunConfig::new(data, fit);
+            config.mesh = match &args.mesh {
+                Some(m) => Some(
+                    std::fs::canonicalize(m)
+                        .map_err(|e| anyhow::anyhow!("{}: {e}", m.display()))?,
+                ),
+                None => None,
+            };
+            config.frames = args.frames.clone().map(|r| [r.start, r.end]);
+            config.stride = args.stride.map_or(1, |s| s as usize);
+            config.backend = args.backend;
+            if let Some(t) = args.test_fraction {
+                config.test_fraction = t;
+            }
+            if let Some(k) = args.checkpoint_every {
+                config.checkpoint_every = k as usize;
+            }
+            let out = args
+                .out
+                .clone()
+                .expect("clap requires --out without --resume");
+            (RunDir::new(out), Some(config))
+        }
+    };
+    let backend = match &config {
+        Some(c) => c.backend,
+        None => run.load_config()?.backend,
+    };
+    let device = backend.device()?;
+    match fit_run(&run, config, &device, &INTERRUPTED, None)? {
+        FitOutcome::Finished(report) => {
+            println!("{}", serde_json::to_string_pretty(&report)?);
+            eprintln!("wrote {}", run.dir.display());
+            Ok(())
+        }
+        FitOutcome::Interrupted { iterations_done } => {
+            eprintln!(
+                "interrupted after {iterations_done} iterations; the checkpoint is saved. Continue with: doma fit --resume {}",
+                run.dir.display()
+            );
+            std::process::exit(130);
+        }
+    }
+}
+
+fn run_eval(args: EvalArgs) -> anyhow::Result<()> {
+    let device = args.backend.device()?;
+    let run = doma::run::RunDir::new(&args.run);
+    let report = doma::run::eval_run(&run, args.data.as_deref(), &device)?;
+    println!("{}", serde_json::to_string_pretty(&report)?);
+    Ok(())
+}
+
+fn run_warp(args: WarpArgs) -> anyhow::Result<()> {
+    let device = args.backend.device()?;
+    let run = doma::run::RunDir::new(&args.run);
+    let paths = doma::run::warp_run(&run, &args.mesh, &args.out, args.frames.clone(), &device)?;
+    eprintln!("wrote {} frames to {}", paths.len(), args.out.display());
+    Ok(())
+}
+
+fn run_info(args: InfoArgs) -> anyhow::Result<()> {
+    let info = doma::run::info(&doma::run::RunDir::new(&args.run))?;
+    println!("{}", serde_json::to_string_pretty(&info)?);
+    Ok(())
+}
+
+/// Where the sequence comes from (shared by the mesh experiments).
+#[derive(clap::Args, Debug)]
+struct SequenceArgs {
+    /// The sequence: .traj, .anime, .npy or .npz (default: the crate's data/cdp_male_wave.traj).
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// An OBJ whose vertices are the points in order, for the faces (default: NAME.obj next
+    /// to a .traj, or the .anime's own faces).
+    #[arg(long)]
+    mesh: Option<PathBuf>,
+    /// A clip of the frames, `A..B` (B excluded) or `A..=B`.
+    #[arg(long, value_parser = doma::data::parse_frame_range)]
+    frames: Option<std::ops::Range<usize>>,
+    /// Keep every N-th frame of the clip.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    stride: Option<u64>,
+}
+
+impl SequenceArgs {
+    fn load(&self, default_stride: usize) -> anyhow::Result<meshes::Sequence> {
+        let data = self.data.clone().unwrap_or_else(meshes::default_data);
+        let stride = self.stride.map_or(default_stride, |s| s as usize);
+        let mut seq =
+            meshes::load_sequence(&data, self.mesh.as_deref(), self.frames.clone(), stride)?;
+        if let Some(r) = &self.frames {
+            seq.name = format!("{}[{}..{}]", seq.name, r.start, r.end);
+        }
+        if stride > 1 {
+            seq.name = format!("{}/{stride}", seq.name);
+        }
+        Ok(seq)
+    }
+}
+
+#[derive(clap::Args, Debug)]
+struct NovelPointsArgs {
+    #[command(flatten)]
+    sequence: SequenceArgs,
+    /// The DOMA variants (comma-separated).
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "trans,se3,scaled-se3,affinity"
+    )]
+    variant: Vec<Variant>,
+    /// Iterations per fit (the paper: 1000).
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..))]
+    iters: u64,
+    /// Surface samples per mesh and frame for CD/CDN (the paper: 1000000).
+    #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1..))]
+    samples: u64,
+    /// The compute backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    backend: BackendKind,
+    /// Seed of the split, the weights and the samples.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// No progress bars.
+    #[arg(long)]
+    quiet: bool,
+    /// Also write one JSON record per run to this file.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+#[derive(clap::Args, Debug)]
+struct MeshAlignmentArgs {
+    #[command(flatten)]
+    sequence: SequenceArgs,
+    /// The models (comma-separated).
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "dpf,trans,affinity"
+    )]
+    model: Vec<meshes::AlignModel>,
+    /// The regularisers (comma-separated): none, a (AIAP), h (smoothness), ah (both).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "none,a,h,ah")]
+    reg: Vec<meshes::AlignReg>,
+    /// Iterations per fit (the authors: 2000).
+    #[arg(long, default_value_t = 2000, value_parser = clap::value_parser!(u64).range(1..))]
+    iters: u64,
+    /// Guidance keypoints: this many vertices, a fixed seeded subset.
+    #[arg(long, default_value_t = 930, value_parser = clap::value_parser!(u64).range(1..))]
+    keypoints: u64,
+    /// Template surface samples (the authors: 10000).
+    #[arg(long, default_value_t = 10_000, value_parser = clap::value_parser!(u64).range(2..))]
+    canonical_samples: u64,
+    /// Target surface samples per step (the authors: 10000).
+    #[arg(long, default_value_t = 10_000, value_parser = clap::value_parser!(u64).range(1..))]
+    target_samples: u64,
+    /// Surface samples per mesh and frame for CD/CDN.
+    #[arg(long, default_value_t = 40_000, value_parser = clap::value_parser!(u64).range(1..))]
+    samples: u64,
+    /// The SIREN's hidden width.
+    #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u64).range(1..))]
+    hidden: u64,
+    /// Hidden sine layers after the first (the authors' registration: 3).
+    #[arg(long, default_value_t = 3)]
+    n_hidden: u64,
+    /// The compute backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    backend: BackendKind,
+    /// Seed of the keypoints, the samples, the weights and the frame order.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// No progress bars.
+    #[arg(long)]
+    quiet: bool,
+    /// Also write one JSON record per run to this file.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+fn finish_mesh_runs(
+    records: &[meshes::MeshRecord],
+    json: Option<&std::path::Path>,
+) -> anyhow::Result<()> {
+    print!("{}", meshes::table(records));
+    if let Some(path) = json {
+        meshes::write_json(path, records)?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+fn run_novel_points(args: NovelPointsArgs) -> anyhow::Result<()> {
+    if let Some(path) = &args.json {
+        check_output_folder(path)?;
+    }
+    let job = meshes::NovelPointsJob {
+        sequence: args.sequence.load(1)?,
+        variants: args.variant,
+        iterations: args.iters as usize,
+        train_fraction: 0.25,
+        samples: args.samples as usize,
+        backend: args.backend,
+        jacobian: JacobianKind::Analytic,
+        seed: args.seed,
+        quiet: args.quiet,
+    };
+    eprintln!(
+        "novel_points on {}: {} frames, {} vertices, {} iterations, backend {}",
+        job.sequence.name,
+        job.sequence.trajectories.frames(),
+        job.sequence.trajectories.points(),
+        job.iterations,
+        job.backend
+    );
+    let records = meshes::novel_points(&job, |r| {
+        eprintln!(
+            "{} EPE {:.2}e-4 in {:.1} s",
+            r.variant,
+            r.epe_x1e4.unwrap_or(f64::NAN),
+            r.seconds
+        )
+    })?;
+    finish_mesh_runs(&records, args.json.as_deref())
+}
+
+fn run_mesh_alignment(args: MeshAlignmentArgs) -> anyhow::Result<()> {
+    if let Some(path) = &args.json {
+        check_output_folder(path)?;
+    }
+    let config = doma::register::RegistrationConfig::new()
+        .with_iterations(args.iters as usize)
+        .with_canonical_samples(args.canonical_samples as usize)
+        .with_target_samples(args.target_samples as usize)
+        .with_seed(args.seed)
+        .with_quiet(args.quiet);
+    let job = meshes::MeshAlignmentJob {
+        sequence: args.sequence.load(2)?,
+        keypoints: args.keypoints as usize,
+        models: args.model,
+        regs: args.reg,
+        config,
+        aiap_weight: 1.0,
+        h_weight: 0.001,
+        hidden: args.hidden as usize,
+        n_hidden: args.n_hidden as usize,
+        samples: args.samples as usize,
+        backend: args.backend,
+    };
+    eprintln!(
+        "mesh_alignment on {}: {} frames, {} vertices, {} iterations, backend {}",
+        job.sequence.name,
+        job.sequence.trajectories.frames(),
+        job.sequence.trajectories.points(),
+        args.iters,
+        job.backend
+    );
+    let records = meshes::mesh_alignment(&job, |r| {
+        eprintln!(
+            "{}-{} CD {:.3}e-4 in {:.1} s",
+            r.variant,
+            r.reg,
+            r.cd_x1e4.unwrap_or(f64::NAN),
+            r.seconds
+        )
+    })?;
+    finish_mesh_runs(&records, args.json.as_deref())
 }
 
 /// A backend, or every one that can run here.
@@ -250,9 +683,22 @@ fn run_bench(args: BenchArgs) -> anyhow::Result<()> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     doma::backend::tune_allocator();
+    // Burn materialises a loaded optimizer state on its default device, which is wgpu when
+    // compiled in; pin it to the CPU so that resuming a CPU fit never needs a GPU adapter
+    // (the state moves to the fit's device at the next step).
+    if std::env::var_os("BURN_DEVICE").is_none() {
+        // SAFETY: no other thread exists yet.
+        unsafe { std::env::set_var("BURN_DEVICE", "flex") };
+    }
     let result = match cli.command {
         Command::Synthetic(args) => run_synthetic(args),
         Command::Bench(args) => run_bench(args),
+        Command::NovelPoints(args) => run_novel_points(args),
+        Command::MeshAlignment(args) => run_mesh_alignment(args),
+        Command::Fit(args) => run_fit(args),
+        Command::Eval(args) => run_eval(args),
+        Command::Warp(args) => run_warp(args),
+        Command::Info(args) => run_info(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,4 +1,5 @@
 //! The paper's experiments as library functions, shared by the CLI and the examples.
 
+pub mod meshes;
 pub mod speed;
 pub mod synthetic;

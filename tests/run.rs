@@ -1,0 +1,173 @@
+//! Run folders: a resumed fit reaches bit-exactly the weights of an uninterrupted one, a
+//! non-finite loss leaves the last good checkpoint in place, and eval / warp / info read a
+//! finished run.
+
+mod common;
+
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+
+use burn::tensor::Device;
+use common::backward_lock;
+use doma::DomaError;
+use doma::field::{DomaFieldConfig, Variant};
+use doma::jacobian::JacobianKind;
+use doma::run::{FitOutcome, RunConfig, RunDir, eval_run, fit_run, info, warp_run};
+use doma::train::{FitConfig, IterationRecord};
+
+fn faerie() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/md2_faerie.traj")
+}
+
+fn temp(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("doma-run-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn config() -> RunConfig {
+    let fit = FitConfig::new(DomaFieldConfig::new(Variant::Affinity).with_hidden(32))
+        .with_iterations(6)
+        .with_smoothness_weight(0.1)
+        .with_jacobian(JacobianKind::Analytic)
+        .with_seed(3)
+        .with_quiet(true);
+    let mut c = RunConfig::new(faerie(), fit);
+    c.frames = Some([112, 118]);
+    c.checkpoint_every = 2;
+    c
+}
+
+fn weights(run: &RunDir, c: &RunConfig) -> Vec<doma::siren::LayerWeights> {
+    run.load_field(c, &Device::flex())
+        .unwrap()
+        .siren
+        .to_weights()
+}
+
+#[test]
+fn a_resumed_fit_equals_an_uninterrupted_one_bit_exactly() {
+    let _g = backward_lock();
+    let device = Device::flex();
+    let never = AtomicBool::new(false);
+    let whole = RunDir::new(temp("whole"));
+    let outcome = fit_run(&whole, Some(config()), &device, &never, None).unwrap();
+    assert!(matches!(outcome, FitOutcome::Finished(_)));
+
+    // Interrupted after 3 iterations (between two checkpoints), then resumed twice over.
+    let parts = RunDir::new(temp("parts"));
+    let outcome = fit_run(&parts, Some(config()), &device, &never, Some(3)).unwrap();
+    assert_eq!(outcome, FitOutcome::Interrupted { iterations_done: 3 });
+    assert!(
+        !parts.model().exists(),
+        "no final model before the fit ends"
+    );
+    let outcome = fit_run(&parts, None, &device, &never, Some(5)).unwrap();
+    assert_eq!(outcome, FitOutcome::Interrupted { iterations_done: 5 });
+    let FitOutcome::Finished(report) = fit_run(&parts, None, &device, &never, None).unwrap() else {
+        panic!("the resumed fit did not finish");
+    };
+    assert_eq!(report.iterations, 6);
+
+    let c = config();
+    assert_eq!(
+        weights(&whole, &c),
+        weights(&parts, &c),
+        "weights differ after resume"
+    );
+    let history = |r: &RunDir| -> Vec<(f64, f64)> {
+        let h: Vec<IterationRecord> =
+            serde_json::from_str(&std::fs::read_to_string(r.history()).unwrap()).unwrap();
+        h.iter()
+            .map(|r| (r.trajectory_loss, r.total_loss))
+            .collect()
+    };
+    assert_eq!(history(&whole), history(&parts));
+    // A finished run cannot be started again in the same folder.
+    assert!(matches!(
+        fit_run(&whole, Some(config()), &device, &never, None),
+        Err(DomaError::InvalidConfig(_))
+    ));
+}
+
+#[test]
+fn a_non_finite_loss_keeps_the_last_good_checkpoint() {
+    let _g = backward_lock();
+    let device = Device::flex();
+    let never = AtomicBool::new(false);
+    let run = RunDir::new(temp("nan"));
+    fit_run(&run, Some(config()), &device, &never, Some(2)).unwrap();
+    let good = std::fs::read(run.resume()).unwrap();
+    // Make the continuation diverge: an absurd learning rate overflows the outputs.
+    let mut c: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.config()).unwrap()).unwrap();
+    c["fit"]["learning_rate"] = serde_json::json!(1e37);
+    std::fs::write(run.config(), c.to_string()).unwrap();
+    match fit_run(&run, None, &device, &never, None) {
+        Err(DomaError::NonFiniteLoss { iteration, .. }) => assert!(iteration >= 2),
+        other => panic!("expected NonFiniteLoss, got {other:?}"),
+    }
+    assert_eq!(
+        std::fs::read(run.resume()).unwrap(),
+        good,
+        "the checkpoint was overwritten"
+    );
+}
+
+#[test]
+fn eval_warp_and_info_read_a_finished_run() {
+    let _g = backward_lock();
+    let device = Device::flex();
+    let never = AtomicBool::new(false);
+    let run = RunDir::new(temp("done"));
+    // Trans: `y = x + o` starts near the identity, so even a short fit keeps the shape.
+    let mut c = config();
+    c.fit.field.variant = Variant::Trans;
+    let FitOutcome::Finished(report) = fit_run(&run, Some(c), &device, &never, None).unwrap()
+    else {
+        panic!()
+    };
+    // 75 % of 366 vertices held out, 6 frames.
+    assert_eq!((report.points, report.frames), (274, 6));
+    let again = eval_run(&run, None, &device).unwrap();
+    assert_eq!(again.epe_x1e4, report.epe_x1e4);
+    // On the whole sequence's first 6 frames of the clip, as new data: all 366 points.
+    let clip = temp("clip").with_extension("traj");
+    let seq = doma::data::traj::read_traj(faerie()).unwrap();
+    doma::data::traj::write_traj(&clip, &seq.select_frames(112..118, 1).unwrap()).unwrap();
+    let on_new = eval_run(&run, Some(&clip), &device).unwrap();
+    assert_eq!(on_new.points, 366);
+    assert!(on_new.evaluated_on.contains("every point"));
+
+    let out = temp("frames");
+    let mesh = faerie().with_extension("obj");
+    let paths = warp_run(&run, &mesh, &out, Some(1..3), &device).unwrap();
+    assert_eq!(paths.len(), 2);
+    let warped = doma::data::mesh::read_obj(&paths[0]).unwrap();
+    let canonical = doma::data::mesh::read_obj(&mesh).unwrap();
+    assert_eq!(warped.faces, canonical.faces);
+    // In the data's own units (the model is about 52 tall), not the normalised ones (≤ 2).
+    let height = |m: &doma::data::mesh::TriMesh| {
+        let zs = m.vertices.iter().map(|v| v[2]);
+        zs.clone().fold(f32::MIN, f32::max) - zs.fold(f32::MAX, f32::min)
+    };
+    assert!(
+        (height(&warped) / height(&canonical) - 1.0).abs() < 0.3,
+        "{}",
+        height(&warped)
+    );
+    assert!(warp_run(&run, &mesh, &out, Some(4..9), &device).is_err());
+
+    let i = info(&run).unwrap();
+    assert_eq!((i.params, i.frames, i.points), (2_371, 6, 366));
+    assert_eq!(i.iterations_done, 6);
+    assert!(i.checkpoint_bytes > 0);
+
+    // A folder that is not a run.
+    let empty = temp("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    match info(&RunDir::new(&empty)) {
+        Err(DomaError::Malformed { reason, .. }) => assert!(reason.contains("not a doma run")),
+        other => panic!("{other:?}"),
+    }
+}
