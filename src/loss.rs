@@ -229,7 +229,7 @@ fn chamfer_one_way(from: Tensor<2>, to: Tensor<2>) -> Tensor<1> {
     total.expect("a non-empty cloud").div_scalar(n as f64)
 }
 
-/// The Chamfer loss (Eq. 12, REFERENCE §4.5) between `a` (`[N, 3]`, e.g. warped canonical
+/// The Chamfer loss (`L_CD` of Eq. 3 and Eq. 14, REFERENCE §4.5) between `a` (`[N, 3]`, e.g. warped canonical
 /// samples) and `b` (`[M, 3]`, target samples): the mean squared nearest-neighbour distance
 /// from `a` to `b` plus from `b` to `a`. On the device, differentiable, and blocked so that
 /// it never holds an `N × M` matrix at once.

@@ -1,7 +1,8 @@
-//! Guided mesh alignment (Sec. 4.2, the objective of Eq. 12 with the smoothness term of
-//! the supplement): a motion field warps a template's surface samples onto each frame's
-//! target cloud (no correspondence, like scans), steered by sparse guidance keypoints
-//! whose correspondence is known (like SMPL-X vertices).
+//! Guided mesh alignment (Sec. 4.2): the objective of Eq. 14, DPF's Eq. 3 plus the
+//! smoothness term `L_H` (DESIGN and the issues call it Eq. 12). A motion field warps a
+//! template's surface samples onto each frame's target cloud (no correspondence, like
+//! scans), steered by sparse guidance keypoints whose correspondence is known (like
+//! SMPL-X vertices).
 //!
 //! Per step (one frame, frames in a fresh random order each iteration; REFERENCE §5.1):
 //! `w_V · L1(y(keypoints), keypoints_k) + w_CD(it) · CD(y(X), S_k) + w_A · AIAP(y(X), X)
@@ -152,7 +153,7 @@ impl RegistrationTask {
     }
 }
 
-/// Aligns `field` (parameters on `device.autodiff()`) to `task` by Eq. 12. Returns the
+/// Aligns `field` (parameters on `device.autodiff()`) to `task` by Eq. 14. Returns the
 /// fitted field (a validation snapshot) and its history; `trajectory_loss` in the history is
 /// the guidance L1.
 pub fn register<M: MotionField + Module>(

@@ -37,132 +37,23 @@ pub fn read_anime(path: impl AsRef<Path>) -> Result<AnimatedMesh> {
     })
 }
 
-fn read_i32(bytes: &[u8], at: usize) -> i32 {
-    i32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]])
-}
-
-fn read_f32(bytes: &[u8], at: usize) -> f32 {
-    f32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]])
-}
-
-/// Parses the bytes of a `.anime` file; the error says what is wrong.
+/// Parses the bytes of a `.anime` file ([`doma_formats::anime::parse`]); the error says
+/// what is wrong.
 pub fn parse_anime(bytes: &[u8]) -> std::result::Result<AnimatedMesh, String> {
-    if bytes.len() < 12 {
-        return Err(format!(
-            "truncated: {} bytes, shorter than the 12-byte header",
-            bytes.len()
-        ));
-    }
-    let count = |at: usize, what: &str| -> std::result::Result<usize, String> {
-        let v = read_i32(bytes, at);
-        if v <= 0 {
-            Err(format!("the {what} count is {v}; it must be positive"))
-        } else {
-            Ok(v as usize)
-        }
-    };
-    let (nf, nv, nt) = (
-        count(0, "frame")?,
-        count(4, "vertex")?,
-        count(8, "triangle")?,
-    );
-    let overflow = || format!("{nf} frames × {nv} vertices × {nt} triangles overflows");
-    let base_len = nv.checked_mul(12).ok_or_else(overflow)?;
-    let face_len = nt.checked_mul(12).ok_or_else(overflow)?;
-    let offs_len = (nf - 1).checked_mul(base_len).ok_or_else(overflow)?;
-    let expected = [base_len, face_len, offs_len]
-        .iter()
-        .try_fold(12usize, |acc, &v| acc.checked_add(v))
-        .ok_or_else(overflow)?;
-    if bytes.len() != expected {
-        return Err(super::size_mismatch(
-            bytes.len(),
-            expected,
-            &format!("{nf} frames, {nv} vertices and {nt} triangles need"),
-        ));
-    }
-    let base_at = 12;
-    let faces_at = base_at + base_len;
-    let offs_at = faces_at + face_len;
-    let faces = (0..nt)
-        .map(|f| {
-            let mut tri = [0u32; 3];
-            for (c, slot) in tri.iter_mut().enumerate() {
-                let v = read_i32(bytes, faces_at + 4 * (3 * f + c));
-                if v < 0 || v as usize >= nv {
-                    return Err(format!("face {f} refers to vertex {v}, outside 0..{nv}"));
-                }
-                *slot = v as u32;
-            }
-            Ok(tri)
-        })
-        .collect::<std::result::Result<Vec<_>, String>>()?;
-    let base: Vec<f32> = (0..3 * nv)
-        .map(|i| read_f32(bytes, base_at + 4 * i))
-        .collect();
-    let mut positions = Vec::with_capacity(nf * 3 * nv);
-    positions.extend_from_slice(&base);
-    for k in 1..nf {
-        let at = offs_at + (k - 1) * base_len;
-        positions.extend((0..3 * nv).map(|i| base[i] + read_f32(bytes, at + 4 * i)));
-    }
-    let trajectories = Trajectories::new(nf, nv, positions).map_err(|e| match e {
-        DomaError::InvalidData(reason) => reason,
-        other => other.to_string(),
-    })?;
+    let a = doma_formats::anime::parse(bytes)?;
     Ok(AnimatedMesh {
-        trajectories,
-        faces,
+        trajectories: Trajectories::from(a.frames),
+        faces: a.faces,
     })
 }
 
 /// The bytes of `mesh` as a `.anime` file (offsets from frame 0).
 pub fn encode_anime(mesh: &AnimatedMesh) -> Result<Vec<u8>> {
-    let t = &mesh.trajectories;
-    let fit = |what: &str, v: usize| {
-        i32::try_from(v)
-            .map_err(|_| DomaError::InvalidData(format!("{what} = {v} does not fit an i32")))
-    };
-    let (nf, nv, nt) = (
-        fit("frames", t.frames())?,
-        fit("vertices", t.points())?,
-        fit("triangles", mesh.faces.len())?,
-    );
-    if nt == 0 {
-        return Err(DomaError::InvalidData(
-            "a .anime mesh needs triangles".into(),
-        ));
-    }
-    if let Some((f, tri)) = mesh
-        .faces
-        .iter()
-        .enumerate()
-        .find(|(_, tri)| tri.iter().any(|&v| v as usize >= t.points()))
-    {
-        return Err(DomaError::InvalidData(format!(
-            "face {f} {tri:?} refers to a vertex outside 0..{}",
-            t.points()
-        )));
-    }
-    let mut out = Vec::with_capacity(12 + 4 * (t.positions().len() + 3 * mesh.faces.len()));
-    for v in [nf, nv, nt] {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
-    let base = t.frame(0);
-    for v in base {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
-    for tri in &mesh.faces {
-        for &v in tri {
-            out.extend_from_slice(&(v as i32).to_le_bytes());
-        }
-    }
-    for k in 1..t.frames() {
-        for (p, b) in t.frame(k).iter().zip(base) {
-            out.extend_from_slice(&(p - b).to_le_bytes());
-        }
-    }
-    Ok(out)
+    doma_formats::anime::encode(&doma_formats::anime::Anime {
+        frames: mesh.trajectories.to_frames(),
+        faces: mesh.faces.clone(),
+    })
+    .map_err(DomaError::InvalidData)
 }
 
 /// Writes `mesh` to `path` as a `.anime` file, atomically.

@@ -13,109 +13,12 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+pub use doma_formats::obj::{TriMesh, check_faces, encode_obj, parse_obj};
+
 use super::Trajectories;
 use crate::field::MotionField;
 use crate::io::write_atomic;
 use crate::{DomaError, Result};
-
-/// A triangle mesh: vertices `[V, 3]` and 0-based triangles.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TriMesh {
-    /// Vertex positions.
-    pub vertices: Vec<[f32; 3]>,
-    /// Triangles, 0-based vertex indices, counter-clockwise seen from outside.
-    pub faces: Vec<[u32; 3]>,
-}
-
-impl TriMesh {
-    /// Checks and wraps a mesh: at least one vertex, finite coordinates, every face
-    /// index in range.
-    pub fn new(vertices: Vec<[f32; 3]>, faces: Vec<[u32; 3]>) -> std::result::Result<Self, String> {
-        if vertices.is_empty() {
-            return Err("the mesh has no vertices".into());
-        }
-        if let Some(i) = vertices
-            .iter()
-            .position(|v| v.iter().any(|c| !c.is_finite()))
-        {
-            return Err(format!("vertex {i} is {:?}, not finite", vertices[i]));
-        }
-        check_faces(&faces, vertices.len())?;
-        Ok(TriMesh { vertices, faces })
-    }
-
-    /// The vertices as a flat `[V·3]` slice.
-    pub fn flat_vertices(&self) -> &[f32] {
-        self.vertices.as_flattened()
-    }
-}
-
-/// Refuses a face whose index is not below `vertices`.
-pub fn check_faces(faces: &[[u32; 3]], vertices: usize) -> std::result::Result<(), String> {
-    match faces
-        .iter()
-        .enumerate()
-        .find(|(_, f)| f.iter().any(|&i| i as usize >= vertices))
-    {
-        Some((k, f)) => Err(format!(
-            "face {k} {f:?} indexes past the {vertices} vertices"
-        )),
-        None => Ok(()),
-    }
-}
-
-/// Parses OBJ text: `v x y z` and `f a b c …` (indices 1-based or negative, with optional
-/// `/vt/vn` parts); polygons are fan-triangulated.
-pub fn parse_obj(text: &str) -> std::result::Result<TriMesh, String> {
-    let mut vertices = Vec::new();
-    let mut faces = Vec::new();
-    for (line_no, line) in text.lines().enumerate() {
-        let at = |m: String| format!("line {}: {m}", line_no + 1);
-        let mut words = line.split_whitespace();
-        match words.next() {
-            Some("v") => {
-                let mut v = [0f32; 3];
-                for c in &mut v {
-                    let w = words
-                        .next()
-                        .ok_or_else(|| at("a vertex needs three coordinates".into()))?;
-                    *c = w.parse().map_err(|_| at(format!("bad coordinate {w:?}")))?;
-                    if !c.is_finite() {
-                        return Err(at(format!("coordinate {w} is not finite")));
-                    }
-                }
-                vertices.push(v);
-            }
-            Some("f") => {
-                let mut corners = Vec::with_capacity(4);
-                for w in words {
-                    let index = w.split('/').next().unwrap_or_default();
-                    let i: i64 = index
-                        .parse()
-                        .map_err(|_| at(format!("bad face index {w:?}")))?;
-                    // 1-based; negative counts back from the last vertex read so far.
-                    let resolved = if i > 0 {
-                        i - 1
-                    } else {
-                        vertices.len() as i64 + i
-                    };
-                    if i == 0 || resolved < 0 || resolved >= u32::MAX as i64 {
-                        return Err(at(format!("face index {i} is out of range")));
-                    }
-                    corners.push(resolved as u32);
-                }
-                if corners.len() < 3 {
-                    return Err(at("a face needs at least three corners".into()));
-                }
-                for k in 1..corners.len() - 1 {
-                    faces.push([corners[0], corners[k], corners[k + 1]]);
-                }
-            }
-            _ => {}
-        }
-    }
-    TriMesh::new(vertices, faces)
-}
 
 /// Reads an OBJ mesh (vertex order preserved).
 pub fn read_obj(path: impl AsRef<Path>) -> Result<TriMesh> {
@@ -127,34 +30,6 @@ pub fn read_obj(path: impl AsRef<Path>) -> Result<TriMesh> {
     };
     let text = std::str::from_utf8(&bytes).map_err(|_| malformed("not UTF-8 text".into()))?;
     parse_obj(text).map_err(malformed)
-}
-
-/// OBJ text of `vertices` and `faces`, with `vn` records (and `f a//a` corners) when
-/// `normals` are given.
-pub fn encode_obj(
-    vertices: &[[f32; 3]],
-    faces: &[[u32; 3]],
-    normals: Option<&[[f32; 3]]>,
-) -> String {
-    use std::fmt::Write;
-    let mut s = String::with_capacity(40 * vertices.len() + 30 * faces.len());
-    s.push_str("# written by doma\n");
-    for v in vertices {
-        let _ = writeln!(s, "v {} {} {}", v[0], v[1], v[2]);
-    }
-    if let Some(ns) = normals {
-        for n in ns {
-            let _ = writeln!(s, "vn {} {} {}", n[0], n[1], n[2]);
-        }
-    }
-    for f in faces {
-        let [a, b, c] = f.map(|i| i + 1);
-        let _ = match normals {
-            Some(_) => writeln!(s, "f {a}//{a} {b}//{b} {c}//{c}"),
-            None => writeln!(s, "f {a} {b} {c}"),
-        };
-    }
-    s
 }
 
 /// Writes an OBJ file atomically (`encode_obj`).
@@ -211,26 +86,21 @@ pub fn read_obj_sequence(dir: impl AsRef<Path>) -> Result<(Trajectories, Vec<[u3
             reason: "the folder holds no .obj frames".into(),
         });
     }
-    let first = read_obj(&files[0])?;
-    let mut positions = Vec::with_capacity(files.len() * first.vertices.len() * 3);
-    positions.extend_from_slice(first.flat_vertices());
-    for f in &files[1..] {
-        let mesh = read_obj(f)?;
-        if mesh.vertices.len() != first.vertices.len() {
-            return Err(DomaError::Malformed {
-                path: f.clone(),
-                reason: format!(
-                    "{} vertices, but the first frame {} has {}",
-                    mesh.vertices.len(),
-                    files[0].display(),
-                    first.vertices.len()
-                ),
-            });
-        }
-        positions.extend_from_slice(mesh.flat_vertices());
-    }
-    let t = Trajectories::new(files.len(), first.vertices.len(), positions)?;
-    Ok((t, first.faces))
+    let meshes = files.iter().map(read_obj).collect::<Result<Vec<_>>>()?;
+    let frames = doma_formats::obj::stack_frames(&meshes).map_err(|e| DomaError::Malformed {
+        path: files[e.frame].clone(),
+        reason: if e.frame > 0 {
+            format!("{} (the first frame is {})", e.reason, files[0].display())
+        } else {
+            e.reason
+        },
+    })?;
+    let faces = meshes
+        .into_iter()
+        .next()
+        .map(|m| m.faces)
+        .unwrap_or_default();
+    Ok((Trajectories::from(frames), faces))
 }
 
 /// `[V·3]` → `[V][3]`.

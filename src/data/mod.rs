@@ -10,17 +10,6 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::{DomaError, Result};
 
-/// The message for a file of `actual` bytes whose header says `expected`: "truncated" or
-/// "oversized", then `need` and the expected size.
-pub(crate) fn size_mismatch(actual: usize, expected: usize, need: &str) -> String {
-    let what = if actual < expected {
-        "truncated"
-    } else {
-        "oversized"
-    };
-    format!("{what}: {actual} bytes, but {need} {expected}")
-}
-
 /// Parses a frame range `A..B` (B excluded) or `A..=B` (B included).
 pub fn parse_frame_range(s: &str) -> std::result::Result<std::ops::Range<usize>, String> {
     let bad = || format!("`{s}` is not a frame range like 0..40 or 0..=39");
@@ -50,6 +39,17 @@ pub fn normalized_time(k: usize, frames: usize) -> f64 {
     }
 }
 
+/// Checked frames from a format parser are trajectories.
+impl From<doma_formats::Frames> for Trajectories {
+    fn from(f: doma_formats::Frames) -> Self {
+        Trajectories {
+            frames: f.frames,
+            points: f.points,
+            positions: f.positions,
+        }
+    }
+}
+
 /// `T` frames of `N` corresponding points, `[T, N, 3]`, frame-major, `f32`.
 /// Point `i` is the same material point in every frame; frame 0 is canonical.
 #[derive(Clone, Debug, PartialEq)]
@@ -61,36 +61,25 @@ pub struct Trajectories {
 
 impl Trajectories {
     /// Checks and wraps `positions` (`[T, N, 3]`, frame-major). Refuses an empty
-    /// sequence, a length that is not `T·N·3`, and non-finite coordinates.
+    /// sequence, a length that is not `T·N·3`, and non-finite coordinates
+    /// ([`doma_formats::check_positions`]).
     pub fn new(frames: usize, points: usize, positions: Vec<f32>) -> Result<Self> {
-        if frames == 0 || points == 0 {
-            return Err(DomaError::InvalidData(format!(
-                "an empty sequence ({frames} frames, {points} points)"
-            )));
-        }
-        let expected = frames
-            .checked_mul(points)
-            .and_then(|v| v.checked_mul(3))
-            .ok_or_else(|| DomaError::InvalidData("frame × point count overflows".into()))?;
-        if positions.len() != expected {
-            return Err(DomaError::InvalidData(format!(
-                "{} coordinates for {frames} frames × {points} points × 3 = {expected}",
-                positions.len()
-            )));
-        }
-        if let Some(i) = positions.iter().position(|v| !v.is_finite()) {
-            let (f, p) = (i / (3 * points), (i / 3) % points);
-            return Err(DomaError::InvalidData(format!(
-                "coordinate {} of point {p} in frame {f} is {}",
-                i % 3,
-                positions[i]
-            )));
-        }
+        doma_formats::check_positions(frames, points, &positions)
+            .map_err(DomaError::InvalidData)?;
         Ok(Trajectories {
             frames,
             points,
             positions,
         })
+    }
+
+    /// The positions as the format crate's checked [`doma_formats::Frames`].
+    pub fn to_frames(&self) -> doma_formats::Frames {
+        doma_formats::Frames {
+            frames: self.frames,
+            points: self.points,
+            positions: self.positions.clone(),
+        }
     }
 
     /// The number of frames `T`.

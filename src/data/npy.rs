@@ -18,42 +18,27 @@
 
 use std::path::Path;
 
+pub use doma_formats::npy::{NPY_MAGIC, NpyArray, encode_npy, encode_npz, parse_npy, parse_npz};
+
 use super::Trajectories;
 use crate::io::write_atomic;
 use crate::{DomaError, Result};
 
-/// The six magic bytes of a `.npy` file.
-pub const NPY_MAGIC: &[u8; 6] = b"\x93NUMPY";
-
-/// An n-dimensional array read from a `.npy`, values in C (row-major) order.
-#[derive(Clone, Debug, PartialEq)]
-pub struct NpyArray {
-    /// The shape, outermost first.
-    pub shape: Vec<usize>,
-    /// `shape.iter().product()` values, C order.
-    pub data: Vec<f64>,
-}
-
-impl NpyArray {
-    /// The array as trajectories: `[T, N, 3]` gives `T` frames, `[N, 3]` one frame. Refuses
-    /// other shapes and non-finite values (the error names the frame and point).
-    pub fn to_trajectories(&self) -> std::result::Result<Trajectories, String> {
-        let (frames, points) = match self.shape[..] {
-            [t, n, 3] => (t, n),
-            [n, 3] => (1, n),
-            _ => {
-                return Err(format!(
-                    "shape {:?} is not [T, N, 3] or [N, 3] point coordinates",
-                    self.shape
-                ));
-            }
-        };
-        let positions = self.data.iter().map(|&v| v as f32).collect();
-        Trajectories::new(frames, points, positions).map_err(|e| match e {
-            DomaError::InvalidData(m) => m,
-            other => other.to_string(),
-        })
-    }
+/// An array as trajectories: `[T, N, 3]` gives `T` frames, `[N, 3]` one frame. Refuses
+/// other shapes and non-finite values (the error names the frame and point).
+pub fn to_trajectories(array: &NpyArray) -> std::result::Result<Trajectories, String> {
+    let (frames, points) = match array.shape[..] {
+        [t, n, 3] => (t, n),
+        [n, 3] => (1, n),
+        _ => {
+            return Err(format!(
+                "shape {:?} is not [T, N, 3] or [N, 3] point coordinates",
+                array.shape
+            ));
+        }
+    };
+    let positions = array.data.iter().map(|&v| v as f32).collect();
+    doma_formats::Frames::new(frames, points, positions).map(Trajectories::from)
 }
 
 fn malformed(path: &Path) -> impl FnOnce(String) -> DomaError + '_ {
@@ -73,230 +58,7 @@ pub fn read_npy(path: impl AsRef<Path>) -> Result<NpyArray> {
 /// Reads point trajectories (`[T, N, 3]` or `[N, 3]`) from a `.npy` file.
 pub fn read_npy_trajectories(path: impl AsRef<Path>) -> Result<Trajectories> {
     let path = path.as_ref();
-    read_npy(path)?.to_trajectories().map_err(malformed(path))
-}
-
-/// The element types the reader accepts.
-#[derive(Clone, Copy, Debug)]
-enum Dtype {
-    Float(usize),
-    Int(usize),
-    Uint(usize),
-}
-
-impl Dtype {
-    fn size(self) -> usize {
-        match self {
-            Dtype::Float(s) | Dtype::Int(s) | Dtype::Uint(s) => s,
-        }
-    }
-
-    /// The value of one element; `b` is little-endian.
-    fn value(self, b: &[u8]) -> f64 {
-        let mut le = [0u8; 8];
-        le[..b.len()].copy_from_slice(b);
-        let raw = u64::from_le_bytes(le);
-        match self {
-            Dtype::Float(4) => f32::from_bits(raw as u32) as f64,
-            Dtype::Float(_) => f64::from_bits(raw),
-            Dtype::Uint(_) => raw as f64,
-            Dtype::Int(s) => {
-                // Sign-extend from `s` bytes.
-                let shift = 64 - 8 * s as u32;
-                (((raw << shift) as i64) >> shift) as f64
-            }
-        }
-    }
-}
-
-fn parse_descr(descr: &str) -> std::result::Result<(Dtype, bool), String> {
-    let bad = || format!("unsupported dtype {descr:?} (need a float or integer, e.g. '<f4')");
-    let (order, rest) = match descr.chars().next() {
-        Some(c @ ('<' | '>' | '|' | '=')) => (c, &descr[1..]),
-        _ => ('=', descr),
-    };
-    let kind = rest.chars().next().ok_or_else(bad)?;
-    let size: usize = rest[1..].parse().map_err(|_| bad())?;
-    let dtype = match (kind, size) {
-        ('f', 4 | 8) => Dtype::Float(size),
-        ('i', 1 | 2 | 4 | 8) => Dtype::Int(size),
-        ('u', 1 | 2 | 4 | 8) => Dtype::Uint(size),
-        _ => return Err(bad()),
-    };
-    // '=' is native order; every target doma builds for is little-endian.
-    let big = order == '>' && size > 1;
-    Ok((dtype, big))
-}
-
-/// The value of `key` in a Python-literal dict header, as the raw text up to its
-/// delimiter (a quoted string, a parenthesised tuple or a bare word).
-fn header_value<'a>(header: &'a str, key: &str) -> std::result::Result<&'a str, String> {
-    let missing = || format!("the header has no '{key}' entry");
-    let at = header
-        .find(&format!("'{key}'"))
-        .or_else(|| header.find(&format!("\"{key}\"")))
-        .ok_or_else(missing)?;
-    let rest = header[at + key.len() + 2..].trim_start();
-    let rest = rest
-        .strip_prefix(':')
-        .ok_or_else(|| format!("the header's '{key}' entry has no ':'"))?
-        .trim_start();
-    let end = match rest.chars().next() {
-        Some(q @ ('\'' | '"')) => rest[1..].find(q).map(|e| e + 2),
-        Some('(') => rest.find(')').map(|e| e + 1),
-        Some(_) => rest.find([',', '}']),
-        None => None,
-    }
-    .ok_or_else(|| format!("the header's '{key}' entry is not terminated"))?;
-    Ok(rest[..end].trim())
-}
-
-fn parse_shape(text: &str) -> std::result::Result<Vec<usize>, String> {
-    let inner = text
-        .strip_prefix('(')
-        .and_then(|t| t.strip_suffix(')'))
-        .ok_or_else(|| format!("the shape {text} is not a tuple"))?;
-    inner
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| {
-            s.trim_end_matches('L')
-                .parse::<usize>()
-                .map_err(|_| format!("the shape {text} has a bad dimension {s:?}"))
-        })
-        .collect()
-}
-
-/// Parses the bytes of a `.npy` file; the error says what is wrong.
-pub fn parse_npy(bytes: &[u8]) -> std::result::Result<NpyArray, String> {
-    if bytes.len() < 10 {
-        return Err(format!(
-            "truncated: {} bytes, shorter than the smallest .npy header",
-            bytes.len()
-        ));
-    }
-    if &bytes[..6] != NPY_MAGIC {
-        return Err("not a .npy file: the magic is not \\x93NUMPY".into());
-    }
-    let (header_len, start): (usize, usize) = match bytes[6] {
-        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
-        2 | 3 if bytes.len() >= 12 => (
-            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
-            12,
-        ),
-        2 | 3 => return Err("truncated: the version 2 header length is cut off".into()),
-        v => return Err(format!("unsupported .npy version {v}.{}", bytes[7])),
-    };
-    let data_start = start
-        .checked_add(header_len)
-        .filter(|&e| e <= bytes.len())
-        .ok_or_else(|| {
-            format!(
-                "truncated: the header says {header_len} header bytes, the file has {}",
-                bytes.len() - start
-            )
-        })?;
-    let header = std::str::from_utf8(&bytes[start..data_start])
-        .map_err(|_| "the header is not text".to_string())?;
-    let descr = header_value(header, "descr")?;
-    let descr = descr.trim_matches(|c| c == '\'' || c == '"');
-    let (dtype, big) = parse_descr(descr)?;
-    let fortran = match header_value(header, "fortran_order")? {
-        "False" => false,
-        "True" => true,
-        other => return Err(format!("fortran_order is {other}, not True or False")),
-    };
-    let shape = parse_shape(header_value(header, "shape")?)?;
-    let count = shape
-        .iter()
-        .try_fold(1usize, |a, &d| a.checked_mul(d))
-        .ok_or_else(|| format!("the shape {shape:?} overflows"))?;
-    let expected = count
-        .checked_mul(dtype.size())
-        .ok_or_else(|| format!("the shape {shape:?} overflows"))?;
-    let payload = &bytes[data_start..];
-    if payload.len() != expected {
-        return Err(super::size_mismatch(
-            payload.len(),
-            expected,
-            &format!("shape {shape:?} of {descr} needs"),
-        ));
-    }
-    let size = dtype.size();
-    let mut element = [0u8; 8];
-    let mut values: Vec<f64> = payload
-        .chunks_exact(size)
-        .map(|c| {
-            element[..size].copy_from_slice(c);
-            if big {
-                element[..size].reverse();
-            }
-            dtype.value(&element[..size])
-        })
-        .collect();
-    if fortran && shape.len() > 1 {
-        values = fortran_to_c(&values, &shape);
-    }
-    Ok(NpyArray {
-        shape,
-        data: values,
-    })
-}
-
-/// Reorders column-major values of `shape` into row-major order.
-fn fortran_to_c(values: &[f64], shape: &[usize]) -> Vec<f64> {
-    let mut strides = vec![1usize; shape.len()];
-    for d in 1..shape.len() {
-        strides[d] = strides[d - 1] * shape[d - 1];
-    }
-    let mut index = vec![0usize; shape.len()];
-    let mut out = Vec::with_capacity(values.len());
-    for _ in 0..values.len() {
-        let offset: usize = index.iter().zip(&strides).map(|(i, s)| i * s).sum();
-        out.push(values[offset]);
-        // Advance the C-order multi-index (last axis fastest).
-        for d in (0..shape.len()).rev() {
-            index[d] += 1;
-            if index[d] < shape[d] {
-                break;
-            }
-            index[d] = 0;
-        }
-    }
-    out
-}
-
-/// The bytes of a version-1 `.npy` of little-endian `f32` values, C order.
-///
-/// # Panics
-/// If `data.len()` is not the product of `shape` (a programming error).
-pub fn encode_npy(shape: &[usize], data: &[f32]) -> Vec<u8> {
-    assert_eq!(
-        shape.iter().product::<usize>(),
-        data.len(),
-        "encode_npy: the data does not fill the shape"
-    );
-    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
-    let tuple = match dims.len() {
-        1 => format!("({},)", dims[0]),
-        _ => format!("({})", dims.join(", ")),
-    };
-    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {tuple}, }}");
-    // Pad so that the data starts on a 64-byte boundary, as NumPy does.
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut out = Vec::with_capacity(10 + header.len() + 4 * data.len());
-    out.extend_from_slice(NPY_MAGIC);
-    out.extend_from_slice(&[1, 0]);
-    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    out.extend_from_slice(header.as_bytes());
-    for v in data {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
-    out
+    to_trajectories(&read_npy(path)?).map_err(malformed(path))
 }
 
 /// Writes `data` (`f32`, C order, of `shape`) as a `.npy` file, atomically.
@@ -307,163 +69,6 @@ pub fn write_npy(path: impl AsRef<Path>, shape: &[usize], data: &[f32]) -> Resul
 /// Writes trajectories as a `[T, N, 3]` `f32` `.npy` file, atomically.
 pub fn write_npy_trajectories(path: impl AsRef<Path>, data: &Trajectories) -> Result<()> {
     write_npy(path, &[data.frames(), data.points(), 3], data.positions())
-}
-
-/// CRC-32 (IEEE, as zip uses), bitwise: `.npz` members are small next to a fit.
-fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    for &b in bytes {
-        crc ^= b as u32;
-        for _ in 0..8 {
-            crc = (crc >> 1) ^ (0xEDB8_8320 & (crc & 1).wrapping_neg());
-        }
-    }
-    !crc
-}
-
-fn le_u16(b: &[u8], at: usize) -> std::result::Result<u64, String> {
-    b.get(at..at + 2)
-        .map(|s| u16::from_le_bytes([s[0], s[1]]) as u64)
-        .ok_or_else(|| "truncated zip record".to_string())
-}
-
-fn le_u32(b: &[u8], at: usize) -> std::result::Result<u64, String> {
-    b.get(at..at + 4)
-        .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]) as u64)
-        .ok_or_else(|| "truncated zip record".to_string())
-}
-
-fn le_u64(b: &[u8], at: usize) -> std::result::Result<u64, String> {
-    b.get(at..at + 8)
-        .map(|s| u64::from_le_bytes(s.try_into().expect("8 bytes")))
-        .ok_or_else(|| "truncated zip record".to_string())
-}
-
-/// Parses the bytes of a `.npz` archive into its members, `(name without ".npy", array)`,
-/// in archive order.
-pub fn parse_npz(bytes: &[u8]) -> std::result::Result<Vec<(String, NpyArray)>, String> {
-    const EOCD: [u8; 4] = [0x50, 0x4b, 0x05, 0x06];
-    if bytes.len() < 22 {
-        return Err(format!(
-            "truncated: {} bytes, shorter than a zip directory",
-            bytes.len()
-        ));
-    }
-    let search_from = bytes.len().saturating_sub(22 + 65_535);
-    let eocd = (search_from..=bytes.len() - 22)
-        .rev()
-        .find(|&i| bytes[i..i + 4] == EOCD)
-        .ok_or("not a .npz (zip) file, or truncated: no end-of-central-directory record")?;
-    let mut entries = le_u16(bytes, eocd + 10)?;
-    let mut dir = le_u32(bytes, eocd + 16)?;
-    // Zip64: the 32-bit fields are saturated and a zip64 record precedes the locator.
-    if (entries == 0xFFFF || dir == 0xFFFF_FFFF) && eocd >= 20 {
-        let locator = eocd - 20;
-        if le_u32(bytes, locator)? == 0x0706_4b50 {
-            let record = le_u64(bytes, locator + 8)? as usize;
-            if le_u32(bytes, record)? != 0x0606_4b50 {
-                return Err("the zip64 directory record is missing".into());
-            }
-            entries = le_u64(bytes, record + 32)?;
-            dir = le_u64(bytes, record + 48)?;
-        }
-    }
-    let mut at = usize::try_from(dir).map_err(|_| "the zip directory offset overflows")?;
-    let mut members = Vec::new();
-    for _ in 0..entries {
-        if le_u32(bytes, at)? != 0x0201_4b50 {
-            return Err(format!("the zip directory is corrupt at byte {at}"));
-        }
-        let method = le_u16(bytes, at + 10)?;
-        let crc = le_u32(bytes, at + 16)? as u32;
-        let mut packed = le_u32(bytes, at + 20)?;
-        let mut size = le_u32(bytes, at + 24)?;
-        let name_len = le_u16(bytes, at + 28)? as usize;
-        let extra_len = le_u16(bytes, at + 30)? as usize;
-        let comment_len = le_u16(bytes, at + 32)? as usize;
-        let mut local = le_u32(bytes, at + 42)?;
-        let name_bytes = bytes
-            .get(at + 46..at + 46 + name_len)
-            .ok_or("truncated zip directory")?;
-        let name = String::from_utf8_lossy(name_bytes).into_owned();
-        // Zip64 extra field (id 1): the saturated sizes and offset, in this order.
-        let extra = bytes
-            .get(at + 46 + name_len..at + 46 + name_len + extra_len)
-            .ok_or("truncated zip directory")?;
-        let mut e = 0;
-        while e + 4 <= extra.len() {
-            let id = le_u16(extra, e)?;
-            let len = le_u16(extra, e + 2)? as usize;
-            if id == 1 {
-                let mut f = e + 4;
-                for field in [&mut size, &mut packed, &mut local] {
-                    if *field == 0xFFFF_FFFF {
-                        *field = le_u64(extra, f)?;
-                        f += 8;
-                    }
-                }
-            }
-            e += 4 + len;
-        }
-        at += 46 + name_len + extra_len + comment_len;
-
-        let local = usize::try_from(local).map_err(|_| "a zip offset overflows")?;
-        if le_u32(bytes, local)? != 0x0403_4b50 {
-            return Err(format!("member {name}: its local header is missing"));
-        }
-        let start =
-            local + 30 + le_u16(bytes, local + 26)? as usize + le_u16(bytes, local + 28)? as usize;
-        let data = usize::try_from(packed)
-            .ok()
-            .and_then(|p| start.checked_add(p))
-            .and_then(|end| bytes.get(start..end))
-            .ok_or_else(|| format!("truncated: member {name} is cut off"))?;
-        let size = usize::try_from(size).map_err(|_| "a zip size overflows")?;
-        let raw = match method {
-            0 => data.to_vec(),
-            8 => inflate(data, size).map_err(|m| format!("member {name}: {m}"))?,
-            m => {
-                return Err(format!(
-                    "member {name}: unsupported zip compression method {m}"
-                ));
-            }
-        };
-        if raw.len() != size {
-            return Err(format!(
-                "member {name}: {} bytes, but the directory says {size}",
-                raw.len()
-            ));
-        }
-        if crc32(&raw) != crc {
-            return Err(format!("member {name}: CRC-32 mismatch (corrupt data)"));
-        }
-        let array = parse_npy(&raw).map_err(|m| format!("member {name}: {m}"))?;
-        let key = name.strip_suffix(".npy").unwrap_or(&name).to_string();
-        members.push((key, array));
-    }
-    Ok(members)
-}
-
-/// Inflates a raw deflate stream of known output `size`.
-fn inflate(data: &[u8], size: usize) -> std::result::Result<Vec<u8>, String> {
-    use miniz_oxide::inflate::TINFLStatus;
-    use miniz_oxide::inflate::core::{DecompressorOxide, decompress, inflate_flags};
-    let mut out = vec![0u8; size];
-    let mut state = Box::<DecompressorOxide>::default();
-    let (status, _, written) = decompress(
-        &mut state,
-        data,
-        &mut out,
-        0,
-        inflate_flags::TINFL_FLAG_USING_NON_WRAPPING_OUTPUT_BUF,
-    );
-    match status {
-        TINFLStatus::Done if written == size => Ok(out),
-        TINFLStatus::Done | TINFLStatus::HasMoreOutput => Err(format!(
-            "the deflated data does not hold the {size} bytes the directory says"
-        )),
-        other => Err(format!("bad deflate data ({other:?})")),
-    }
 }
 
 /// Reads a `.npz` archive's members, `(name, array)`.
@@ -495,79 +100,10 @@ pub fn read_npz_trajectories(path: impl AsRef<Path>, key: Option<&str>) -> Resul
             )));
         }
     };
-    array.to_trajectories().map_err(malformed(path))
-}
-
-/// The bytes of a `.npz` archive (stored, like `np.savez`) of `f32` arrays
-/// `(name, shape, values)`; each member is named `name.npy`.
-pub fn encode_npz(members: &[(&str, &[usize], &[f32])]) -> Vec<u8> {
-    let mut out = Vec::new();
-    let mut directory = Vec::new();
-    for (name, shape, data) in members {
-        let payload = encode_npy(shape, data);
-        let file = format!("{name}.npy");
-        let crc = crc32(&payload);
-        let offset = out.len() as u32;
-        let common = |buf: &mut Vec<u8>| {
-            buf.extend_from_slice(&20u16.to_le_bytes()); // version needed
-            buf.extend_from_slice(&0u16.to_le_bytes()); // flags
-            buf.extend_from_slice(&0u16.to_le_bytes()); // stored
-            buf.extend_from_slice(&0u32.to_le_bytes()); // time, date
-            buf.extend_from_slice(&crc.to_le_bytes());
-            buf.extend_from_slice(&(payload.len() as u32).to_le_bytes());
-            buf.extend_from_slice(&(payload.len() as u32).to_le_bytes());
-            buf.extend_from_slice(&(file.len() as u16).to_le_bytes());
-            buf.extend_from_slice(&0u16.to_le_bytes()); // extra
-        };
-        out.extend_from_slice(&0x0403_4b50u32.to_le_bytes());
-        common(&mut out);
-        out.extend_from_slice(file.as_bytes());
-        out.extend_from_slice(&payload);
-
-        directory.extend_from_slice(&0x0201_4b50u32.to_le_bytes());
-        directory.extend_from_slice(&20u16.to_le_bytes()); // made by
-        common(&mut directory);
-        directory.extend_from_slice(&[0u8; 6]); // comment length, disk, internal attributes
-        directory.extend_from_slice(&0u32.to_le_bytes()); // external attributes
-        directory.extend_from_slice(&offset.to_le_bytes());
-        directory.extend_from_slice(file.as_bytes());
-    }
-    let dir_offset = out.len() as u32;
-    out.extend_from_slice(&directory);
-    out.extend_from_slice(&0x0605_4b50u32.to_le_bytes());
-    out.extend_from_slice(&[0u8; 4]); // disk numbers
-    out.extend_from_slice(&(members.len() as u16).to_le_bytes());
-    out.extend_from_slice(&(members.len() as u16).to_le_bytes());
-    out.extend_from_slice(&(directory.len() as u32).to_le_bytes());
-    out.extend_from_slice(&dir_offset.to_le_bytes());
-    out.extend_from_slice(&0u16.to_le_bytes());
-    out
+    to_trajectories(array).map_err(malformed(path))
 }
 
 /// Writes a `.npz` archive of `f32` arrays atomically ([`encode_npz`]).
 pub fn write_npz(path: impl AsRef<Path>, members: &[(&str, &[usize], &[f32])]) -> Result<()> {
     write_atomic(path.as_ref(), &encode_npz(members))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn crc32_matches_the_standard_check_value() {
-        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
-    }
-
-    #[test]
-    fn fortran_order_is_transposed() {
-        // [[1, 2, 3], [4, 5, 6]] stored column-major.
-        let c = fortran_to_c(&[1.0, 4.0, 2.0, 5.0, 3.0, 6.0], &[2, 3]);
-        assert_eq!(c, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
-    }
-
-    #[test]
-    fn signed_integers_are_sign_extended() {
-        assert_eq!(Dtype::Int(2).value(&(-3i16).to_le_bytes()), -3.0);
-        assert_eq!(Dtype::Uint(2).value(&(65533u16).to_le_bytes()), 65533.0);
-    }
 }

@@ -1,6 +1,6 @@
 //! The mesh experiments: `novel_points` (after Tab. 1: fit on 25 % of an animated mesh's
 //! vertices, predict the other 75 %) and `mesh_alignment` (after Tab. 3: align the frame-0
-//! template to per-frame target surfaces with sparse guidance keypoints, Eq. 12).
+//! template to per-frame target surfaces with sparse guidance keypoints, Eq. 14).
 //!
 //! Both read any user's sequence ([`load_sequence`]: `.traj` with an optional OBJ for the
 //! faces, `.anime`, `.npy`/`.npz`, a clip `A..B` with a stride) and write one

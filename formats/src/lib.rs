@@ -1,0 +1,97 @@
+//! The file formats of doma as pure functions over bytes and text: `.traj`
+//! ([`traj`]), DeformingThings4D `.anime` ([`anime`]), NumPy `.npy` / `.npz` ([`npy`]) and
+//! OBJ meshes ([`obj`]).
+//!
+//! This crate has no Burn dependency, so that the readers can be fuzzed (`fuzz/` in the
+//! doma repository) without building a deep-learning framework under coverage
+//! instrumentation. Every parser returns `Err(reason)` for a bad input, never panics; the
+//! `doma` crate adds the file name and turns the result into its own types.
+
+pub mod anime;
+pub mod npy;
+pub mod obj;
+pub mod traj;
+
+/// Checked point positions: `frames × points` points, `[T, N, 3]` frame-major.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frames {
+    /// `T`.
+    pub frames: usize,
+    /// `N`.
+    pub points: usize,
+    /// `T·N·3` finite coordinates.
+    pub positions: Vec<f32>,
+}
+
+impl Frames {
+    /// Checks `positions` ([`check_positions`]) and wraps them.
+    pub fn new(frames: usize, points: usize, positions: Vec<f32>) -> Result<Self, String> {
+        check_positions(frames, points, &positions)?;
+        Ok(Frames {
+            frames,
+            points,
+            positions,
+        })
+    }
+}
+
+/// Refuses an empty sequence, a length that is not `T·N·3`, and non-finite coordinates
+/// (naming the frame, point and coordinate).
+pub fn check_positions(frames: usize, points: usize, positions: &[f32]) -> Result<(), String> {
+    if frames == 0 || points == 0 {
+        return Err(format!(
+            "an empty sequence ({frames} frames, {points} points)"
+        ));
+    }
+    let expected = frames
+        .checked_mul(points)
+        .and_then(|v| v.checked_mul(3))
+        .ok_or_else(|| "frame × point count overflows".to_string())?;
+    if positions.len() != expected {
+        return Err(format!(
+            "{} coordinates for {frames} frames × {points} points × 3 = {expected}",
+            positions.len()
+        ));
+    }
+    if let Some(i) = positions.iter().position(|v| !v.is_finite()) {
+        let (f, p) = (i / (3 * points), (i / 3) % points);
+        return Err(format!(
+            "coordinate {} of point {p} in frame {f} is {}",
+            i % 3,
+            positions[i]
+        ));
+    }
+    Ok(())
+}
+
+/// The message for a file of `actual` bytes whose header says `expected`: "truncated" or
+/// "oversized", then `need` and the expected size.
+pub fn size_mismatch(actual: usize, expected: usize, need: &str) -> String {
+    let what = if actual < expected {
+        "truncated"
+    } else {
+        "oversized"
+    };
+    format!("{what}: {actual} bytes, but {need} {expected}")
+}
+
+/// CRC-32 (IEEE 802.3, as zip and PNG use), bitwise: the buffers here are small next to a
+/// fit.
+pub fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in bytes {
+        crc ^= b as u32;
+        for _ in 0..8 {
+            crc = (crc >> 1) ^ (0xEDB8_8320 & (crc & 1).wrapping_neg());
+        }
+    }
+    !crc
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn crc32_matches_the_standard_check_value() {
+        assert_eq!(super::crc32(b"123456789"), 0xCBF4_3926);
+    }
+}
