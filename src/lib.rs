@@ -28,6 +28,7 @@ pub mod io;
 pub mod jacobian;
 pub mod loss;
 pub mod metrics;
+pub mod plot;
 pub mod register;
 pub mod run;
 pub mod siren;

@@ -454,12 +454,13 @@ fn normalize_with(t: &Trajectories, center: [f32; 3], scale: f32) -> Trajectorie
     map_points(t, |v, c| (v - center[c]) / scale)
 }
 
-/// Warps the canonical mesh `mesh` (in the data's own units) through the run's field to
-/// frames `frames` (default: all of the run's frames) and writes `out/frame_0000.obj`, …
-/// with recomputed normals, each atomically. Returns the paths written.
+/// Warps the canonical mesh `mesh` (in the data's own units; default: the run data's own
+/// canonical frame with its faces) through the run's field to frames `frames` (default:
+/// all of the run's frames) and writes `out/frame_0000.obj`, … with recomputed normals, each
+/// atomically. Returns the paths written.
 pub fn warp_run(
     run: &RunDir,
-    mesh: &Path,
+    mesh: Option<&Path>,
     out: &Path,
     frames: Option<std::ops::Range<usize>>,
     device: &Device,
@@ -475,7 +476,22 @@ pub fn warp_run(
             range.start, range.end
         )));
     }
-    let canonical = read_obj(mesh)?;
+    let canonical = match mesh {
+        Some(path) => read_obj(path)?,
+        None => {
+            let faces = own.faces.clone().ok_or_else(|| {
+                DomaError::InvalidData(format!(
+                    "{} has no faces: give the canonical mesh with --mesh",
+                    config.data.display()
+                ))
+            })?;
+            let vertices = as_points(own.trajectories.frame(0))
+                .iter()
+                .map(|p| std::array::from_fn(|c| p[c] * own.scale + own.center[c]))
+                .collect();
+            TriMesh { vertices, faces }
+        }
+    };
     let norm: Vec<[f32; 3]> = canonical
         .vertices
         .iter()
@@ -557,4 +573,93 @@ pub fn info(run: &RunDir) -> Result<RunInfo> {
 /// The canonical points of a run's data (normalised) as a flat list, for plots.
 pub fn canonical_points(seq: &Sequence) -> Vec<[f32; 3]> {
     as_points(seq.trajectories.frame(0))
+}
+
+/// Writes the run's plots into `RUN_DIR/plots/`: `loss.png` (trajectory and total loss per
+/// iteration, log scale), `epe_per_frame.png` (held-out EPE per frame) and, for each of
+/// `frames` (default: the middle and the last frame), `points_frame_KKKK.png` (three views
+/// of the held-out points coloured by error). Returns the paths written.
+pub fn plot_run(run: &RunDir, frames: Option<&[usize]>, device: &Device) -> Result<Vec<PathBuf>> {
+    use crate::plot::{Series, line_plot, three_views};
+    let config = run.load_config()?;
+    let field = run.load_field(&config, device)?;
+    let seq = config.load()?;
+    let (_, test) = config.split(&seq.trajectories)?;
+    let history: Vec<IterationRecord> = load_json(&run.history())?;
+    let dir = run.dir.join("plots");
+    std::fs::create_dir_all(&dir).map_err(|e| DomaError::io(&dir, e))?;
+    let mut written = Vec::new();
+
+    let curve = |f: fn(&IterationRecord) -> f64| {
+        history.iter().map(|r| (r.iteration as f64, f(r))).collect()
+    };
+    let loss = line_plot(
+        "LOSS",
+        "ITERATION",
+        "LOSS (LOG)",
+        &[
+            Series {
+                name: "TRAJECTORY L1",
+                color: [40, 60, 200],
+                points: curve(|r| r.trajectory_loss),
+            },
+            Series {
+                name: "TOTAL",
+                color: [210, 30, 30],
+                points: curve(|r| r.total_loss),
+            },
+        ],
+        true,
+    );
+    let path = dir.join("loss.png");
+    loss.save(&path)?;
+    written.push(path);
+
+    let predicted = predict(&field, &test, device)?;
+    let per_frame = epe_per_frame(&predicted, &test)?;
+    let epe = line_plot(
+        "HELD-OUT EPE PER FRAME",
+        "FRAME",
+        "EPE X1E-4",
+        &[Series {
+            name: "EPE",
+            color: [30, 170, 90],
+            points: per_frame
+                .iter()
+                .enumerate()
+                .map(|(k, e)| (k as f64, e * EPE_SCALE))
+                .collect(),
+        }],
+        false,
+    );
+    let path = dir.join("epe_per_frame.png");
+    epe.save(&path)?;
+    written.push(path);
+
+    let t = test.frames();
+    let default = [t / 2, t - 1];
+    let chosen = frames.unwrap_or(&default);
+    if let Some(&bad) = chosen.iter().find(|&&k| k >= t) {
+        return Err(DomaError::InvalidConfig(format!(
+            "frame {bad} is not within the run's {t} frames"
+        )));
+    }
+    let canonical = as_points(test.frame(0));
+    for &k in chosen {
+        let (truth, pred) = (as_points(test.frame(k)), as_points(predicted.frame(k)));
+        let mut errors: Vec<f64> = truth
+            .iter()
+            .zip(&pred)
+            .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs() as f64).sum())
+            .collect();
+        errors.sort_by(f64::total_cmp);
+        // The colour scale ends at the 99th percentile, so that one outlier does not wash
+        // out the rest.
+        let max = errors[(errors.len() - 1) * 99 / 100];
+        let title = format!("FRAME {k}: EPE {:.1} X1E-4", per_frame[k] * EPE_SCALE);
+        let path = dir.join(format!("points_frame_{k:04}.png"));
+        three_views(&title, &canonical, &truth, &pred, max).save(&path)?;
+        written.push(path);
+    }
+    Ok(written)
 }

@@ -141,7 +141,7 @@ fn eval_warp_and_info_read_a_finished_run() {
 
     let out = temp("frames");
     let mesh = faerie().with_extension("obj");
-    let paths = warp_run(&run, &mesh, &out, Some(1..3), &device).unwrap();
+    let paths = warp_run(&run, Some(&mesh), &out, Some(1..3), &device).unwrap();
     assert_eq!(paths.len(), 2);
     let warped = doma::data::mesh::read_obj(&paths[0]).unwrap();
     let canonical = doma::data::mesh::read_obj(&mesh).unwrap();
@@ -156,7 +156,52 @@ fn eval_warp_and_info_read_a_finished_run() {
         "{}",
         height(&warped)
     );
-    assert!(warp_run(&run, &mesh, &out, Some(4..9), &device).is_err());
+    assert!(warp_run(&run, Some(&mesh), &out, Some(4..9), &device).is_err());
+    // Without --mesh: the run's own canonical frame (the clip's first frame) and faces.
+    let own = warp_run(&run, None, &out, Some(0..1), &device).unwrap();
+    let own = doma::data::mesh::read_obj(&own[0]).unwrap();
+    assert_eq!(own.faces, canonical.faces);
+    let clip0 = doma::data::traj::read_traj(faerie())
+        .unwrap()
+        .select_frames(112..113, 1)
+        .unwrap();
+    let err: f32 = own
+        .vertices
+        .iter()
+        .flatten()
+        .zip(clip0.positions())
+        .map(|(a, b)| (a - b).abs())
+        .sum::<f32>()
+        / clip0.positions().len() as f32;
+    assert!(err < 3.0, "mean |Δ| {err} (the model is about 52 tall)");
+
+    // Plots: valid PNGs (signature, header, and pixel data that inflates to the size).
+    let plots = doma::run::plot_run(&run, Some(&[0, 5]), &device).unwrap();
+    assert_eq!(plots.len(), 4);
+    for path in &plots {
+        let png = std::fs::read(path).unwrap();
+        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+        assert_eq!(&png[12..16], b"IHDR");
+        let w = u32::from_be_bytes(png[16..20].try_into().unwrap()) as usize;
+        let h = u32::from_be_bytes(png[20..24].try_into().unwrap()) as usize;
+        let idat_len = u32::from_be_bytes(png[33..37].try_into().unwrap()) as usize;
+        assert_eq!(&png[37..41], b"IDAT");
+        let zlib = &png[41..41 + idat_len];
+        let mut out = vec![0u8; h * (1 + 3 * w)];
+        let (status, _, n) = miniz_oxide::inflate::core::decompress(
+            &mut Box::<miniz_oxide::inflate::core::DecompressorOxide>::default(),
+            &zlib[2..zlib.len() - 4],
+            &mut out,
+            0,
+            miniz_oxide::inflate::core::inflate_flags::TINFL_FLAG_USING_NON_WRAPPING_OUTPUT_BUF,
+        );
+        assert_eq!(
+            (status, n),
+            (miniz_oxide::inflate::TINFLStatus::Done, out.len()),
+            "{path:?}"
+        );
+    }
+    assert!(doma::run::plot_run(&run, Some(&[6]), &device).is_err());
 
     let i = info(&run).unwrap();
     assert_eq!((i.params, i.frames, i.points), (2_371, 6, 366));

@@ -38,6 +38,29 @@ enum Command {
     Warp(WarpArgs),
     /// Print a run's variant, parameter count, checkpoint size and data shape.
     Info(InfoArgs),
+    /// Write PNG plots of a run (loss, per-frame EPE, 3-view error scatters) to RUN/plots/.
+    Plot(PlotArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct PlotArgs {
+    /// The run folder.
+    run: PathBuf,
+    /// The frames of the scatter plots (comma-separated; default: the middle and the last).
+    #[arg(long, value_delimiter = ',')]
+    frames: Option<Vec<usize>>,
+    /// The compute backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    backend: BackendKind,
+}
+
+fn run_plot(args: PlotArgs) -> anyhow::Result<()> {
+    let device = args.backend.device()?;
+    let run = doma::run::RunDir::new(&args.run);
+    for path in doma::run::plot_run(&run, args.frames.as_deref(), &device)? {
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
 }
 
 #[derive(clap::Args, Debug)]
@@ -107,9 +130,10 @@ struct EvalArgs {
 struct WarpArgs {
     /// The run folder.
     run: PathBuf,
-    /// The canonical mesh (frame 0, in the data's units).
+    /// The canonical mesh, in the data's units (default: the run data's first frame, with
+    /// the faces of its mesh).
     #[arg(long)]
-    mesh: PathBuf,
+    mesh: Option<PathBuf>,
     /// The folder to write frame_0000.obj, … into.
     #[arg(long)]
     out: PathBuf,
@@ -244,7 +268,13 @@ fn run_eval(args: EvalArgs) -> anyhow::Result<()> {
 fn run_warp(args: WarpArgs) -> anyhow::Result<()> {
     let device = args.backend.device()?;
     let run = doma::run::RunDir::new(&args.run);
-    let paths = doma::run::warp_run(&run, &args.mesh, &args.out, args.frames.clone(), &device)?;
+    let paths = doma::run::warp_run(
+        &run,
+        args.mesh.as_deref(),
+        &args.out,
+        args.frames.clone(),
+        &device,
+    )?;
     eprintln!("wrote {} frames to {}", paths.len(), args.out.display());
     Ok(())
 }
@@ -683,6 +713,12 @@ fn run_bench(args: BenchArgs) -> anyhow::Result<()> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     doma::backend::tune_allocator();
+    // Die quietly on a closed pipe (`doma eval RUN | head`), as Unix tools do, rather than
+    // panic in `println!`.
+    // SAFETY: restoring the default disposition of a signal; no other thread exists yet.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     // Burn materialises a loaded optimizer state on its default device, which is wgpu when
     // compiled in; pin it to the CPU so that resuming a CPU fit never needs a GPU adapter
     // (the state moves to the fit's device at the next step).
@@ -699,6 +735,7 @@ fn main() -> ExitCode {
         Command::Eval(args) => run_eval(args),
         Command::Warp(args) => run_warp(args),
         Command::Info(args) => run_info(args),
+        Command::Plot(args) => run_plot(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
