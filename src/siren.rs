@@ -147,7 +147,8 @@ pub struct Siren {
     pub omega: f64,
 }
 
-fn linear_from(layer: &LayerWeights, device: &Device) -> Linear {
+/// A Burn `Linear` holding `layer`'s weights.
+pub(crate) fn linear_from(layer: &LayerWeights, device: &Device) -> Linear {
     let w = TensorData::new(layer.weight.clone(), [layer.fan_in, layer.fan_out]);
     let b = TensorData::new(layer.bias.clone(), [layer.fan_out]);
     Linear {

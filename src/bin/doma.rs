@@ -331,6 +331,9 @@ struct NovelPointsArgs {
         default_value = "trans,se3,scaled-se3,affinity"
     )]
     variant: Vec<Variant>,
+    /// Baselines to run too (comma-separated): mlp, mlp-pe6, dct-nerf, bone-cloud.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    baselines: Vec<doma::field::baselines::Baseline>,
     /// Iterations per fit (the paper: 1000).
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..))]
     iters: u64,
@@ -420,6 +423,7 @@ fn run_novel_points(args: NovelPointsArgs) -> anyhow::Result<()> {
     let job = meshes::NovelPointsJob {
         sequence: args.sequence.load(1)?,
         variants: args.variant,
+        baselines: args.baselines,
         iterations: args.iters as usize,
         train_fraction: 0.25,
         samples: args.samples as usize,

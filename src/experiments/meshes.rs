@@ -20,12 +20,16 @@ use crate::data::mesh::{
     SurfaceSamples, TriMesh, as_points, read_obj, unique_edges, warp_mesh_sequence,
 };
 use crate::data::{Trajectories, anime, npy, traj};
+use crate::field::baselines::Baseline;
+use crate::field::baselines::bone_cloud::BoneCloudConfig;
+use crate::field::baselines::dct::DctConfig;
+use crate::field::baselines::mlp::MlpConfig;
 use crate::field::dpf::DpfConfig;
 use crate::field::{DomaFieldConfig, MotionField, Variant};
 use crate::jacobian::JacobianKind;
 use crate::metrics::{EPE_SCALE, chamfer_with_normals, evaluate_epe, std_edges, std_vertices};
 use crate::register::{RegistrationConfig, RegistrationTask, register};
-use crate::train::{FitConfig, fit};
+use crate::train::{FitConfig, Fitted, fit, fit_model};
 use crate::{DomaError, Result};
 
 /// Chamfer distances are reported ×1e4 (REFERENCE §7).
@@ -198,6 +202,8 @@ pub struct NovelPointsJob {
     pub sequence: Sequence,
     /// The variants.
     pub variants: Vec<Variant>,
+    /// The baselines (Tab. 1's other rows).
+    pub baselines: Vec<Baseline>,
     /// Iterations per fit.
     pub iterations: usize,
     /// The fraction of vertices used for training (the paper: 0.25).
@@ -248,26 +254,93 @@ pub fn novel_points(
         .transpose()
         .map_err(DomaError::InvalidData)?;
     let mut records = Vec::new();
+    let ad = device.clone().autodiff();
+    let base = FitConfig::new(DomaFieldConfig::new(Variant::Trans))
+        .with_iterations(job.iterations)
+        .with_jacobian(job.jacobian)
+        .with_seed(job.seed)
+        .with_quiet(job.quiet);
+    let ctx = NovelContext {
+        job,
+        test: &test,
+        full: data,
+        canonical: canonical.as_ref(),
+        device: &device,
+    };
     for &variant in &job.variants {
-        let config = FitConfig::new(DomaFieldConfig::new(variant))
-            .with_iterations(job.iterations)
-            .with_jacobian(job.jacobian)
-            .with_seed(job.seed)
-            .with_quiet(job.quiet);
+        let mut config = base.clone();
+        config.field = DomaFieldConfig::new(variant);
         let fitted = fit(&config, &train, &device)?;
-        let epe = evaluate_epe(&fitted.field, &test, &device)?;
-        let (cd, cdn) = match &canonical {
+        let record = ctx.record(variant.paper_name(), fitted)?;
+        on_run(&record);
+        records.push(record);
+    }
+    for &baseline in &job.baselines {
+        let config = base.clone().with_learning_rate(baseline.learning_rate());
+        let t = data.frames();
+        let record = match baseline {
+            Baseline::Mlp | Baseline::MlpPe6 => {
+                let octaves = if baseline == Baseline::MlpPe6 { 6 } else { 0 };
+                let model = MlpConfig::new()
+                    .with_pe_octaves(octaves)
+                    .init(job.seed, &ad);
+                ctx.record(
+                    baseline.paper_name(),
+                    fit_model(model, &config, &train, &device)?,
+                )?
+            }
+            Baseline::DctNerf => {
+                let model = DctConfig::new(t).init(job.seed, &ad);
+                ctx.record(
+                    baseline.paper_name(),
+                    fit_model(model, &config, &train, &device)?,
+                )?
+            }
+            Baseline::BoneCloud => {
+                let model = BoneCloudConfig::new(t).init(train.frame(0), job.seed, &ad);
+                ctx.record(
+                    baseline.paper_name(),
+                    fit_model(model, &config, &train, &device)?,
+                )?
+            }
+        };
+        on_run(&record);
+        records.push(record);
+    }
+    Ok(records)
+}
+
+/// What every `novel_points` fit is measured against.
+struct NovelContext<'a> {
+    job: &'a NovelPointsJob,
+    test: &'a Trajectories,
+    full: &'a Trajectories,
+    canonical: Option<&'a TriMesh>,
+    device: &'a burn::tensor::Device,
+}
+
+impl NovelContext<'_> {
+    /// EPE on the held-out points, CD/CDN of the warped canonical mesh, size: one record.
+    fn record<M: MotionField + burn::module::Module>(
+        &self,
+        name: &str,
+        fitted: Fitted<M>,
+    ) -> Result<MeshRecord> {
+        let (job, device) = (self.job, self.device);
+        let epe = evaluate_epe(&fitted.field, self.test, device)?;
+        let (cd, cdn) = match self.canonical {
             Some(mesh) => {
-                let warped = warp_mesh_sequence(&fitted.field, mesh, data.frames(), &device)?;
-                let (cd, cdn) = mesh_chamfer(&warped, data, &mesh.faces, job.samples, job.seed)?;
+                let warped = warp_mesh_sequence(&fitted.field, mesh, self.full.frames(), device)?;
+                let (cd, cdn) =
+                    mesh_chamfer(&warped, self.full, &mesh.faces, job.samples, job.seed)?;
                 (Some(cd * CD_SCALE), Some(cdn))
             }
             None => (None, None),
         };
-        let record = MeshRecord {
+        Ok(MeshRecord {
             experiment: "novel_points".into(),
-            sequence: seq.name.clone(),
-            variant: variant.paper_name().into(),
+            sequence: job.sequence.name.clone(),
+            variant: name.into(),
             reg: "none".into(),
             iters: job.iterations,
             backend: job.backend,
@@ -279,11 +352,8 @@ pub fn novel_points(
             params: fitted.field.param_count(),
             checkpoint_bytes: encode_checkpoint(fitted.field, Precision::F32)?.len() as u64,
             seconds: fitted.seconds,
-        };
-        on_run(&record);
-        records.push(record);
+        })
     }
-    Ok(records)
 }
 
 /// The models of `mesh_alignment`.

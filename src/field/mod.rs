@@ -6,6 +6,7 @@
 //! variant; without one the same code is a plain forward pass.
 
 pub mod affinity;
+pub mod baselines;
 pub mod dpf;
 pub mod rotation;
 pub mod scaled_se3;

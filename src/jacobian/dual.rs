@@ -125,6 +125,13 @@ impl Dual {
         }
     }
 
+    /// `exp(v)`, with tangent `exp(v) ⊙ v̇`.
+    pub fn exp(self) -> Self {
+        let value = self.value.exp();
+        let tangent = self.tangent.map(|t| t * lift(&value));
+        Dual { value, tangent }
+    }
+
     /// `cos(v)`, with tangent `−sin(v) ⊙ v̇`.
     pub fn cos(self) -> Self {
         let tangent = self
