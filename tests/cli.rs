@@ -441,3 +441,27 @@ fn ctrl_c_saves_a_checkpoint_and_the_fit_resumes() {
     assert!(ok, "{err}");
     assert!(run.join("model.bpk").is_file() && run.join("report.json").is_file());
 }
+
+#[test]
+fn the_supplement_experiments_refuse_bad_flags() {
+    for (args, needle) in [
+        (vec!["fluid", "--widths", "0"], "--widths"),
+        (vec!["fluid", "--clip-len", "1"], "--clip-len"),
+        (vec!["fluid", "--model", "banmo"], "banmo"),
+        (
+            vec!["fluid", "--data", "/nonexistent/fluid.traj"],
+            "fluid.traj",
+        ),
+        (vec!["image2d", "--resolution", "1"], "--resolution"),
+        (vec!["image2d", "--widths", "0"], "--widths"),
+        (vec!["image2d", "--motion", "twist"], "twist"),
+        (vec!["novel-points", "--baselines", "banmo"], "banmo"),
+    ] {
+        let (ok, _, err) = doma(&args);
+        assert!(!ok, "{args:?} was accepted");
+        assert!(
+            err.contains(needle) && !err.contains("panicked"),
+            "{args:?}:\n{err}"
+        );
+    }
+}

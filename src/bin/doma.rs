@@ -30,6 +30,10 @@ enum Command {
     NovelPoints(NovelPointsArgs),
     /// Align the frame-0 template to every frame with guidance keypoints (paper Tab. 3).
     MeshAlignment(MeshAlignmentArgs),
+    /// DPF vs Trans vs Affinity on 10-frame clips of a fluid simulation (supplement Tab. A8).
+    Fluid(FluidArgs),
+    /// Trans vs Affinity on a deforming 2-D pixel grid at widths 32/64/128 (supplement Tab. A7).
+    Image2d(Image2dArgs),
     /// Fit a motion field to your own data into a run folder (resumable).
     Fit(FitArgs),
     /// Print the metrics of a fitted run, on its held-out points or on new data.
@@ -58,6 +62,180 @@ fn run_plot(args: PlotArgs) -> anyhow::Result<()> {
     let device = args.backend.device()?;
     let run = doma::run::RunDir::new(&args.run);
     for path in doma::run::plot_run(&run, args.frames.as_deref(), &device)? {
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+#[derive(clap::Args, Debug)]
+struct FluidArgs {
+    /// The particle sequence (default: the crate's data/taichi_mpm3d_fluid.traj).
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// Frames per clip.
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(2..))]
+    clip_len: u64,
+    /// The first clip's first frame.
+    #[arg(long, default_value_t = 10)]
+    start: u64,
+    /// Frames between clip starts.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..))]
+    step: u64,
+    /// Skip clips whose mean particle displacement (normalised units) is below this.
+    #[arg(long, default_value_t = 0.02, value_parser = non_negative)]
+    min_motion: f64,
+    /// The models (comma-separated).
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "dpf,trans,affinity"
+    )]
+    model: Vec<meshes::AlignModel>,
+    /// Hidden widths (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "64,128")]
+    widths: Vec<usize>,
+    /// Iterations per fit (the paper: 5000).
+    #[arg(long, default_value_t = 5000, value_parser = clap::value_parser!(u64).range(1..))]
+    iters: u64,
+    /// The compute backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    backend: BackendKind,
+    /// Seed of the split and the weights.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// No progress bars.
+    #[arg(long)]
+    quiet: bool,
+    /// Also write one JSON record per fit to this file.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+#[derive(clap::Args, Debug)]
+struct Image2dArgs {
+    /// Grid resolution (pixels per side).
+    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u64).range(2..))]
+    resolution: u64,
+    /// Frames.
+    #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u64).range(2..))]
+    frames: u64,
+    /// The motions (comma-separated).
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "rotation,scaling,shearing,translation"
+    )]
+    motion: Vec<doma::experiments::image2d::Motion2d>,
+    /// The variants (comma-separated).
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "trans,affinity"
+    )]
+    variant: Vec<Variant>,
+    /// Hidden widths (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "32,64,128")]
+    widths: Vec<usize>,
+    /// Iterations per fit.
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..))]
+    iters: u64,
+    /// The compute backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    backend: BackendKind,
+    /// Seed of the split and the weights.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// No progress bars.
+    #[arg(long)]
+    quiet: bool,
+    /// The folder for the PNG pictures of the last frame.
+    #[arg(long, default_value = "results/image2d")]
+    png_dir: PathBuf,
+    /// Also write one JSON record per fit to this file.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+fn run_image2d(args: Image2dArgs) -> anyhow::Result<()> {
+    use doma::experiments::image2d;
+    if let Some(path) = &args.json {
+        check_output_folder(path)?;
+    }
+    if args.widths.contains(&0) {
+        anyhow::bail!("--widths: a hidden width must be at least 1");
+    }
+    let job = image2d::Image2dJob {
+        resolution: args.resolution as usize,
+        frames: args.frames as usize,
+        motions: args.motion.clone(),
+        variants: args.variant.clone(),
+        widths: args.widths.clone(),
+        iterations: args.iters as usize,
+        backend: args.backend,
+        seed: args.seed,
+        quiet: args.quiet,
+        png_dir: Some(args.png_dir.clone()),
+    };
+    let records = image2d::run(&job, |r| {
+        eprintln!(
+            "{} {} {}D: EPE {:.2}e-4 in {:.1} s",
+            r.motion.name(),
+            r.variant,
+            r.hidden,
+            r.epe_x1e4,
+            r.seconds
+        )
+    })?;
+    print!("{}", image2d::table(&records));
+    if let Some(path) = &args.json {
+        doma::checkpoint::save_json(&records, path)?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+fn run_fluid(args: FluidArgs) -> anyhow::Result<()> {
+    use doma::experiments::fluid;
+    if let Some(path) = &args.json {
+        check_output_folder(path)?;
+    }
+    if args.widths.contains(&0) {
+        anyhow::bail!("--widths: a hidden width must be at least 1");
+    }
+    let job = fluid::FluidJob {
+        data: args.data.clone().unwrap_or_else(fluid::default_data),
+        clip_len: args.clip_len as usize,
+        start: args.start as usize,
+        step: args.step as usize,
+        min_motion: args.min_motion,
+        models: args.model.clone(),
+        widths: args.widths.clone(),
+        iterations: args.iters as usize,
+        backend: args.backend,
+        seed: args.seed,
+        quiet: args.quiet,
+    };
+    let records = fluid::run(
+        &job,
+        |r| {
+            eprintln!(
+                "clip {} {} {}D: EPE {:.2}e-4 in {:.1} s",
+                r.clip_start, r.variant, r.hidden, r.epe_x1e4, r.seconds
+            )
+        },
+        |start, motion| {
+            eprintln!(
+                "clip {start}: skipped (mean motion {motion:.4} < {})",
+                job.min_motion
+            )
+        },
+    )?;
+    print!("{}", fluid::table(&records));
+    if let Some(path) = &args.json {
+        doma::checkpoint::save_json(&records, path)?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())
@@ -735,6 +913,8 @@ fn main() -> ExitCode {
         Command::Bench(args) => run_bench(args),
         Command::NovelPoints(args) => run_novel_points(args),
         Command::MeshAlignment(args) => run_mesh_alignment(args),
+        Command::Fluid(args) => run_fluid(args),
+        Command::Image2d(args) => run_image2d(args),
         Command::Fit(args) => run_fit(args),
         Command::Eval(args) => run_eval(args),
         Command::Warp(args) => run_warp(args),

@@ -1,0 +1,99 @@
+//! The 2-D image and fluid experiments' building blocks on hand-computed values, and tiny
+//! end-to-end runs that check their records.
+
+use doma::backend::BackendKind;
+use doma::data::Trajectories;
+use doma::experiments::fluid::{self, FluidRecord, mean_motion};
+use doma::experiments::image2d::{self, Image2dJob, Motion2d, grid};
+use doma::field::Variant;
+
+#[test]
+fn the_pixel_grid_is_centred_and_y_up() {
+    let g = grid(4);
+    assert_eq!(g.len(), 16);
+    // Row 0 is the top row (y = +0.75), column 0 the left (x = −0.75).
+    assert_eq!(g[0], (-0.75, 0.75));
+    assert_eq!(g[15], (0.75, -0.75));
+}
+
+#[test]
+fn the_2d_motions_follow_their_schedules() {
+    let t = 30;
+    // Frame 0: rotation and shearing are the identity, scaling 0.5, translation −1.
+    assert_eq!(Motion2d::Rotation.apply(0.3, -0.2, 0, t), (0.3, -0.2));
+    assert_eq!(Motion2d::Shearing.apply(0.3, -0.2, 0, t), (0.3, -0.2));
+    assert_eq!(Motion2d::Scaling.apply(0.4, -0.2, 0, t), (0.2, -0.1));
+    assert_eq!(Motion2d::Translation.apply(0.3, -0.2, 0, t), (-0.7, -1.2));
+    // Last frame: scale 1.5, shear 1.5, +1; rotation by 2π·29/30.
+    assert_eq!(
+        Motion2d::Scaling.apply(0.4, -0.2, 29, t),
+        (0.4 * 1.5, -0.2 * 1.5)
+    );
+    let (x, y) = Motion2d::Shearing.apply(0.3, -0.2, 29, t);
+    assert!(x.abs() < 1e-15 && y == -0.2, "0.3 + 1.5 · (−0.2) = 0");
+    let (x, y) = Motion2d::Rotation.apply(1.0, 0.0, 15, t);
+    assert!(
+        (x + 1.0).abs() < 1e-12 && y.abs() < 1e-12,
+        "half a turn at frame 15"
+    );
+}
+
+#[test]
+fn mean_motion_and_the_fluid_table_by_hand() {
+    // Two points: one moves by (3, 4, 0) = 5, one stays: mean 2.5.
+    let clip =
+        Trajectories::new(2, 2, vec![0., 0., 0., 1., 1., 1., 3., 4., 0., 1., 1., 1.]).unwrap();
+    assert_eq!(mean_motion(&clip), 2.5);
+    let rec = |clip: usize, variant: &str, hidden: usize, epe: f64| FluidRecord {
+        experiment: "fluid".into(),
+        clip_start: clip,
+        motion: 0.1,
+        variant: variant.into(),
+        hidden,
+        iters: 1,
+        epe_x1e4: epe,
+        params: 0,
+        checkpoint_bytes: 0,
+        seconds: 0.0,
+    };
+    let t = fluid::table(&[
+        rec(10, "DPF", 64, 100.0),
+        rec(20, "DPF", 64, 300.0),
+        rec(10, "DPF", 128, 50.0),
+    ]);
+    assert!(t.contains("2 clips"), "{t}");
+    assert!(t.contains("200.00") && t.contains("50.00"), "{t}");
+}
+
+#[test]
+fn a_tiny_image2d_run_writes_its_pictures() {
+    let dir = std::env::temp_dir().join(format!("doma-i2d-{}", std::process::id()));
+    let job = Image2dJob {
+        resolution: 16,
+        frames: 4,
+        motions: vec![Motion2d::Scaling],
+        variants: vec![Variant::Trans, Variant::Affinity],
+        widths: vec![8],
+        iterations: 2,
+        backend: BackendKind::Flex,
+        seed: 0,
+        quiet: true,
+        png_dir: Some(dir.clone()),
+    };
+    let records = image2d::run(&job, |_| {}).unwrap();
+    assert_eq!(records.len(), 2);
+    assert!(
+        records
+            .iter()
+            .all(|r| r.epe_x1e4.is_finite() && r.resolution == 16)
+    );
+    for name in [
+        "scaling_truth.png",
+        "scaling_trans_8.png",
+        "scaling_affinity_8.png",
+    ] {
+        let png = std::fs::read(dir.join(name)).unwrap();
+        assert_eq!(&png[..4], b"\x89PNG");
+    }
+    assert!(image2d::table(&records).contains("Affinity 8D"));
+}
