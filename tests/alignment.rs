@@ -347,3 +347,33 @@ fn a_warped_mesh_sequence_is_the_field_at_each_frames_time() {
         assert!(rel_err(&got, &y) < 1e-6, "frame {k}");
     }
 }
+
+#[test]
+fn a_dpf_step_on_one_frame_leaves_the_other_frames_untouched() {
+    let _lock = backward_lock();
+    let device = Device::flex();
+    let ad = device.clone().autodiff();
+    let data = Trajectories::new(3, 5, (0..45).map(|i| i as f32 * 0.01).collect()).unwrap();
+    let dpf = DpfConfig::new(3)
+        .with_hidden(8)
+        .with_n_hidden(1)
+        .init(0, &ad);
+    let config = doma::train::FitConfig::new(DomaFieldConfig::new(Variant::Trans)).with_quiet(true);
+    let mut trainer = doma::train::Trainer::new(dpf, &config, &data, &device).unwrap();
+    let weights = |t: &doma::train::Trainer<'_, doma::field::dpf::Dpf>| -> Vec<Vec<f64>> {
+        t.field()
+            .nets
+            .iter()
+            .map(|n| to_vec(n.weights[0].val()))
+            .collect()
+    };
+    // A step on frame 0 gives frame 0 Adam moments; a step on frame 1 must then leave
+    // frame 0 alone (with one stacked parameter, its momentum would move it again).
+    trainer.step(0, 1e-2);
+    let before = weights(&trainer);
+    trainer.step(1, 1e-2);
+    let after = weights(&trainer);
+    assert_eq!(after[0], before[0], "frame 0 moved during frame 1's step");
+    assert_eq!(after[2], before[2]);
+    assert_ne!(after[1], before[1]);
+}

@@ -1,17 +1,19 @@
 //! The frame-wise DPF baseline (DESIGN §1, REFERENCE §2): one 3-D-input SIREN per frame,
 //! `g_k(x) = x + u_k(x)`, with no time input and nothing shared between frames.
 //!
-//! The `T` networks are **one** module: every layer's weights are stacked into
-//! `[T, fan_in, fan_out]` and its biases into `[T, fan_out]`. A fit step on frame `k`
-//! slices frame `k`'s weights (one matmul per layer); [`Dpf::warp_all`] evaluates every
-//! frame at once with one batched matmul per layer. The parameter count grows as `O(T)`,
-//! which is what Tab. 3 compares. Like the authors' code, it has `T` nets (frame 0 too;
-//! the paper says `T − 1`).
+//! The `T` networks live in one module, one parameter per frame and layer. A fit step on
+//! frame `k` uses frame `k`'s parameters alone (one matmul per layer), so only they get a
+//! gradient and Adam leaves the other frames' weights and moments untouched, exactly as
+//! PyTorch's Adam skips the authors' separate nets. [`Dpf::warp_all`] evaluates every frame
+//! at once: it stacks each layer's weights into `[T, fan_in, fan_out]` and runs one batched
+//! matmul per layer. The parameter count grows as `O(T)`, which is what Tab. 3 compares.
+//! Like the authors' code, it has `T` nets (frame 0 too; the paper says `T − 1`).
 //!
-//! Training note: the fit loop's Adam sees the whole stacked tensor, so the slices of the
-//! frames not in a step get a zero gradient and Adam's momentum keeps moving them for a
-//! few steps; PyTorch's Adam skips the authors' separate nets instead. This is a
-//! difference in the baseline's optimiser, stated here and in the README.
+//! Why not one stacked `[T, fan_in, fan_out]` parameter per layer (DESIGN §1): then every
+//! step's gradient covers all frames, zero outside frame `k`, and Adam's momentum keeps
+//! moving the other frames' weights after each of their steps, `T − 1` extra updates per
+//! real one. That is a different (and, measured, a much faster-converging) baseline than
+//! the authors'.
 
 use burn::config::Config;
 use burn::module::{Module, Param};
@@ -63,40 +65,51 @@ impl DpfConfig {
         assert!(self.frames > 0, "DPF needs at least one frame");
         let siren = self.siren();
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let nets: Vec<_> = (0..self.frames)
-            .map(|_| SirenInitializer::new(self.omega).init(&siren, &mut rng))
+        let nets = (0..self.frames)
+            .map(|_| {
+                let layers = SirenInitializer::new(self.omega).init(&siren, &mut rng);
+                FrameNet {
+                    weights: layers
+                        .iter()
+                        .map(|l| {
+                            Param::from_data(
+                                TensorData::new(l.weight.clone(), [l.fan_in, l.fan_out]),
+                                device,
+                            )
+                        })
+                        .collect(),
+                    biases: layers
+                        .iter()
+                        .map(|l| {
+                            Param::from_data(TensorData::new(l.bias.clone(), [l.fan_out]), device)
+                        })
+                        .collect(),
+                }
+            })
             .collect();
-        let shapes = siren.layer_shapes();
-        let mut weights = Vec::with_capacity(shapes.len());
-        let mut biases = Vec::with_capacity(shapes.len());
-        for (l, &(fan_in, fan_out)) in shapes.iter().enumerate() {
-            let w: Vec<f64> = nets.iter().flat_map(|n| n[l].weight.clone()).collect();
-            let b: Vec<f64> = nets.iter().flat_map(|n| n[l].bias.clone()).collect();
-            weights.push(Param::from_data(
-                TensorData::new(w, [self.frames, fan_in, fan_out]),
-                device,
-            ));
-            biases.push(Param::from_data(
-                TensorData::new(b, [self.frames, fan_out]),
-                device,
-            ));
-        }
         Dpf {
-            weights,
-            biases,
+            nets,
             omega: self.omega,
             frames: self.frames,
         }
     }
 }
 
-/// `T` stacked SIRENs `x ↦ u_k(x)`; the warp to frame `k` is `x + u_k(x)`.
+/// One frame's SIREN `x ↦ u_k(x)`: per layer (sine layers first, output last) a
+/// `[fan_in, fan_out]` weight and a `[fan_out]` bias.
+#[derive(Module, Debug)]
+pub struct FrameNet {
+    /// The weights.
+    pub weights: Vec<Param<Tensor<2>>>,
+    /// The biases.
+    pub biases: Vec<Param<Tensor<1>>>,
+}
+
+/// `T` SIRENs `x ↦ u_k(x)`; the warp to frame `k` is `x + u_k(x)`.
 #[derive(Module, Debug)]
 pub struct Dpf {
-    /// Per layer (sine layers first, output last): `[T, fan_in, fan_out]`.
-    pub weights: Vec<Param<Tensor<3>>>,
-    /// Per layer: `[T, fan_out]`.
-    pub biases: Vec<Param<Tensor<2>>>,
+    /// One net per frame.
+    pub nets: Vec<FrameNet>,
     /// The sine frequency `ω₀`.
     pub omega: f64,
     /// `T`.
@@ -116,13 +129,11 @@ impl Dpf {
 
     /// Frame `k`'s displacement `u_k(x)` on duals, `x: [N, 3]`.
     pub fn displacement_dual(&self, x: Dual, k: usize) -> Dual {
-        let last = self.weights.len() - 1;
+        let net = &self.nets[k];
+        let last = net.weights.len() - 1;
         let mut h = x;
-        for (l, (w, b)) in self.weights.iter().zip(&self.biases).enumerate() {
-            let [_, fan_in, fan_out] = w.dims();
-            let w = w.val().narrow(0, k, 1).reshape([fan_in, fan_out]);
-            let b = b.val().narrow(0, k, 1).reshape([fan_out]);
-            h = h.linear(w, Some(b));
+        for (l, (w, b)) in net.weights.iter().zip(&net.biases).enumerate() {
+            h = h.linear(w.val(), Some(b.val()));
             if l < last {
                 h = h.mul_scalar(self.omega).sin();
             }
@@ -130,16 +141,22 @@ impl Dpf {
         h
     }
 
-    /// Every frame's warp of the same points at once, `x: [N, 3]` → `[T, N, 3]`: one
-    /// batched `[T, N, d_in] × [T, d_in, d_out]` matmul per layer.
+    /// Every frame's warp of the same points at once, `x: [N, 3]` → `[T, N, 3]`: the
+    /// layers' weights stacked to `[T, d_in, d_out]`, one batched matmul per layer.
     pub fn warp_all(&self, x: Tensor<2>) -> Tensor<3> {
         let [n, _] = x.dims();
         let x3 = x.unsqueeze_dim::<3>(0).repeat_dim(0, self.frames); // [T, N, 3]
-        let last = self.weights.len() - 1;
+        let layers = self.nets[0].weights.len();
         let mut h = x3.clone();
-        for (l, (w, b)) in self.weights.iter().zip(&self.biases).enumerate() {
-            h = h.matmul(w.val()) + b.val().unsqueeze_dim::<3>(1);
-            if l < last {
+        for l in 0..layers {
+            let w = Tensor::stack(
+                self.nets.iter().map(|net| net.weights[l].val()).collect(),
+                0,
+            );
+            let b: Tensor<2> =
+                Tensor::stack(self.nets.iter().map(|net| net.biases[l].val()).collect(), 0);
+            h = h.matmul(w) + b.unsqueeze_dim::<3>(1);
+            if l + 1 < layers {
                 h = h.mul_scalar(self.omega).sin();
             }
         }
