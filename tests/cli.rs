@@ -465,3 +465,49 @@ fn the_supplement_experiments_refuse_bad_flags() {
         );
     }
 }
+
+#[test]
+fn fit_reads_a_config_file_and_flags_override_it() {
+    let dir = std::env::temp_dir().join(format!("doma-cli-config-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let config = dir.join("fit.json");
+    // A FitConfig as a run's config.json holds it: Scaled SE(3), width 16, 50 iterations.
+    let fit = doma::train::FitConfig::new(
+        doma::field::DomaFieldConfig::new(doma::field::Variant::ScaledSe3).with_hidden(16),
+    )
+    .with_iterations(50);
+    std::fs::write(&config, serde_json::to_string(&fit).unwrap()).unwrap();
+    let run = dir.join("run");
+    let faerie = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
+    let (ok, _, err) = doma(&[
+        "fit",
+        faerie,
+        "--frames",
+        "112..116",
+        "--out",
+        run.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+        "--iters",
+        "2",
+        "--quiet",
+    ]);
+    assert!(ok, "{err}");
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap();
+    assert_eq!(saved["fit"]["field"]["variant"], "scaled-se3");
+    assert_eq!(saved["fit"]["field"]["hidden"], 16);
+    assert_eq!(saved["fit"]["iterations"], 2, "the flag overrides the file");
+    // A config file that is not JSON names the file.
+    std::fs::write(&config, "{ nope").unwrap();
+    let (ok, _, err) = doma(&[
+        "fit",
+        faerie,
+        "--out",
+        dir.join("r2").to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains("fit.json"), "{err}");
+}
