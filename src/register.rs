@@ -22,7 +22,6 @@ use burn::config::Config;
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Device, Tensor, TensorData};
-use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -195,16 +194,7 @@ pub fn register<M: MotionField + Module>(
     let method = config.jacobian.method();
     let mut optim = AdamConfig::new().with_epsilon(1e-8).init();
 
-    let bar = if config.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(config.iterations as u64).with_style(
-            ProgressStyle::with_template(
-                "{bar:30} {pos}/{len} it  {elapsed_precise}<{eta_precise}  {msg}",
-            )
-            .expect("a valid template"),
-        )
-    };
+    let bar = crate::train::progress_bar(config.iterations, config.quiet);
     let start = Instant::now();
     let frames = task.keypoints.frames();
     let mut field = field;
@@ -260,22 +250,12 @@ pub fn register<M: MotionField + Module>(
             let grads = GradientsParams::from_grads(total.backward(), &field);
             field = optim.step(lr, field, grads);
         }
-        let losses = Tensor::stack::<2>(step_losses, 0)
-            .try_into_vec_as::<f64>()
-            .map_err(|e| DomaError::Device(format!("{e:?}")))?;
-        if let Some(i) = losses.iter().position(|v| !v.is_finite()) {
-            return Err(DomaError::NonFiniteLoss {
-                iteration: it,
-                frame: order[i / 2],
-                value: losses[i],
-            });
-        }
-        let mean = |c: usize| losses.iter().skip(c).step_by(2).sum::<f64>() / frames as f64;
+        let (guidance_mean, total_mean) = crate::train::read_step_losses(step_losses, &order, it)?;
         let record = IterationRecord {
             iteration: it,
             learning_rate: lr,
-            trajectory_loss: mean(0),
-            total_loss: mean(1),
+            trajectory_loss: guidance_mean,
+            total_loss: total_mean,
             seconds: start.elapsed().as_secs_f64(),
         };
         bar.set_message(format!(

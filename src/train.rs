@@ -165,6 +165,42 @@ pub fn fit(config: &FitConfig, data: &Trajectories, device: &Device) -> Result<F
     fit_model(field, config, data, device)
 }
 
+/// The progress bar of a fit loop (hidden when `quiet`).
+pub(crate) fn progress_bar(iterations: usize, quiet: bool) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    ProgressBar::new(iterations as u64).with_style(
+        ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} it  {elapsed_precise}<{eta_precise}  {msg}",
+        )
+        .expect("a valid template"),
+    )
+}
+
+/// Reads an iteration's step losses back (one device sync), each a `[2]` tensor
+/// (primary loss, total) in the order `order` of frames; stops with
+/// [`DomaError::NonFiniteLoss`] naming the iteration and frame if any is not finite, else
+/// returns the two means.
+pub(crate) fn read_step_losses(
+    step_losses: Vec<Tensor<1>>,
+    order: &[usize],
+    iteration: usize,
+) -> Result<(f64, f64)> {
+    let losses = Tensor::stack::<2>(step_losses, 0)
+        .try_into_vec_as::<f64>()
+        .map_err(|e| DomaError::Device(format!("{e:?}")))?;
+    if let Some(i) = losses.iter().position(|v| !v.is_finite()) {
+        return Err(DomaError::NonFiniteLoss {
+            iteration,
+            frame: order[i / 2],
+            value: losses[i],
+        });
+    }
+    let mean = |c: usize| losses.iter().skip(c).step_by(2).sum::<f64>() / order.len() as f64;
+    Ok((mean(0), mean(1)))
+}
+
 /// Draws the `L_H` sample points: a random subset of at most `max` rows of `x0`
 /// (`[N, 3]`, host), jittered by Gaussian noise of standard deviation `sigma`.
 fn smoothness_samples(
@@ -344,19 +380,7 @@ impl<'a, M: MotionField + Module> Trainer<'a, M> {
         let mut order: Vec<usize> = (0..frames).collect();
         order.shuffle(&mut self.rng);
         let step_losses: Vec<Tensor<1>> = order.iter().map(|&k| self.step(k, lr)).collect();
-        // [T, 2] (trajectory, total) in step order.
-        let losses = Tensor::stack::<2>(step_losses, 0)
-            .try_into_vec_as::<f64>()
-            .map_err(|e| DomaError::Device(format!("{e:?}")))?;
-        if let Some(i) = losses.iter().position(|v| !v.is_finite()) {
-            return Err(DomaError::NonFiniteLoss {
-                iteration,
-                frame: order[i / 2],
-                value: losses[i],
-            });
-        }
-        let mean = |c: usize| losses.iter().skip(c).step_by(2).sum::<f64>() / frames as f64;
-        Ok((mean(0), mean(1)))
+        read_step_losses(step_losses, &order, iteration)
     }
 
     /// The field being fitted (parameters on the autodiff device).
@@ -407,16 +431,7 @@ impl<'a, M: MotionField + Module> Trainer<'a, M> {
     /// The whole fit: `config.iterations` iterations, with a progress bar unless quiet.
     pub fn run(mut self) -> Result<Fitted<M>> {
         let config = self.config;
-        let bar = if config.quiet {
-            ProgressBar::hidden()
-        } else {
-            ProgressBar::new(config.iterations as u64).with_style(
-                ProgressStyle::with_template(
-                    "{bar:30} {pos}/{len} it  {elapsed_precise}<{eta_precise}  {msg}",
-                )
-                .expect("a valid template"),
-            )
-        };
+        let bar = progress_bar(config.iterations, config.quiet);
         let start = Instant::now();
         let mut history = Vec::with_capacity(config.iterations);
         for iteration in 0..config.iterations {

@@ -117,14 +117,9 @@ pub struct Dpf {
 }
 
 impl Dpf {
-    /// The frame whose net answers normalised time `t` (`t_k = −1 + 2k/(T−1)`, rounded
-    /// to the nearest frame and clamped).
+    /// The frame nearest normalised time `t` ([`crate::field::frame_of`]).
     pub fn frame_of(&self, t: f64) -> usize {
-        if self.frames < 2 {
-            return 0;
-        }
-        let k = ((t + 1.0) * 0.5 * (self.frames - 1) as f64).round();
-        k.clamp(0.0, (self.frames - 1) as f64) as usize
+        crate::field::frame_of(t, self.frames)
     }
 
     /// Frame `k`'s displacement `u_k(x)` on duals, `x: [N, 3]`.
@@ -170,21 +165,13 @@ impl MotionField for Dpf {
     /// `jacobian` method gets the forward mode on duals (the Analytic kernels are
     /// SIREN-with-time specific).
     fn raw_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> Dual {
-        let x = match jacobian {
-            Some(_) => Dual::seed_spatial(x),
-            None => Dual::constant(x),
-        };
+        let x = crate::field::spatial_input(x, jacobian);
         self.displacement_dual(x, self.frame_of(t))
     }
 
     fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput {
         let raw = self.raw_dual(x.clone(), t, jacobian);
-        let x = match jacobian {
-            Some(_) => Dual::seed_spatial(x),
-            None => Dual::constant(x),
-        };
-        let warped = x + raw.clone();
-        WarpOutput { raw, warped }
+        crate::field::displacement_warp(x, raw, jacobian)
     }
 
     fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {

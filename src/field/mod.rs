@@ -170,6 +170,37 @@ pub trait MotionField {
     }
 }
 
+/// The frame of `frames` nearest normalised time `t` (`t_k = −1 + 2k/(T−1)`), clamped:
+/// how the frame-indexed models (DPF, DCT-NeRF, BoneCloud) read the fit loop's time.
+pub fn frame_of(t: f64, frames: usize) -> usize {
+    if frames < 2 {
+        return 0;
+    }
+    let k = ((t + 1.0) * 0.5 * (frames - 1) as f64).round();
+    k.clamp(0.0, (frames - 1) as f64) as usize
+}
+
+/// `x` as a dual: seeded for spatial tangents when a Jacobian is requested.
+pub fn spatial_input(x: Tensor<2>, jacobian: Option<&dyn JacobianMethod>) -> Dual {
+    match jacobian {
+        Some(_) => Dual::seed_spatial(x),
+        None => Dual::constant(x),
+    }
+}
+
+/// The warp of a displacement model: `y = x + raw`, with the tangents of `x` when a
+/// Jacobian is requested.
+pub fn displacement_warp(
+    x: Tensor<2>,
+    raw: Dual,
+    jacobian: Option<&dyn JacobianMethod>,
+) -> WarpOutput {
+    WarpOutput {
+        warped: spatial_input(x, jacobian) + raw.clone(),
+        raw,
+    }
+}
+
 /// `[x, t]`: appends a constant time column to `x: [N, 3]`.
 pub fn time_input(x: Tensor<2>, t: f64) -> Tensor<2> {
     let n = x.dims()[0];

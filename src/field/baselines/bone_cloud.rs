@@ -84,14 +84,9 @@ pub struct BoneCloud {
 }
 
 impl BoneCloud {
-    /// The frame nearest normalised time `t`.
+    /// The frame nearest normalised time `t` ([`crate::field::frame_of`]).
     pub fn frame_of(&self, t: f64) -> usize {
-        if self.frames < 2 {
-            return 0;
-        }
-        ((t + 1.0) * 0.5 * (self.frames - 1) as f64)
-            .round()
-            .clamp(0.0, (self.frames - 1) as f64) as usize
+        crate::field::frame_of(t, self.frames)
     }
 
     /// The normalised skinning weights `[N, K]` of `x`.
@@ -133,10 +128,7 @@ impl BoneCloud {
 impl MotionField for BoneCloud {
     /// The raw outputs are the blended `A` (row-major) and `u` at the frame nearest `t`.
     fn raw_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> Dual {
-        let x = match jacobian {
-            Some(_) => Dual::seed_spatial(x),
-            None => Dual::constant(x),
-        };
+        let x = crate::field::spatial_input(x, jacobian);
         let w = self.skinning_weights(x);
         let (rot, trans) = self.bone_transforms(self.frame_of(t));
         Dual::cat(vec![w.clone().linear(rot, None), w.linear(trans, None)])
@@ -144,10 +136,7 @@ impl MotionField for BoneCloud {
 
     fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput {
         let raw = self.raw_dual(x.clone(), t, jacobian);
-        let x = match jacobian {
-            Some(_) => Dual::seed_spatial(x),
-            None => Dual::constant(x),
-        };
+        let x = crate::field::spatial_input(x, jacobian);
         let warped = Variant::Affinity.local_affine(raw.clone()).apply(x);
         WarpOutput { raw, warped }
     }

@@ -88,14 +88,9 @@ pub fn dct_basis(j: usize, k: usize, t: usize) -> f64 {
 }
 
 impl DctNerf {
-    /// The frame nearest normalised time `t`.
+    /// The frame nearest normalised time `t` ([`crate::field::frame_of`]).
     pub fn frame_of(&self, t: f64) -> usize {
-        if self.frames < 2 {
-            return 0;
-        }
-        ((t + 1.0) * 0.5 * (self.frames - 1) as f64)
-            .round()
-            .clamp(0.0, (self.frames - 1) as f64) as usize
+        crate::field::frame_of(t, self.frames)
     }
 
     /// The `[3K, 3]` matrix that maps coefficients to the displacement at frame `k`.
@@ -114,24 +109,14 @@ impl MotionField for DctNerf {
     /// The raw output is the displacement `u(x, k)` at the frame nearest `t`.
     fn raw_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> Dual {
         let device = x.device();
-        let input = match jacobian {
-            Some(_) => Dual::seed_spatial(x),
-            None => Dual::constant(x),
-        };
+        let input = crate::field::spatial_input(x, jacobian);
         let coefficients = self.mlp.forward_dual(input);
         coefficients.linear(self.basis_matrix(self.frame_of(t), &device), None)
     }
 
     fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput {
         let raw = self.raw_dual(x.clone(), t, jacobian);
-        let x = match jacobian {
-            Some(_) => Dual::seed_spatial(x),
-            None => Dual::constant(x),
-        };
-        WarpOutput {
-            warped: x + raw.clone(),
-            raw,
-        }
+        crate::field::displacement_warp(x, raw, jacobian)
     }
 
     fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {

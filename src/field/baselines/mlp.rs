@@ -151,23 +151,13 @@ impl MotionField for Mlp {
     /// The raw output is the displacement `o = MLP(γ([x, t]))`.
     fn raw_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> Dual {
         let xt = time_input(x, t);
-        let input = match jacobian {
-            Some(_) => Dual::seed_spatial(xt),
-            None => Dual::constant(xt),
-        };
+        let input = crate::field::spatial_input(xt, jacobian);
         self.forward_dual(input)
     }
 
     fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput {
         let raw = self.raw_dual(x.clone(), t, jacobian);
-        let x = match jacobian {
-            Some(_) => Dual::seed_spatial(x),
-            None => Dual::constant(x),
-        };
-        WarpOutput {
-            warped: x + raw.clone(),
-            raw,
-        }
+        crate::field::displacement_warp(x, raw, jacobian)
     }
 
     fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {
