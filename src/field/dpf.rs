@@ -21,7 +21,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use super::{LocalAffine, MotionField, WarpOutput};
+use super::{MotionField, WarpOutput};
 use crate::jacobian::{Dual, JacobianMethod};
 use crate::siren::{SirenConfig, SirenInitializer};
 
@@ -175,12 +175,10 @@ impl MotionField for Dpf {
     }
 
     fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {
-        let u = self.raw_dual(x, t, None);
-        LocalAffine {
-            columns: None,
-            translation: u,
-        }
-        .matrices()
+        // A displacement model is the Trans head: `A = I`, `u = raw`.
+        crate::field::Variant::Trans
+            .local_affine(self.raw_dual(x, t, None))
+            .matrices()
     }
 
     fn param_count(&self) -> usize {

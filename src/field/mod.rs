@@ -188,17 +188,17 @@ pub fn spatial_input(x: Tensor<2>, jacobian: Option<&dyn JacobianMethod>) -> Dua
     }
 }
 
-/// The warp of a displacement model: `y = x + raw`, with the tangents of `x` when a
+/// The warp of a displacement model, the Trans head: `y = x + raw`, with the tangents of `x` when a
 /// Jacobian is requested.
 pub fn displacement_warp(
     x: Tensor<2>,
     raw: Dual,
     jacobian: Option<&dyn JacobianMethod>,
 ) -> WarpOutput {
-    WarpOutput {
-        warped: spatial_input(x, jacobian) + raw.clone(),
-        raw,
-    }
+    let warped = Variant::Trans
+        .local_affine(raw.clone())
+        .apply(spatial_input(x, jacobian));
+    WarpOutput { raw, warped }
 }
 
 /// `[x, t]`: appends a constant time column to `x: [N, 3]`.

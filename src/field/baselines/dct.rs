@@ -14,7 +14,7 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 
 use super::mlp::{Mlp, MlpConfig};
-use crate::field::{LocalAffine, MotionField, WarpOutput};
+use crate::field::{MotionField, WarpOutput};
 use crate::jacobian::{Dual, JacobianMethod};
 
 /// The shape of a DCT-NeRF model.
@@ -120,11 +120,10 @@ impl MotionField for DctNerf {
     }
 
     fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {
-        LocalAffine {
-            columns: None,
-            translation: self.raw_dual(x, t, None),
-        }
-        .matrices()
+        // A displacement model is the Trans head: `A = I`, `u = raw`.
+        crate::field::Variant::Trans
+            .local_affine(self.raw_dual(x, t, None))
+            .matrices()
     }
 
     fn param_count(&self) -> usize {

@@ -15,7 +15,7 @@ use burn::tensor::{Device, Tensor};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::field::{LocalAffine, MotionField, WarpOutput, time_input};
+use crate::field::{MotionField, WarpOutput, time_input};
 use crate::jacobian::{Dual, JacobianMethod};
 use crate::siren::{LayerWeights, linear_from};
 
@@ -161,11 +161,10 @@ impl MotionField for Mlp {
     }
 
     fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {
-        LocalAffine {
-            columns: None,
-            translation: self.raw_dual(x, t, None),
-        }
-        .matrices()
+        // A displacement model is the Trans head: `A = I`, `u = raw`.
+        crate::field::Variant::Trans
+            .local_affine(self.raw_dual(x, t, None))
+            .matrices()
     }
 
     fn param_count(&self) -> usize {
