@@ -429,7 +429,19 @@ impl<'a, M: MotionField + Module> Trainer<'a, M> {
     }
 
     /// The whole fit: `config.iterations` iterations, with a progress bar unless quiet.
-    pub fn run(mut self) -> Result<Fitted<M>> {
+    pub fn run(self) -> Result<Fitted<M>> {
+        self.run_observed(0, |_, _| Ok(()))
+    }
+
+    /// [`Trainer::run`], calling `observe(record, field)` after every `every`-th iteration
+    /// (and after the last) with that iteration's record and a validation copy of the
+    /// field; `every = 0` never calls it. Learning curves (test error against iterations)
+    /// are built on this.
+    pub fn run_observed(
+        mut self,
+        every: usize,
+        mut observe: impl FnMut(&IterationRecord, M) -> Result<()>,
+    ) -> Result<Fitted<M>> {
         let config = self.config;
         let bar = progress_bar(config.iterations, config.quiet);
         let start = Instant::now();
@@ -445,6 +457,9 @@ impl<'a, M: MotionField + Module> Trainer<'a, M> {
             };
             bar.set_message(format!("L1 {trajectory_loss:.2e}  loss {total_loss:.2e}"));
             bar.inc(1);
+            if every > 0 && ((iteration + 1) % every == 0 || iteration + 1 == config.iterations) {
+                observe(&record, self.field().clone().valid())?;
+            }
             history.push(record);
         }
         bar.finish_and_clear();

@@ -55,6 +55,7 @@ fn mean_motion_and_the_fluid_table_by_hand() {
         params: 0,
         checkpoint_bytes: 0,
         seconds: 0.0,
+        curve: vec![],
     };
     let t = fluid::table(&[
         rec(10, "DPF", 64, 100.0),
@@ -96,4 +97,56 @@ fn a_tiny_image2d_run_writes_its_pictures() {
         assert_eq!(&png[..4], b"\x89PNG");
     }
     assert!(image2d::table(&records).contains("Affinity 8D"));
+}
+
+#[test]
+fn a_tiny_fluid_run_records_its_learning_curve() {
+    // 40 particles on a rotating ring, two 4-frame clips; the second one barely moves.
+    let (frames, n) = (8usize, 40usize);
+    let mut pos = Vec::new();
+    for k in 0..frames {
+        let a = if k < 4 {
+            0.2 * k as f32
+        } else {
+            0.6 + 1e-5 * k as f32
+        };
+        for i in 0..n {
+            let phi = std::f32::consts::TAU * i as f32 / n as f32;
+            let r = 1.0 + 0.1 * (i % 3) as f32;
+            pos.extend([r * (phi + a).cos(), r * (phi + a).sin(), 0.01 * i as f32]);
+        }
+    }
+    let dir = std::env::temp_dir().join(format!("doma-fluid-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let data = dir.join("ring.traj");
+    doma::data::traj::write_traj(&data, &Trajectories::new(frames, n, pos).unwrap()).unwrap();
+    let job = fluid::FluidJob {
+        data,
+        clip_len: 4,
+        start: 0,
+        step: 4,
+        min_motion: 0.01,
+        models: vec![
+            doma::experiments::meshes::AlignModel::Dpf,
+            doma::experiments::meshes::AlignModel::Affinity,
+        ],
+        widths: vec![16],
+        iterations: 3,
+        backend: BackendKind::Flex,
+        seed: 0,
+        quiet: true,
+        eval_every: 2,
+    };
+    let (mut runs, mut skips) = (0, Vec::new());
+    let records = fluid::run(&job, |_| runs += 1, |start, _| skips.push(start)).unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    assert_eq!(skips, vec![4]);
+    assert_eq!((runs, records.len()), (2, 2));
+    for r in &records {
+        let its: Vec<usize> = r.curve.iter().map(|c| c.iteration).collect();
+        assert_eq!(its, vec![2, 3], "{r:?}");
+        // The curve's last point is the reported result.
+        assert_eq!(r.curve[1].test_epe_x1e4, r.epe_x1e4, "{r:?}");
+        assert!(r.curve.iter().all(|c| c.train_epe_x1e4 > 0.0), "{r:?}");
+    }
 }

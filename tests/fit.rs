@@ -183,3 +183,37 @@ fn wgpu_agrees_with_flex() {
     eprintln!("wgpu vs flex after 3 Affinity-H iterations: relative difference {e:e}");
     assert!(e < 1e-4, "wgpu vs flex: relative difference {e:e}");
 }
+
+#[test]
+fn an_observed_fit_sees_every_kth_iteration_and_the_last_and_ends_where_a_plain_fit_ends() {
+    let _g = backward_lock();
+    let (train, test) = small_data();
+    let device = Device::flex();
+    let config = config(Variant::Affinity, 5).with_learning_rate(1e-3);
+    let mut seen = Vec::new();
+    let mut last_prediction = Vec::new();
+    let field = config.field.init(config.seed, &device.clone().autodiff());
+    let observed = doma::train::Trainer::new(field, &config, &train, &device)
+        .unwrap()
+        .run_observed(2, |r, f| {
+            seen.push(r.iteration + 1);
+            last_prediction = predictions(&f, &test, &device);
+            Ok(())
+        })
+        .unwrap();
+    assert_eq!(seen, vec![2, 4, 5]);
+    let plain = fit(&config, &train, &device).unwrap();
+    let (a, b) = (
+        predictions(&observed.field, &test, &device),
+        predictions(&plain.field, &test, &device),
+    );
+    // Observing must not change the fit, and the last observation is the result.
+    assert_eq!(a, b);
+    assert_eq!(last_prediction, a);
+    // An error from the observer stops the fit.
+    let field = config.field.init(config.seed, &device.clone().autodiff());
+    let err = doma::train::Trainer::new(field, &config, &train, &device)
+        .unwrap()
+        .run_observed(1, |_, _| Err(DomaError::InvalidConfig("stop".into())));
+    assert!(matches!(err, Err(DomaError::InvalidConfig(_))));
+}

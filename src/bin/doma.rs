@@ -110,6 +110,10 @@ struct FluidArgs {
     /// Also write one JSON record per fit to this file.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Record train and test EPE every this many iterations (a learning curve, in the
+    /// JSON records; 0 = none).
+    #[arg(long, default_value_t = 0)]
+    eval_every: usize,
 }
 
 #[derive(clap::Args, Debug)]
@@ -217,10 +221,17 @@ fn run_fluid(args: FluidArgs) -> anyhow::Result<()> {
         backend: args.backend,
         seed: args.seed,
         quiet: args.quiet,
+        eval_every: args.eval_every,
     };
     let records = fluid::run(
         &job,
         |r| {
+            for c in &r.curve {
+                eprintln!(
+                    "  {} it: train EPE {:.2}e-4, test EPE {:.2}e-4",
+                    c.iteration, c.train_epe_x1e4, c.test_epe_x1e4
+                );
+            }
             eprintln!(
                 "clip {} {} {}D: EPE {:.2}e-4 in {:.1} s",
                 r.clip_start, r.variant, r.hidden, r.epe_x1e4, r.seconds

@@ -19,8 +19,9 @@ use crate::experiments::meshes::{AlignModel, load_sequence, split_indices};
 use crate::field::dpf::DpfConfig;
 use crate::field::{DomaFieldConfig, MotionField, Variant};
 use crate::metrics::{EPE_SCALE, evaluate_epe};
-use crate::train::{FitConfig, Fitted, fit, fit_model};
+use crate::train::{FitConfig, Trainer};
 use crate::{DomaError, Result};
+use burn::module::Module;
 
 /// What to run.
 #[derive(Clone, Debug)]
@@ -47,6 +48,22 @@ pub struct FluidJob {
     pub seed: u64,
     /// No progress bars.
     pub quiet: bool,
+    /// Record a learning curve point (train and test EPE) every this many iterations
+    /// (0 = none).
+    pub eval_every: usize,
+}
+
+/// One point of a learning curve: the error on the training and on the held-out
+/// particles after `iteration` iterations. A gap that grows while the training error
+/// falls is overfitting.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct CurvePoint {
+    /// Iterations done.
+    pub iteration: usize,
+    /// EPE ×1e-4 on the training particles.
+    pub train_epe_x1e4: f64,
+    /// EPE ×1e-4 on the held-out particles.
+    pub test_epe_x1e4: f64,
 }
 
 /// One fit's record.
@@ -72,6 +89,9 @@ pub struct FluidRecord {
     pub checkpoint_bytes: u64,
     /// Fit seconds.
     pub seconds: f64,
+    /// The learning curve, when asked for ([`FluidJob::eval_every`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub curve: Vec<CurvePoint>,
 }
 
 /// The mean displacement from the first to the last frame.
@@ -129,30 +149,28 @@ pub fn run(
                         .with_jacobian(crate::jacobian::JacobianKind::Analytic)
                         .with_seed(job.seed)
                         .with_quiet(job.quiet);
-                let record = |f: Fitted<_>| -> Result<FluidRecord> {
-                    summarise(job, start, motion, model, hidden, f, &test, &device)
+                let clip_run = ClipRun {
+                    job,
+                    start,
+                    motion,
+                    model,
+                    hidden,
+                    train: &train,
+                    test: &test,
+                    device: &device,
                 };
                 let r = match model {
-                    AlignModel::Dpf => {
-                        let dpf = DpfConfig::new(clip.frames())
+                    AlignModel::Dpf => clip_run.fit(
+                        DpfConfig::new(clip.frames())
                             .with_hidden(hidden)
-                            .init(job.seed, &ad);
-                        summarise(
-                            job,
-                            start,
-                            motion,
-                            model,
-                            hidden,
-                            fit_model(dpf, &config, &train, &device)?,
-                            &test,
-                            &device,
-                        )?
-                    }
-                    AlignModel::Trans => record(fit(&config, &train, &device)?)?,
+                            .init(job.seed, &ad),
+                        &config,
+                    )?,
+                    AlignModel::Trans => clip_run.fit(config.field.init(job.seed, &ad), &config)?,
                     AlignModel::Affinity => {
                         let mut c = config.clone();
                         c.field.variant = Variant::Affinity;
-                        record(fit(&c, &train, &device)?)?
+                        clip_run.fit(c.field.init(job.seed, &ad), &c)?
                     }
                 };
                 on_run(&r);
@@ -164,30 +182,48 @@ pub fn run(
     Ok(records)
 }
 
-#[allow(clippy::too_many_arguments)]
-fn summarise<M: MotionField + burn::module::Module>(
-    job: &FluidJob,
+/// One model's fit on one clip.
+struct ClipRun<'a> {
+    job: &'a FluidJob,
     start: usize,
     motion: f64,
     model: AlignModel,
     hidden: usize,
-    fitted: Fitted<M>,
-    test: &Trajectories,
-    device: &burn::tensor::Device,
-) -> Result<FluidRecord> {
-    let epe = evaluate_epe(&fitted.field, test, device)?;
-    Ok(FluidRecord {
-        experiment: "fluid".into(),
-        clip_start: start,
-        motion,
-        variant: model.paper_name().into(),
-        hidden,
-        iters: job.iterations,
-        epe_x1e4: epe * EPE_SCALE,
-        params: fitted.field.param_count(),
-        checkpoint_bytes: encode_checkpoint(fitted.field, Precision::F32)?.len() as u64,
-        seconds: fitted.seconds,
-    })
+    train: &'a Trajectories,
+    test: &'a Trajectories,
+    device: &'a burn::tensor::Device,
+}
+
+impl ClipRun<'_> {
+    /// Fits `field` to the training half (recording the learning curve if asked) and
+    /// scores it on the held-out half.
+    fn fit<M: MotionField + Module>(&self, field: M, config: &FitConfig) -> Result<FluidRecord> {
+        let mut curve = Vec::new();
+        let fitted = Trainer::new(field, config, self.train, self.device)?.run_observed(
+            self.job.eval_every,
+            |r, f| {
+                curve.push(CurvePoint {
+                    iteration: r.iteration + 1,
+                    train_epe_x1e4: evaluate_epe(&f, self.train, self.device)? * EPE_SCALE,
+                    test_epe_x1e4: evaluate_epe(&f, self.test, self.device)? * EPE_SCALE,
+                });
+                Ok(())
+            },
+        )?;
+        Ok(FluidRecord {
+            experiment: "fluid".into(),
+            clip_start: self.start,
+            motion: self.motion,
+            variant: self.model.paper_name().into(),
+            hidden: self.hidden,
+            iters: self.job.iterations,
+            epe_x1e4: evaluate_epe(&fitted.field, self.test, self.device)? * EPE_SCALE,
+            params: fitted.field.param_count(),
+            checkpoint_bytes: encode_checkpoint(fitted.field, Precision::F32)?.len() as u64,
+            seconds: fitted.seconds,
+            curve,
+        })
+    }
 }
 
 /// The table of Tab. A8: mean EPE over the clips, one row per model, one column per width.
