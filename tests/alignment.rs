@@ -14,7 +14,7 @@ use doma::data::Trajectories;
 use doma::data::mesh::TriMesh;
 use doma::field::dpf::DpfConfig;
 use doma::field::{DomaFieldConfig, MotionField, Variant};
-use doma::jacobian::Autodiff;
+use doma::jacobian::{Autodiff, JacobianKind};
 use doma::loss::{AiapNeighbourhoods, CHAMFER_BLOCK, aiap, chamfer};
 use doma::register::{RegistrationConfig, RegistrationTask, register};
 
@@ -162,6 +162,39 @@ fn dpf_jacobian_matches_finite_differences() {
             .collect();
         let ad = &tangent[c * 18..(c + 1) * 18];
         assert!(rel_err(ad, &fd) < 2e-2, "column {c}: {ad:?} vs {fd:?}");
+    }
+}
+
+#[test]
+fn dpf_value_path_through_the_fused_sine_layers_matches_the_plain_one_with_its_gradients() {
+    let _g = backward_lock();
+    let device = Device::flex().autodiff();
+    let dpf = DpfConfig::new(3).with_hidden(32).init(2, &device);
+    let x = tensor2(common::random_points(50, 4), [50, 3], &device);
+    let t = doma::data::normalized_time(1, 3);
+    // Values and weight gradients of `sum(y²)`, frame 1's nets only.
+    let run = |y: Tensor<2>| -> (Vec<f64>, Vec<f64>, bool) {
+        let grads = y.clone().mul(y.clone()).sum().backward();
+        let mut g = Vec::new();
+        for w in &dpf.nets[1].weights {
+            g.extend(to_vec(w.val().grad(&grads).expect("frame 1 has gradients")));
+        }
+        for b in &dpf.nets[1].biases {
+            g.extend(to_vec(b.val().grad(&grads).expect("frame 1 has gradients")));
+        }
+        let others = dpf.nets[0].weights[0].val().grad(&grads).is_some();
+        (to_vec(y), g, others)
+    };
+    let (plain_y, plain_g, _) = run(dpf.warp(x.clone(), t));
+    for method in [JacobianKind::Analytic, JacobianKind::Autodiff] {
+        let y = dpf
+            .warp_values(x.clone(), t, method.method().as_ref())
+            .warped
+            .value;
+        let (y, g, others) = run(y);
+        assert!(rel_err(&y, &plain_y) < 1e-5, "{method:?} values");
+        assert!(rel_err(&g, &plain_g) < 1e-4, "{method:?} gradients");
+        assert!(!others, "{method:?}: frame 0 got a gradient");
     }
 }
 

@@ -32,6 +32,16 @@ pub trait JacobianMethod: std::fmt::Debug + Send + Sync {
     /// The SIREN's outputs `[N, O]` for inputs `xt: [N, 4]` (`[x, y, z, t]`), with their
     /// tangents `[3, N, O]` with respect to the three spatial inputs.
     fn forward_dual(&self, siren: &Siren, xt: Tensor<2>) -> Dual;
+
+    /// One value-only sine layer `sin(ω (h W + b))` (Eq. 1), `h: [N, fan_in]`,
+    /// `w: [fan_in, fan_out]`. The default is Burn's ops; a method may fuse it. Models
+    /// built from bare weights rather than a [`Siren`] (DPF's frame nets) call it, so
+    /// that they get the same kernels as the DOMA fields they are compared with.
+    fn sine_layer(&self, h: Tensor<2>, w: Tensor<2>, b: Tensor<1>, omega: f64) -> Tensor<2> {
+        (h.matmul(w) + b.unsqueeze_dim::<2>(0))
+            .mul_scalar(omega)
+            .sin()
+    }
 }
 
 /// Automatic forward mode: the network runs on [`Dual`]s, with the three tangents
