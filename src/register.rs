@@ -207,7 +207,11 @@ pub fn register<M: MotionField + Module>(
         let mut step_losses = Vec::with_capacity(frames);
         for &k in &order {
             let t = task.keypoints.time(k);
-            let y = field.warp(x.clone(), t);
+            // The value path of the field's Jacobian method (fused sine layers for Analytic).
+            let y = field
+                .warp_values(x.clone(), t, method.as_ref())
+                .warped
+                .value;
             let y_key = y.clone().narrow(0, 0, g);
             let y_can = y.narrow(0, g, nc);
             let guidance = loss::trajectory_l1(y_key, key_targets[k].clone());

@@ -579,6 +579,10 @@ struct MeshAlignmentArgs {
     /// Hidden sine layers after the first (the authors' registration: 3).
     #[arg(long, default_value_t = 3)]
     n_hidden: u64,
+    /// How `L_H`'s Jacobian is computed; `analytic` also fuses the sine layers of every
+    /// SIREN-based model's warp (DOMA and DPF).
+    #[arg(long, value_enum, default_value = "autodiff")]
+    jacobian: JacobianKind,
     /// The compute backend.
     #[arg(long, value_enum, default_value = "flex")]
     backend: BackendKind,
@@ -648,6 +652,7 @@ fn run_mesh_alignment(args: MeshAlignmentArgs) -> anyhow::Result<()> {
         .with_iterations(args.iters as usize)
         .with_canonical_samples(args.canonical_samples as usize)
         .with_target_samples(args.target_samples as usize)
+        .with_jacobian(args.jacobian)
         .with_seed(args.seed)
         .with_quiet(args.quiet);
     let job = meshes::MeshAlignmentJob {
