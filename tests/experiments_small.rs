@@ -139,6 +139,9 @@ fn a_tiny_fluid_run_records_its_learning_curve() {
     };
     let (mut runs, mut skips) = (0, Vec::new());
     let records = fluid::run(&job, |_| runs += 1, |start, _| skips.push(start)).unwrap();
+    let pngs = fluid::curve_plots(&records, &dir.join("curves")).unwrap();
+    assert_eq!(pngs, vec![dir.join("curves/fluid_clip0_16d.png")]);
+    assert_eq!(&std::fs::read(&pngs[0]).unwrap()[..4], b"\x89PNG");
     std::fs::remove_dir_all(&dir).ok();
     assert_eq!(skips, vec![4]);
     assert_eq!((runs, records.len()), (2, 2));

@@ -114,6 +114,9 @@ struct FluidArgs {
     /// JSON records; 0 = none).
     #[arg(long, default_value_t = 0)]
     eval_every: usize,
+    /// With --eval-every: write one learning-curve PNG per clip and width here.
+    #[arg(long)]
+    png_dir: Option<PathBuf>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -209,6 +212,14 @@ fn run_fluid(args: FluidArgs) -> anyhow::Result<()> {
     if args.widths.contains(&0) {
         anyhow::bail!("--widths: a hidden width must be at least 1");
     }
+    if let Some(dir) = &args.png_dir {
+        if args.eval_every == 0 {
+            anyhow::bail!("--png-dir draws learning curves: it needs --eval-every N");
+        }
+        // Fail now, not after hours of fitting.
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow::anyhow!("--png-dir {}: {e}", dir.display()))?;
+    }
     let job = fluid::FluidJob {
         data: args.data.clone().unwrap_or_else(fluid::default_data),
         clip_len: args.clip_len as usize,
@@ -245,6 +256,11 @@ fn run_fluid(args: FluidArgs) -> anyhow::Result<()> {
         },
     )?;
     print!("{}", fluid::table(&records));
+    if let Some(dir) = &args.png_dir {
+        for path in fluid::curve_plots(&records, dir)? {
+            eprintln!("wrote {}", path.display());
+        }
+    }
     if let Some(path) = &args.json {
         doma::checkpoint::save_json(&records, path)?;
         eprintln!("wrote {}", path.display());

@@ -268,6 +268,68 @@ pub fn table(records: &[FluidRecord]) -> String {
     out
 }
 
+/// One learning-curve picture per clip and width (`fluid_clip{start}_{hidden}d.png` in
+/// `dir`): EPE ×1e-4 against iterations, log scale, each model's held-out error with its
+/// training error in a lighter shade. Records without a curve are left out. Returns the
+/// paths written.
+pub fn curve_plots(records: &[FluidRecord], dir: &Path) -> Result<Vec<PathBuf>> {
+    use crate::plot::{Series, line_plot};
+    std::fs::create_dir_all(dir).map_err(|e| DomaError::io(dir, e))?;
+    let mut keys: Vec<(usize, usize)> = records
+        .iter()
+        .filter(|r| !r.curve.is_empty())
+        .map(|r| (r.clip_start, r.hidden))
+        .collect();
+    keys.sort_unstable();
+    keys.dedup();
+    let palette = [[200, 40, 40], [40, 60, 200], [30, 150, 70], [150, 60, 170]];
+    let light = |c: [u8; 3]| c.map(|v| v + (255 - v) / 2);
+    let mut written = Vec::new();
+    for (start, hidden) in keys {
+        let runs: Vec<&FluidRecord> = records
+            .iter()
+            .filter(|r| r.clip_start == start && r.hidden == hidden && !r.curve.is_empty())
+            .collect();
+        let names: Vec<(String, String)> = runs
+            .iter()
+            .map(|r| {
+                (
+                    format!("{} TEST", r.variant),
+                    format!("{} TRAIN", r.variant),
+                )
+            })
+            .collect();
+        let mut series = Vec::new();
+        for (i, (r, (test, train))) in runs.iter().zip(&names).enumerate() {
+            let color = palette[i % palette.len()];
+            let pts = |f: fn(&CurvePoint) -> f64| {
+                r.curve.iter().map(|c| (c.iteration as f64, f(c))).collect()
+            };
+            series.push(Series {
+                name: test,
+                color,
+                points: pts(|c| c.test_epe_x1e4),
+            });
+            series.push(Series {
+                name: train,
+                color: light(color),
+                points: pts(|c| c.train_epe_x1e4),
+            });
+        }
+        let canvas = line_plot(
+            &format!("FLUID CLIP {start}, {hidden}D"),
+            "ITERATION",
+            "EPE X1E-4 (LOG)",
+            &series,
+            true,
+        );
+        let path = dir.join(format!("fluid_clip{start}_{hidden}d.png"));
+        canvas.save(&path)?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
 /// The default particle data: the crate's `data/taichi_mpm3d_fluid.traj`.
 pub fn default_data() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("data/taichi_mpm3d_fluid.traj")
