@@ -125,6 +125,7 @@ fn a_tiny_fluid_run_records_its_learning_curve() {
         clip_len: 4,
         start: 0,
         step: 4,
+        clips: None,
         min_motion: 0.01,
         models: vec![
             doma::experiments::meshes::AlignModel::Dpf,
@@ -139,6 +140,23 @@ fn a_tiny_fluid_run_records_its_learning_curve() {
     };
     let (mut runs, mut skips) = (0, Vec::new());
     let records = fluid::run(&job, |_| runs += 1, |start, _| skips.push(start)).unwrap();
+    // An explicit clip list runs those clips; one past the end is refused up front.
+    let listed = fluid::FluidJob {
+        clips: Some(vec![4]),
+        models: vec![doma::experiments::meshes::AlignModel::Trans],
+        min_motion: 0.0,
+        eval_every: 0,
+        ..job.clone()
+    };
+    let r = fluid::run(&listed, |_| {}, |_, _| {}).unwrap();
+    assert_eq!(r.len(), 1);
+    assert_eq!((r[0].clip_start, r[0].curve.len()), (4, 0));
+    let past = fluid::FluidJob {
+        clips: Some(vec![0, 5]),
+        ..listed
+    };
+    let err = fluid::run(&past, |_| {}, |_, _| {}).unwrap_err();
+    assert!(err.to_string().contains("clip 5"), "{err}");
     let pngs = fluid::curve_plots(&records, &dir.join("curves")).unwrap();
     assert_eq!(pngs, vec![dir.join("curves/fluid_clip0_16d.png")]);
     assert_eq!(&std::fs::read(&pngs[0]).unwrap()[..4], b"\x89PNG");

@@ -81,6 +81,9 @@ struct FluidArgs {
     /// Frames between clip starts.
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..))]
     step: u64,
+    /// Explicit clip starts (comma-separated), instead of --start/--step.
+    #[arg(long, value_delimiter = ',', conflicts_with_all = ["start", "step"])]
+    clips: Option<Vec<usize>>,
     /// Skip clips whose mean particle displacement (normalised units) is below this.
     #[arg(long, default_value_t = 0.02, value_parser = non_negative)]
     min_motion: f64,
@@ -225,6 +228,7 @@ fn run_fluid(args: FluidArgs) -> anyhow::Result<()> {
         clip_len: args.clip_len as usize,
         start: args.start as usize,
         step: args.step as usize,
+        clips: args.clips.clone(),
         min_motion: args.min_motion,
         models: args.model.clone(),
         widths: args.widths.clone(),

@@ -3,7 +3,7 @@
 //! DOMA-Trans and DOMA-Affinity at hidden widths 64 and 128 (2 hidden layers), EPE ×1e-4
 //! averaged over the clips.
 //!
-//! Clips are frames `[t, t + 10)` for `t = start, start + step, …`; each clip's first frame
+//! Clips are frames `[t, t + 10)` for `t = start, start + step, …` (or a given list); each clip's first frame
 //! is canonical and each clip is normalised like every sequence in doma. A clip whose mean
 //! particle displacement (first to last frame, normalised units) is below `min_motion` is
 //! skipped as trivial, like the authors' static beginning and steady end.
@@ -34,6 +34,8 @@ pub struct FluidJob {
     pub start: usize,
     /// Frames between clip starts (the paper: 5).
     pub step: usize,
+    /// Explicit clip starts, instead of `start, start + step, …`.
+    pub clips: Option<Vec<usize>>,
     /// Clips whose mean displacement is below this (normalised units) are skipped.
     pub min_motion: f64,
     /// The models.
@@ -125,15 +127,28 @@ pub fn run(
     let total = crate::experiments::meshes::load_sequence(&job.data, None, None, 1)?
         .trajectories
         .frames();
+    let starts: Vec<usize> = match &job.clips {
+        Some(list) => {
+            if let Some(bad) = list.iter().find(|&&s| s + job.clip_len > total) {
+                return Err(DomaError::InvalidConfig(format!(
+                    "clip {bad}: frames {bad}..{} run past the sequence's {total} frames",
+                    bad + job.clip_len
+                )));
+            }
+            list.clone()
+        }
+        None if job.start + job.clip_len <= total => (job.start..=total - job.clip_len)
+            .step_by(job.step)
+            .collect(),
+        None => Vec::new(),
+    };
     let mut records = Vec::new();
-    let mut start = job.start;
-    while start + job.clip_len <= total {
+    for start in starts {
         let clip =
             load_sequence(&job.data, None, Some(start..start + job.clip_len), 1)?.trajectories;
         let motion = mean_motion(&clip);
         if motion < job.min_motion {
             on_skip(start, motion);
-            start += job.step;
             continue;
         }
         let (train_idx, test_idx) = split_indices(clip.points(), 0.5, job.seed)?;
@@ -177,7 +192,6 @@ pub fn run(
                 records.push(r);
             }
         }
-        start += job.step;
     }
     Ok(records)
 }
