@@ -9,12 +9,13 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum DomaError {
     /// A file could not be read or written.
-    #[error("{path}: {source}")]
+    // Not `source`: thiserror would chain it, and `{:#}` would print the reason twice.
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: PathBuf,
         /// The operating-system error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// A file was read but its contents are not valid.
     #[error("{path}: {reason}")]
@@ -57,10 +58,10 @@ pub enum DomaError {
 
 impl DomaError {
     /// An [`DomaError::Io`] for `path`.
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+    pub fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
         DomaError::Io {
             path: path.into(),
-            source,
+            error,
         }
     }
 }

@@ -452,6 +452,13 @@ fn the_supplement_experiments_refuse_bad_flags() {
             vec!["fluid", "--data", "/nonexistent/fluid.traj"],
             "fluid.traj",
         ),
+        (vec!["fluid", "--clips", "10,95", "--iters", "1"], "clip 95"),
+        (vec!["fluid", "--clips", "10", "--start", "5"], "--start"),
+        (vec!["fluid", "--png-dir", "/tmp/x"], "--eval-every"),
+        (
+            vec!["fluid", "--records", "/nonexistent/records.json"],
+            "records.json",
+        ),
         (vec!["image2d", "--resolution", "1"], "--resolution"),
         (vec!["image2d", "--widths", "0"], "--widths"),
         (vec!["image2d", "--motion", "twist"], "twist"),
@@ -463,6 +470,8 @@ fn the_supplement_experiments_refuse_bad_flags() {
             err.contains(needle) && !err.contains("panicked"),
             "{args:?}:\n{err}"
         );
+        // The operating system's reason is said once, not once per error in the chain.
+        assert!(err.matches("No such file").count() <= 1, "{args:?}:\n{err}");
     }
 }
 

@@ -120,6 +120,10 @@ struct FluidArgs {
     /// With --eval-every: write one learning-curve PNG per clip and width here.
     #[arg(long)]
     png_dir: Option<PathBuf>,
+    /// Fit nothing: read these record files (written by --json; comma-separated), print
+    /// their table, and with --png-dir draw their curves, with --json merge them.
+    #[arg(long, value_delimiter = ',')]
+    records: Vec<PathBuf>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -216,12 +220,21 @@ fn run_fluid(args: FluidArgs) -> anyhow::Result<()> {
         anyhow::bail!("--widths: a hidden width must be at least 1");
     }
     if let Some(dir) = &args.png_dir {
-        if args.eval_every == 0 {
+        if args.eval_every == 0 && args.records.is_empty() {
             anyhow::bail!("--png-dir draws learning curves: it needs --eval-every N");
         }
         // Fail now, not after hours of fitting.
         std::fs::create_dir_all(dir)
             .map_err(|e| anyhow::anyhow!("--png-dir {}: {e}", dir.display()))?;
+    }
+    if !args.records.is_empty() {
+        let mut records = Vec::new();
+        for path in &args.records {
+            records.extend(doma::checkpoint::load_json::<Vec<fluid::FluidRecord>>(
+                path,
+            )?);
+        }
+        return finish_fluid(&records, &args);
     }
     let job = fluid::FluidJob {
         data: args.data.clone().unwrap_or_else(fluid::default_data),
@@ -259,9 +272,18 @@ fn run_fluid(args: FluidArgs) -> anyhow::Result<()> {
             )
         },
     )?;
-    print!("{}", fluid::table(&records));
+    finish_fluid(&records, &args)
+}
+
+/// Prints the fluid table, draws the curves and writes the records, as asked.
+fn finish_fluid(
+    records: &[doma::experiments::fluid::FluidRecord],
+    args: &FluidArgs,
+) -> anyhow::Result<()> {
+    use doma::experiments::fluid;
+    print!("{}", fluid::table(records));
     if let Some(dir) = &args.png_dir {
-        for path in fluid::curve_plots(&records, dir)? {
+        for path in fluid::curve_plots(records, dir)? {
             eprintln!("wrote {}", path.display());
         }
     }
