@@ -1,12 +1,15 @@
 //! One training step of the synthetic protocol (750 trajectory points; `L_H` on min(1,024, 750)
 //! = 750 jittered points; T = 20), DOMA-Affinity with and without the smoothness loss, for each CPU
-//! backend and Jacobian method (and wgpu when an adapter exists).
+//! backend and Jacobian method (and wgpu when an adapter exists); and one step of the DPF
+//! baseline (T = 20 frame nets of the same width), whose value path is Burn's `sin` under
+//! `autodiff` and the fused sine layers under `analytic`.
 //!
 //! `cargo bench --bench fit_step`
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use doma::backend::{BackendKind, wgpu_available};
 use doma::data::synthetic::{Motion, benchmark_sequence};
+use doma::field::dpf::DpfConfig;
 use doma::field::{DomaFieldConfig, Variant};
 use doma::jacobian::JacobianKind;
 use doma::train::{FitConfig, Trainer};
@@ -42,6 +45,22 @@ fn fit_step(c: &mut Criterion) {
                     })
                 });
             }
+        }
+        for method in [JacobianKind::Autodiff, JacobianKind::Analytic] {
+            let config = FitConfig::new(DomaFieldConfig::new(Variant::Trans))
+                .with_jacobian(method)
+                .with_quiet(true);
+            let dpf = DpfConfig::new(seq.train.frames()).init(0, &device.clone().autodiff());
+            let mut trainer = Trainer::new(dpf, &config, &seq.train, &device).expect("a trainer");
+            let mut k = 0;
+            group.bench_function(format!("{backend}/dpf/{}", method.name()), |b| {
+                b.iter(|| {
+                    let losses = trainer.step(k % 20, 1e-4);
+                    k += 1;
+                    device.sync().expect("the device syncs");
+                    losses
+                })
+            });
         }
     }
     group.finish();
