@@ -21,7 +21,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use super::{MotionField, WarpOutput};
+use super::{MotionField, Variant, WarpOutput};
 use crate::jacobian::{Dual, JacobianMethod};
 use crate::siren::{SirenConfig, SirenInitializer};
 
@@ -169,9 +169,9 @@ impl MotionField for Dpf {
         self.displacement_dual(x, self.frame_of(t))
     }
 
-    fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput {
-        let raw = self.raw_dual(x.clone(), t, jacobian);
-        crate::field::displacement_warp(x, raw, jacobian)
+    /// A displacement model: `A = I`, `u = raw`.
+    fn head(&self) -> Variant {
+        Variant::Trans
     }
 
     /// The value path of the fit loop: frame `k`'s sine layers through `method`'s
@@ -186,14 +186,7 @@ impl MotionField for Dpf {
             h = method.sine_layer(h, w.val(), b.val(), self.omega);
         }
         let u = h.matmul(net.weights[last].val()) + net.biases[last].val().unsqueeze_dim::<2>(0);
-        crate::field::displacement_warp(x, Dual::constant(u), None)
-    }
-
-    fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {
-        // A displacement model is the Trans head: `A = I`, `u = raw`.
-        crate::field::Variant::Trans
-            .local_affine(self.raw_dual(x, t, None))
-            .matrices()
+        crate::field::head_warp(Variant::Trans, x, Dual::constant(u), None)
     }
 
     fn param_count(&self) -> usize {

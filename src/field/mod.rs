@@ -146,9 +146,17 @@ pub trait MotionField {
     /// they carry their spatial tangents `∂o/∂x` (what `L_H` penalises).
     fn raw_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> Dual;
 
-    /// Evaluates the field at `x: [N, 3]`, time `t`. With `jacobian`, the outputs
-    /// carry their spatial tangents.
-    fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput;
+    /// How the raw outputs become a local transformation `(A, u)` (Eq. 4): the DOMA
+    /// field's variant; [`Variant::Trans`] (`A = I`, `u = raw`) for the displacement
+    /// models (DPF, MLP, DCT-NeRF); [`Variant::Affinity`] for BoneCloud's blended map.
+    fn head(&self) -> Variant;
+
+    /// Evaluates the field at `x: [N, 3]`, time `t`: the raw outputs through
+    /// [`MotionField::head`]. With `jacobian`, the outputs carry their spatial tangents.
+    fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput {
+        let raw = self.raw_dual(x.clone(), t, jacobian);
+        head_warp(self.head(), x, raw, jacobian)
+    }
 
     /// Like `warp_dual(x, t, None)` (no tangents), but through `method`'s value path,
     /// which a method may fuse ([`crate::jacobian::Analytic`] does). The fit loop uses it
@@ -159,7 +167,11 @@ pub trait MotionField {
     }
 
     /// The local transformation `(A [N, 3, 3], u [N, 3])` at `x`, `t` (Eq. 4).
-    fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>);
+    fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {
+        self.head()
+            .local_affine(self.raw_dual(x, t, None))
+            .matrices()
+    }
 
     /// The number of trainable parameters.
     fn param_count(&self) -> usize;
@@ -188,14 +200,15 @@ pub fn spatial_input(x: Tensor<2>, jacobian: Option<&dyn JacobianMethod>) -> Dua
     }
 }
 
-/// The warp of a displacement model, the Trans head: `y = x + raw`, with the tangents of `x` when a
-/// Jacobian is requested.
-pub fn displacement_warp(
+/// The warp `y = A x + u` of raw outputs `raw` at `x` through `head` (Eq. 4), with the
+/// tangents of `x` when a Jacobian is requested.
+pub fn head_warp(
+    head: Variant,
     x: Tensor<2>,
     raw: Dual,
     jacobian: Option<&dyn JacobianMethod>,
 ) -> WarpOutput {
-    let warped = Variant::Trans
+    let warped = head
         .local_affine(raw.clone())
         .apply(spatial_input(x, jacobian));
     WarpOutput { raw, warped }
@@ -261,28 +274,13 @@ impl MotionField for DomaField {
         }
     }
 
-    fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput {
-        let raw = self.raw_dual(x.clone(), t, jacobian);
-        let x = match jacobian {
-            Some(_) => Dual::seed_spatial(x),
-            None => Dual::constant(x),
-        };
-        let warped = self.variant.local_affine(raw.clone()).apply(x);
-        WarpOutput { raw, warped }
+    fn head(&self) -> Variant {
+        self.variant
     }
 
     fn warp_values(&self, x: Tensor<2>, t: f64, method: &dyn JacobianMethod) -> WarpOutput {
         let raw = Dual::constant(method.forward(&self.siren, time_input(x.clone(), t)));
-        let warped = self
-            .variant
-            .local_affine(raw.clone())
-            .apply(Dual::constant(x));
-        WarpOutput { raw, warped }
-    }
-
-    fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {
-        let raw = Dual::constant(self.siren.forward(time_input(x, t)));
-        self.variant.local_affine(raw).matrices()
+        head_warp(self.variant, x, raw, None)
     }
 
     fn param_count(&self) -> usize {

@@ -19,7 +19,7 @@ use rand_chacha::ChaCha8Rng;
 use std::ops::Mul;
 
 use crate::field::rotation::gram_schmidt;
-use crate::field::{MotionField, Variant, WarpOutput};
+use crate::field::{MotionField, Variant};
 use crate::jacobian::{Dual, JacobianMethod};
 
 /// The shape of a BoneCloud model.
@@ -134,16 +134,9 @@ impl MotionField for BoneCloud {
         Dual::cat(vec![w.clone().linear(rot, None), w.linear(trans, None)])
     }
 
-    fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput {
-        let raw = self.raw_dual(x.clone(), t, jacobian);
-        let x = crate::field::spatial_input(x, jacobian);
-        let warped = Variant::Affinity.local_affine(raw.clone()).apply(x);
-        WarpOutput { raw, warped }
-    }
-
-    fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {
-        let raw = self.raw_dual(x, t, None);
-        Variant::Affinity.local_affine(raw).matrices()
+    /// Linear blend skinning is a blended local affine map.
+    fn head(&self) -> Variant {
+        Variant::Affinity
     }
 
     fn param_count(&self) -> usize {

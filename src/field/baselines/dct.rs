@@ -14,7 +14,7 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 
 use super::mlp::{Mlp, MlpConfig};
-use crate::field::{MotionField, WarpOutput};
+use crate::field::MotionField;
 use crate::jacobian::{Dual, JacobianMethod};
 
 /// The shape of a DCT-NeRF model.
@@ -114,16 +114,9 @@ impl MotionField for DctNerf {
         coefficients.linear(self.basis_matrix(self.frame_of(t), &device), None)
     }
 
-    fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput {
-        let raw = self.raw_dual(x.clone(), t, jacobian);
-        crate::field::displacement_warp(x, raw, jacobian)
-    }
-
-    fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {
-        // A displacement model is the Trans head: `A = I`, `u = raw`.
+    /// A displacement model: `A = I`, `u = raw`.
+    fn head(&self) -> crate::field::Variant {
         crate::field::Variant::Trans
-            .local_affine(self.raw_dual(x, t, None))
-            .matrices()
     }
 
     fn param_count(&self) -> usize {

@@ -15,7 +15,7 @@ use burn::tensor::{Device, Tensor};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::field::{MotionField, WarpOutput, time_input};
+use crate::field::{MotionField, time_input};
 use crate::jacobian::{Dual, JacobianMethod};
 use crate::siren::{LayerWeights, linear_from};
 
@@ -155,16 +155,9 @@ impl MotionField for Mlp {
         self.forward_dual(input)
     }
 
-    fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput {
-        let raw = self.raw_dual(x.clone(), t, jacobian);
-        crate::field::displacement_warp(x, raw, jacobian)
-    }
-
-    fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {
-        // A displacement model is the Trans head: `A = I`, `u = raw`.
+    /// A displacement model: `A = I`, `u = raw`.
+    fn head(&self) -> crate::field::Variant {
         crate::field::Variant::Trans
-            .local_affine(self.raw_dual(x, t, None))
-            .matrices()
     }
 
     fn param_count(&self) -> usize {
