@@ -1,8 +1,8 @@
 //! One training step of the synthetic protocol (750 trajectory points; `L_H` on min(1,024, 750)
 //! = 750 jittered points; T = 20), DOMA-Affinity with and without the smoothness loss, for each CPU
 //! backend and Jacobian method (and wgpu when an adapter exists); and one step of the DPF
-//! baseline (T = 20 frame nets of the same width), whose value path is Burn's `sin` under
-//! `autodiff` and the fused sine layers under `analytic`.
+//! baseline (T = 20 frame nets of the same width), whose SIRENs run through the method: Burn's
+//! `sin` under `autodiff`, the fused sine layers under `analytic`.
 //!
 //! `cargo bench --bench fit_step`
 
@@ -10,6 +10,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use doma::backend::{BackendKind, wgpu_available};
 use doma::data::synthetic::{Motion, benchmark_sequence};
 use doma::field::dpf::DpfConfig;
+use doma::field::model::ModelConfig;
 use doma::field::{DomaFieldConfig, Variant};
 use doma::jacobian::JacobianKind;
 use doma::train::{FitConfig, Trainer};
@@ -27,18 +28,16 @@ fn fit_step(c: &mut Criterion) {
         let device = backend.device().expect("a backend that runs here");
         for (name, w_h) in [("affinity", 0.0), ("affinity-h", 0.1)] {
             for method in [JacobianKind::Autodiff, JacobianKind::Analytic] {
-                let config = FitConfig::new(DomaFieldConfig::new(Variant::Affinity))
+                let config = FitConfig::doma(DomaFieldConfig::new(Variant::Affinity))
                     .with_smoothness_weight(w_h)
-                    .with_jacobian(method)
-                    .with_quiet(true);
-                let field = config.field.init(0, &device.clone().autodiff());
+                    .with_jacobian(method);
                 let mut trainer =
-                    Trainer::new(field, &config, &seq.train, &device).expect("a trainer");
+                    Trainer::from_config(&config, &seq.train, &device).expect("a trainer");
                 let mut k = 0;
                 let id = format!("{backend}/{name}/{}", method.name());
                 group.bench_function(id, |b| {
                     b.iter(|| {
-                        let losses = trainer.step(k % 20, 1e-4);
+                        let losses = trainer.step(k % 20, 1e-4).expect("a step");
                         k += 1;
                         device.sync().expect("the device syncs");
                         losses
@@ -47,15 +46,14 @@ fn fit_step(c: &mut Criterion) {
             }
         }
         for method in [JacobianKind::Autodiff, JacobianKind::Analytic] {
-            let config = FitConfig::new(DomaFieldConfig::new(Variant::Trans))
-                .with_jacobian(method)
-                .with_quiet(true);
-            let dpf = DpfConfig::new(seq.train.frames()).init(0, &device.clone().autodiff());
-            let mut trainer = Trainer::new(dpf, &config, &seq.train, &device).expect("a trainer");
+            let dpf = DpfConfig::new(seq.train.frames());
+            let config = FitConfig::new(ModelConfig::Dpf(dpf)).with_jacobian(method);
+            let mut trainer =
+                Trainer::from_config(&config, &seq.train, &device).expect("a trainer");
             let mut k = 0;
             group.bench_function(format!("{backend}/dpf/{}", method.name()), |b| {
                 b.iter(|| {
-                    let losses = trainer.step(k % 20, 1e-4);
+                    let losses = trainer.step(k % 20, 1e-4).expect("a step");
                     k += 1;
                     device.sync().expect("the device syncs");
                     losses

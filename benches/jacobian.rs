@@ -36,7 +36,7 @@ fn jacobian(c: &mut Criterion) {
                 let id = BenchmarkId::new(format!("{backend}/{}", method.name()), points);
                 group.bench_function(id, |b| {
                     b.iter(|| {
-                        let raw = field.raw_dual(x.clone(), 0.5, Some(jac.as_ref()));
+                        let raw = field.raw_dual(x.clone(), 0.5, jac.as_ref());
                         let tangent = raw.tangent.expect("tangents");
                         let l =
                             loss::smoothness(tangent, SmoothnessNorm::Squared) + raw.value.mean();

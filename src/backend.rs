@@ -57,7 +57,7 @@ impl BackendKind {
 
 impl std::fmt::Display for BackendKind {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
+        f.pad(self.name())
     }
 }
 
@@ -84,5 +84,25 @@ pub fn tune_allocator() {
         libc::mallopt(libc::M_MMAP_THRESHOLD, 256 << 20);
         libc::mallopt(libc::M_TRIM_THRESHOLD, 1 << 30);
         libc::mallopt(libc::M_TOP_PAD, 64 << 20);
+    }
+}
+
+/// Makes flex Burn's default device for this process, unless `BURN_DEVICE` already names
+/// one.
+///
+/// Why this exists: Burn 0.22 materialises a loaded optimizer state
+/// (`ModuleOptimizer::load_record`, which resuming a fit calls) on `Device::default()`, and
+/// takes no device argument; with wgpu compiled in, the default is wgpu. Pinning the
+/// default to the CPU means resuming a CPU fit never needs a GPU adapter; the state moves
+/// to the fit's own device at the next step. Burn reads the default only from the
+/// `BURN_DEVICE` environment variable, so this is the one process-wide setting in doma.
+///
+/// # Safety
+/// It sets an environment variable: call it before any other thread exists (first thing
+/// in `main`).
+pub unsafe fn pin_default_device() {
+    if std::env::var_os("BURN_DEVICE").is_none() {
+        // SAFETY: the caller guarantees that no other thread exists yet.
+        unsafe { std::env::set_var("BURN_DEVICE", "flex") };
     }
 }

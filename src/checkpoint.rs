@@ -2,7 +2,7 @@
 //! (to a temporary file in the same folder, then renamed), optionally in `f16`, next to the
 //! `config.json` that rebuilds the module (DESIGN §5). Tab. 3 reports their size.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use burn::module::{Module, ModuleMapper, Param};
 use burn::store::ModuleRecord;
@@ -55,21 +55,29 @@ pub fn save_checkpoint<M: Module>(module: M, path: &Path, precision: Precision) 
     Ok(bytes.len() as u64)
 }
 
-/// Loads the parameters in `path` into `module` (a freshly initialised module of the same
-/// shape, e.g. from its `config.json`), casting them to the module's precision. A file that
-/// is not a burnpack, or that holds other shapes, is [`DomaError::Malformed`].
-pub fn load_checkpoint<M: Module>(module: M, path: &Path) -> Result<M> {
-    let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
-    let malformed = |reason: String| DomaError::Malformed {
-        path: path.to_path_buf(),
-        reason,
-    };
-    let record = ModuleRecord::from_bytes(burn::tensor::Bytes::from_bytes_vec(bytes))
-        .map_err(|e| malformed(format!("not a burnpack checkpoint: {e}")))?
+/// Loads the burnpack `bytes` into `module` (a freshly initialised module of the same
+/// shape), casting them to the module's precision. Bytes that are not a burnpack, or hold
+/// other shapes, are [`DomaError::InvalidData`]; [`load_checkpoint`] names the file.
+pub fn decode_checkpoint<M: Module>(module: M, bytes: &[u8]) -> Result<M> {
+    let record = ModuleRecord::from_bytes(burn::tensor::Bytes::from_bytes_vec(bytes.to_vec()))
+        .map_err(|e| DomaError::InvalidData(format!("not a burnpack checkpoint: {e}")))?
         .cast_to_module_dtype();
     module
         .try_load_record(record)
-        .map_err(|e| malformed(format!("does not fit the model: {e}")))
+        .map_err(|e| DomaError::InvalidData(format!("does not fit the model: {e}")))
+}
+
+/// Loads the parameters in `path` into `module` (see [`decode_checkpoint`]). A file that
+/// is not a burnpack, or that holds other shapes, is [`DomaError::Malformed`].
+pub fn load_checkpoint<M: Module>(module: M, path: &Path) -> Result<M> {
+    let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
+    decode_checkpoint(module, &bytes).map_err(|e| DomaError::Malformed {
+        path: path.to_path_buf(),
+        reason: match e {
+            DomaError::InvalidData(reason) => reason,
+            other => other.to_string(),
+        },
+    })
 }
 
 /// Writes `config` as pretty JSON to `path`, atomically.
@@ -86,23 +94,4 @@ pub fn load_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
         path: path.to_path_buf(),
         reason: e.to_string(),
     })
-}
-
-/// The file names of a saved field inside a folder.
-#[derive(Clone, Debug)]
-pub struct CheckpointPaths {
-    /// `model.bpk`.
-    pub model: PathBuf,
-    /// `config.json`.
-    pub config: PathBuf,
-}
-
-impl CheckpointPaths {
-    /// The paths inside `dir`.
-    pub fn in_dir(dir: &Path) -> Self {
-        CheckpointPaths {
-            model: dir.join("model.bpk"),
-            config: dir.join("config.json"),
-        }
-    }
 }

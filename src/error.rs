@@ -51,6 +51,10 @@ pub enum DomaError {
         /// Why.
         reason: String,
     },
+    /// A command-line flag or its combination with others cannot run; the message names
+    /// the flag.
+    #[error("{0}")]
+    Usage(String),
     /// A tensor could not be read back from the device.
     #[error("device error: {0}")]
     Device(String),

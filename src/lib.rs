@@ -14,13 +14,27 @@
 //! The backend is a runtime value ([`backend::BackendKind`] maps a name to a Burn
 //! `Device`); no code is generic over a backend type.
 //!
+//! **Layers**, each importing only those before it:
+//! 1. the core: [`dual`] (forward-mode duals), [`siren`], [`jacobian`], [`field`] (the
+//!    variants and baselines), [`loss`], [`metrics`], [`data`] (trajectories, formats,
+//!    meshes, sequences), [`checkpoint`], [`train`] (the one fit loop) and [`register`]
+//!    (the Eq. 14 objective in that loop);
+//! 2. [`warp`] (meshes through fields, above `data` and `field`);
+//! 3. [`experiments`] (the paper's tables), [`run`] (run folders for users' data) and
+//!    [`plot`];
+//! 4. [`cli`], the command line that the `doma` binary and the examples parse.
+//!
 //! Equation numbers refer to the CVPR 2024 paper (main text): Eq. 1 SIREN, Eq. 2 DPF,
 //! Eq. 4 the affinity field, Eq. 6 the SIREN Jacobian, Eq. 10–12 the Trans, SE(3) and
 //! Scaled SE(3) variants, Eq. 13 the smoothness loss.
 
+#![warn(missing_docs)]
+
 pub mod backend;
 pub mod checkpoint;
+pub mod cli;
 pub mod data;
+pub mod dual;
 pub mod error;
 pub mod experiments;
 pub mod field;
@@ -29,9 +43,11 @@ pub mod jacobian;
 pub mod loss;
 pub mod metrics;
 pub mod plot;
+pub mod prelude;
 pub mod register;
 pub mod run;
 pub mod siren;
 pub mod train;
+pub mod warp;
 
 pub use error::{DomaError, Result};

@@ -15,21 +15,22 @@
 //! an error naming the iteration and leaves the last good checkpoint in place.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
+use std::sync::atomic::AtomicBool;
 
 use burn::tensor::Device;
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 
-use crate::checkpoint::{Precision, load_checkpoint, load_json, save_checkpoint, save_json};
+use crate::checkpoint::{Precision, decode_checkpoint, load_json, save_json};
 use crate::data::Trajectories;
 use crate::data::mesh::{TriMesh, as_points, encode_obj, read_obj, vertex_normals};
-use crate::experiments::meshes::{Sequence, load_sequence, split_indices};
-use crate::field::{DomaField, MotionField};
+use crate::data::sequence::{Sequence, load_sequence, split_indices};
+use crate::field::MotionField;
+use crate::field::model::{Model, ModelConfig};
 use crate::io::write_atomic;
 use crate::metrics::{EPE_SCALE, epe_per_frame, predict};
-use crate::train::{FitConfig, IterationRecord, RngState, Trainer, TrainerSnapshot};
+use crate::train::{
+    FitConfig, Hooks, IterationRecord, Outcome, RngState, Trainer, TrainerSnapshot,
+};
 use crate::{DomaError, Result};
 
 /// What a run fits and how; saved as `config.json`.
@@ -191,23 +192,43 @@ impl RunDir {
         Ok(config)
     }
 
-    /// The fitted field (from `model.bpk`, else from the last checkpoint).
-    pub fn load_field(&self, config: &RunConfig, device: &Device) -> Result<DomaField> {
-        let fresh = config.fit.field.init(config.fit.seed, device);
-        let model = self.model();
-        if model.is_file() {
-            return load_checkpoint(fresh, &model);
+    /// The fitted field (from `model.bpk`, else from the last checkpoint, read in memory:
+    /// nothing is written into the run folder).
+    pub fn load_field(&self, config: &RunConfig, device: &Device) -> Result<Model> {
+        let canonical = self.canonical_training_points(config)?;
+        let fresh = config.fit.model.init(config.fit.seed, &canonical, device);
+        let path = self.model();
+        if path.is_file() {
+            let bytes = std::fs::read(&path).map_err(|e| DomaError::io(&path, e))?;
+            return fresh.decode(&bytes).map_err(|e| DomaError::Malformed {
+                path,
+                reason: e.to_string(),
+            });
         }
-        let (_, snapshot) = self.read_resume()?;
-        let tmp = self.dir.join(".model-from-checkpoint.bpk");
-        write_atomic(&tmp, &snapshot.model)?;
-        let field = load_checkpoint(fresh, &tmp);
-        let _ = std::fs::remove_file(&tmp);
-        field
+        let snapshot = self.read_resume()?;
+        decode_checkpoint(fresh, &snapshot.model).map_err(|e| DomaError::Malformed {
+            path: self.resume(),
+            reason: format!("the model part: {e}"),
+        })
     }
 
-    fn write_resume(&self, meta: &ResumeMeta, snapshot: &TrainerSnapshot) -> Result<()> {
-        let json = serde_json::to_vec(meta)
+    /// The canonical training points, which place BoneCloud's bones (the other models do
+    /// not read them; the parameters come from the checkpoint anyway).
+    fn canonical_training_points(&self, config: &RunConfig) -> Result<Vec<f32>> {
+        if !matches!(config.fit.model, ModelConfig::BoneCloud(_)) {
+            return Ok(Vec::new());
+        }
+        let sequence = config.load()?;
+        Ok(config.split(&sequence.trajectories)?.0.frame(0).to_vec())
+    }
+
+    fn write_resume(&self, snapshot: &TrainerSnapshot) -> Result<()> {
+        let meta = ResumeMeta {
+            iterations_done: snapshot.iterations_done,
+            history: snapshot.history.clone(),
+            rng: snapshot.rng.clone(),
+        };
+        let json = serde_json::to_vec(&meta)
             .map_err(|e| DomaError::InvalidData(format!("cannot serialise the checkpoint: {e}")))?;
         let mut bytes = MAGIC.to_vec();
         for part in [&json, &snapshot.model, &snapshot.optimizer] {
@@ -217,7 +238,7 @@ impl RunDir {
         write_atomic(&self.resume(), &bytes)
     }
 
-    fn read_resume(&self) -> Result<(ResumeMeta, TrainerSnapshot)> {
+    fn read_resume(&self) -> Result<TrainerSnapshot> {
         let path = self.resume();
         let bytes = std::fs::read(&path).map_err(|e| DomaError::io(&path, e))?;
         let bad = |reason: String| DomaError::Malformed {
@@ -247,12 +268,13 @@ impl RunDir {
         }
         let meta: ResumeMeta =
             serde_json::from_slice(&parts[0]).map_err(|e| bad(format!("bad metadata: {e}")))?;
-        let snapshot = TrainerSnapshot {
+        Ok(TrainerSnapshot {
             model: std::mem::take(&mut parts[1]),
             optimizer: std::mem::take(&mut parts[2]),
-            rng: meta.rng.clone(),
-        };
-        Ok((meta, snapshot))
+            rng: meta.rng,
+            iterations_done: meta.iterations_done,
+            history: meta.history,
+        })
     }
 }
 
@@ -271,13 +293,14 @@ pub enum FitOutcome {
 /// Fits `config` into `run` (a new or empty folder), or resumes the fit saved there when
 /// `resume` is set. `interrupt` is polled after every iteration: when set, the fit saves a
 /// checkpoint and returns [`FitOutcome::Interrupted`]. `stop_after` (for tests) interrupts
-/// after that many iterations.
+/// after that many iterations. `progress` shows a progress bar.
 pub fn fit_run(
     run: &RunDir,
     config: Option<RunConfig>,
     device: &Device,
     interrupt: &AtomicBool,
     stop_after: Option<usize>,
+    progress: bool,
 ) -> Result<FitOutcome> {
     let resume = config.is_none();
     let (config, sequence) = match config {
@@ -305,74 +328,46 @@ pub fn fit_run(
     };
     let (train, test) = config.split(&sequence.trajectories)?;
     let ad = device.clone().autodiff();
-    let field = config.fit.field.init(config.fit.seed, &ad);
     let fit = &config.fit;
-    let mut trainer = Trainer::new(field, fit, &train, device)?;
-    let (mut done, mut history) = (0, Vec::new());
+    let field = fit.model.init(fit.seed, train.frame(0), &ad);
+    let mut trainer = Trainer::new(field, fit, &train, device)?.progress(progress);
     if resume && run.resume().is_file() {
-        let (meta, snapshot) = run.read_resume()?;
-        trainer.restore(&snapshot)?;
-        done = meta.iterations_done;
-        history = meta.history;
+        let snapshot = run.read_resume()?;
+        trainer
+            .restore(&snapshot)
+            .map_err(|e| DomaError::Malformed {
+                path: run.resume(),
+                reason: e.to_string(),
+            })?;
     }
-    let offset = history.last().map_or(0.0, |r: &IterationRecord| r.seconds);
-    let bar = if fit.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(fit.iterations as u64)
-            .with_style(
-                ProgressStyle::with_template("{bar:30} {pos}/{len} it  {elapsed_precise}  {msg}")
-                    .expect("a valid template"),
-            )
-            .with_position(done as u64)
-    };
-    let start = Instant::now();
-    let save = |done: usize, history: &[IterationRecord], trainer: &Trainer<'_, DomaField>| {
-        let snapshot = trainer.snapshot()?;
-        let meta = ResumeMeta {
-            iterations_done: done,
-            history: history.to_vec(),
-            rng: snapshot.rng.clone(),
-        };
-        run.write_resume(&meta, &snapshot)?;
-        save_json(&history, &run.history())
-    };
-    while done < fit.iterations {
-        let (trajectory_loss, total_loss) = trainer.iteration(done)?;
-        history.push(IterationRecord {
-            iteration: done,
-            learning_rate: fit.learning_rate * fit.lr_factor(done),
-            trajectory_loss,
-            total_loss,
-            seconds: offset + start.elapsed().as_secs_f64(),
-        });
-        done += 1;
-        bar.set_message(format!("L1 {trajectory_loss:.2e}"));
-        bar.set_position(done as u64);
-        let stop = interrupt.load(Ordering::SeqCst) || stop_after == Some(done);
-        if done % config.checkpoint_every == 0 || done == fit.iterations || stop {
-            save(done, &history, &trainer)?;
-        }
-        if stop && done < fit.iterations {
-            bar.abandon();
-            return Ok(FitOutcome::Interrupted {
-                iterations_done: done,
-            });
-        }
+    let mut hooks = Hooks::new()
+        .checkpoint(config.checkpoint_every, |snapshot| {
+            run.write_resume(snapshot)?;
+            save_json(&snapshot.history, &run.history())
+        })
+        .interrupt(interrupt);
+    if let Some(n) = stop_after {
+        hooks = hooks.stop_after(n);
     }
-    bar.finish_and_clear();
-    let field = burn::module::Module::valid(trainer.field());
-    let bytes = save_checkpoint(field.clone(), &run.model(), Precision::F32)?;
+    let fitted = match trainer.run_with(hooks)? {
+        Outcome::Finished(fitted) => fitted,
+        Outcome::Interrupted { iterations_done } => {
+            return Ok(FitOutcome::Interrupted { iterations_done });
+        }
+    };
+    let encoded = fitted.field.encode(Precision::F32)?;
+    write_atomic(&run.model(), &encoded)?;
+    let bytes = encoded.len() as u64;
     let report = evaluate(
-        &field,
+        &fitted.field,
         &test,
         "the held-out points of the fitted data",
         device,
     )?;
     let report = Report {
         checkpoint_bytes: bytes,
-        iterations: done,
-        seconds: history.last().map_or(0.0, |r| r.seconds),
+        iterations: fitted.history.len(),
+        seconds: fitted.seconds,
         ..report
     };
     save_json(&report, &run.report())?;
@@ -381,7 +376,7 @@ pub fn fit_run(
 
 /// The EPE report of `field` on `truth` (normalised coordinates).
 pub fn evaluate(
-    field: &DomaField,
+    field: &dyn MotionField,
     truth: &Trajectories,
     what: &str,
     device: &Device,
@@ -501,7 +496,7 @@ pub fn warp_run(
     let mut paths = Vec::new();
     for k in range {
         let t = crate::data::normalized_time(k, total);
-        let y = crate::data::mesh::warp_points(&field, &norm, t, device)?;
+        let y = crate::warp::warp_points(&field, &norm, t, device)?;
         let vertices: Vec<[f32; 3]> = y
             .iter()
             .map(|p| std::array::from_fn(|c| p[c] * own.scale + own.center[c]))
@@ -524,12 +519,14 @@ pub fn warp_run(
 /// What `doma info` prints.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct RunInfo {
-    /// The variant's paper name.
+    /// The model's paper name (a DOMA variant's, or a baseline's).
     pub variant: String,
-    /// Hidden width and sine layers.
-    pub hidden: usize,
-    /// Hidden sine layers after the first.
-    pub n_hidden: usize,
+    /// The SIREN's hidden width (SIREN-based models).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub hidden: Option<usize>,
+    /// Its hidden sine layers after the first.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub n_hidden: Option<usize>,
     /// Trainable parameters.
     pub params: usize,
     /// `model.bpk` bytes (0 before the fit finishes).
@@ -555,24 +552,24 @@ pub fn info(run: &RunDir) -> Result<RunInfo> {
     } else {
         Vec::new()
     };
-    let field = &config.fit.field;
+    let model = &config.fit.model;
+    let shape = match model {
+        ModelConfig::Doma(c) => Some(&c.shape),
+        ModelConfig::Dpf(c) => Some(&c.shape),
+        _ => None,
+    };
     Ok(RunInfo {
-        variant: field.variant.paper_name().into(),
-        hidden: field.hidden,
-        n_hidden: field.n_hidden,
-        params: field.siren().num_params(),
+        variant: model.paper_name().into(),
+        hidden: shape.map(|s| s.hidden),
+        n_hidden: shape.map(|s| s.n_hidden),
+        params: model.num_params(),
         checkpoint_bytes: std::fs::metadata(run.model()).map(|m| m.len()).unwrap_or(0),
         data: config.data.clone(),
         frames: seq.trajectories.frames(),
         points: seq.trajectories.points(),
         iterations_done: history.len(),
-        iterations: config.fit.iterations,
+        iterations: config.fit.schedule.iterations,
     })
-}
-
-/// The canonical points of a run's data (normalised) as a flat list, for plots.
-pub fn canonical_points(seq: &Sequence) -> Vec<[f32; 3]> {
-    as_points(seq.trajectories.frame(0))
 }
 
 /// Writes the run's plots into `RUN_DIR/plots/`: `loss.png` (trajectory and total loss per

@@ -11,33 +11,90 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::jacobian::Dual;
+use crate::dual::Dual;
 
-/// The shape of a SIREN.
-#[derive(Config, Debug)]
-pub struct SirenConfig {
-    /// Input width (4 for `[x, y, z, t]`).
-    #[config(default = 4)]
-    pub d_in: usize,
+/// The body of a SIREN that the experiments vary: width, depth and frequency. Every
+/// SIREN-based model (DOMA, DPF, the fluid widths) nests one, so the three numbers are
+/// declared once.
+#[derive(Config, Debug, PartialEq)]
+pub struct SirenShape {
     /// Hidden width `d` (the paper's 128).
     #[config(default = 128)]
     pub hidden: usize,
     /// Number of hidden sine layers `n` after the first sine layer (the paper's 2).
     #[config(default = 2)]
     pub n_hidden: usize,
-    /// Output width (3 for Trans, 9 for SE(3), 10 for Scaled SE(3), 12 for Affinity).
-    pub d_out: usize,
-    /// The frequency `ω₀` of every sine layer.
+    /// The frequency `ω₀` of every sine layer (Eq. 1; the authors' 30).
     #[config(default = 30.0)]
     pub omega: f64,
+}
+
+impl SirenShape {
+    /// Refuses shapes that cannot be built or would not fit in memory (an `hidden²`
+    /// weight matrix per layer).
+    pub fn validate(&self) -> crate::Result<()> {
+        let bad = |m: String| Err(crate::DomaError::InvalidConfig(m));
+        if self.hidden == 0 {
+            return bad("hidden width must be at least 1".into());
+        }
+        if !(self.omega.is_finite() && self.omega > 0.0) {
+            return bad(format!("sine frequency {} must be positive", self.omega));
+        }
+        Ok(())
+    }
+}
+
+/// The builders of a config that nests a [`SirenShape`], written once for every
+/// SIREN-based model: `DomaFieldConfig::new(v).with_hidden(64)`.
+pub trait WithSirenShape: Sized {
+    /// The nested shape.
+    fn shape_mut(&mut self) -> &mut SirenShape;
+
+    /// Sets the hidden width `d`.
+    fn with_hidden(mut self, hidden: usize) -> Self {
+        self.shape_mut().hidden = hidden;
+        self
+    }
+
+    /// Sets the number of hidden sine layers `n` after the first.
+    fn with_n_hidden(mut self, n_hidden: usize) -> Self {
+        self.shape_mut().n_hidden = n_hidden;
+        self
+    }
+
+    /// Sets the sine frequency `ω₀`.
+    fn with_omega(mut self, omega: f64) -> Self {
+        self.shape_mut().omega = omega;
+        self
+    }
+}
+
+/// The shape of a SIREN (Eq. 1): input and output widths around a [`SirenShape`].
+#[derive(Config, Debug)]
+pub struct SirenConfig {
+    /// Input width (4 for `[x, y, z, t]`).
+    #[config(default = 4)]
+    pub d_in: usize,
+    /// Output width (3 for Trans, 9 for SE(3), 10 for Scaled SE(3), 12 for Affinity).
+    pub d_out: usize,
+    /// Width, depth and frequency.
+    #[config(default = "SirenShape::new()")]
+    pub shape: SirenShape,
+}
+
+impl WithSirenShape for SirenConfig {
+    fn shape_mut(&mut self) -> &mut SirenShape {
+        &mut self.shape
+    }
 }
 
 impl SirenConfig {
     /// The widths `(fan_in, fan_out)` of every layer, sine layers first, output last.
     pub fn layer_shapes(&self) -> Vec<(usize, usize)> {
-        let mut shapes = vec![(self.d_in, self.hidden)];
-        shapes.extend((0..self.n_hidden).map(|_| (self.hidden, self.hidden)));
-        shapes.push((self.hidden, self.d_out));
+        let d = self.shape.hidden;
+        let mut shapes = vec![(self.d_in, d)];
+        shapes.extend((0..self.shape.n_hidden).map(|_| (d, d)));
+        shapes.push((d, self.d_out));
         shapes
     }
 
@@ -49,8 +106,9 @@ impl SirenConfig {
     /// A SIREN initialised by [`SirenInitializer`] from `seed`, on `device`.
     pub fn init(&self, seed: u64, device: &Device) -> Siren {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let layers = SirenInitializer::new(self.omega).init(self, &mut rng);
-        Siren::from_weights(&layers, self.omega, device)
+        let omega = self.shape.omega;
+        let layers = SirenInitializer::new(omega).init(self, &mut rng);
+        Siren::from_weights(&layers, omega, device)
     }
 }
 

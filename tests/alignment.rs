@@ -16,6 +16,7 @@ use doma::field::dpf::DpfConfig;
 use doma::field::{DomaFieldConfig, MotionField, Variant};
 use doma::jacobian::{Autodiff, JacobianKind};
 use doma::loss::{AiapNeighbourhoods, CHAMFER_BLOCK, aiap, chamfer};
+use doma::prelude::*;
 use doma::register::{RegistrationConfig, RegistrationTask, register};
 
 fn points(v: &[[f32; 3]], device: &Device) -> Tensor<2> {
@@ -101,8 +102,8 @@ fn the_chamfer_weight_follows_the_authors_schedule() {
     assert_eq!(c.chamfer_weight_at(25), 0.0);
     assert!((c.chamfer_weight_at(26) - 1e3 * 0.95f64.powi(73)).abs() < 1e-9);
     assert_eq!(c.chamfer_weight_at(99), 1e3);
-    assert!((c.lr_factor(0) - 1.0).abs() < 1e-12);
-    assert!((c.lr_factor(99) - 2.0 / 101.0).abs() < 1e-12);
+    assert!((c.schedule.lr_factor(0) - 1.0).abs() < 1e-12);
+    assert!((c.schedule.lr_factor(99) - 2.0 / 101.0).abs() < 1e-12);
 }
 
 #[test]
@@ -142,7 +143,7 @@ fn dpf_jacobian_matches_finite_differences() {
         .init(5, &device);
     let x = common::random_points(6, 9);
     let t = doma::data::normalized_time(2, 4);
-    let out = dpf.warp_dual(tensor2(x.clone(), [6, 3], &device), t, Some(&Autodiff));
+    let out = dpf.warp_dual(tensor2(x.clone(), [6, 3], &device), t, &Autodiff);
     // Tangent c is ∂y/∂x_c, [3, N, 3].
     let tangent = to_vec(out.warped.tangent.unwrap());
     let h = 1e-2;
@@ -176,13 +177,23 @@ fn dpf_value_path_through_the_fused_sine_layers_matches_the_plain_one_with_its_g
     let run = |y: Tensor<2>| -> (Vec<f64>, Vec<f64>, bool) {
         let grads = y.clone().mul(y.clone()).sum().backward();
         let mut g = Vec::new();
-        for w in &dpf.nets[1].weights {
-            g.extend(to_vec(w.val().grad(&grads).expect("frame 1 has gradients")));
+        let net = &dpf.nets[1];
+        for layer in net.sine.iter().chain([&net.output]) {
+            let b = layer.bias.as_ref().expect("SIREN layers have a bias");
+            for p in [
+                to_vec(
+                    layer
+                        .weight
+                        .val()
+                        .grad(&grads)
+                        .expect("frame 1 has gradients"),
+                ),
+                to_vec(b.val().grad(&grads).expect("frame 1 has gradients")),
+            ] {
+                g.extend(p);
+            }
         }
-        for b in &dpf.nets[1].biases {
-            g.extend(to_vec(b.val().grad(&grads).expect("frame 1 has gradients")));
-        }
-        let others = dpf.nets[0].weights[0].val().grad(&grads).is_some();
+        let others = dpf.nets[0].sine[0].weight.val().grad(&grads).is_some();
         (to_vec(y), g, others)
     };
     let (plain_y, plain_g, _) = run(dpf.warp(x.clone(), t));
@@ -328,13 +339,12 @@ fn a_short_registration_reduces_the_guidance_loss_with_every_term() {
         .with_canonical_samples(64)
         .with_target_samples(64)
         .with_aiap_weight(1.0)
-        .with_smoothness_weight(0.001)
-        .with_quiet(true);
+        .with_smoothness_weight(0.001);
     let ad = device.clone().autodiff();
     let field = DomaFieldConfig::new(Variant::Affinity)
         .with_hidden(32)
         .init(0, &ad);
-    let fitted = register(field, &task, &config, &device).unwrap();
+    let fitted = register(field, &task, &config, &device, false).unwrap();
     let first = fitted.history[0].trajectory_loss;
     let last = fitted.history.last().unwrap().trajectory_loss;
     assert!(last < 0.5 * first, "guidance L1 {first} → {last}");
@@ -345,7 +355,14 @@ fn a_short_registration_reduces_the_guidance_loss_with_every_term() {
 
     // DPF runs through the same loop.
     let dpf = DpfConfig::new(4).with_hidden(32).init(0, &ad);
-    let fitted = register(dpf, &task, &config.clone().with_iterations(5), &device).unwrap();
+    let fitted = register(
+        dpf,
+        &task,
+        &config.clone().with_iterations(5),
+        &device,
+        false,
+    )
+    .unwrap();
     assert_eq!(fitted.history.len(), 5);
 
     // Keypoints and targets must have the same frames.
@@ -355,7 +372,7 @@ fn a_short_registration_reduces_the_guidance_loss_with_every_term() {
         .with_hidden(8)
         .init(0, &ad);
     assert!(matches!(
-        register(field, &bad, &config, &device),
+        register(field, &bad, &config, &device, false),
         Err(DomaError::InvalidData(_))
     ));
 }
@@ -371,7 +388,7 @@ fn a_warped_mesh_sequence_is_the_field_at_each_frames_time() {
         vec![[0, 1, 2]],
     )
     .unwrap();
-    let seq = doma::data::mesh::warp_mesh_sequence(&field, &mesh, 5, &device).unwrap();
+    let seq = doma::warp::warp_mesh_sequence(&field, &mesh, 5, &device).unwrap();
     assert_eq!((seq.frames(), seq.points()), (5, 3));
     for k in 0..5 {
         let x = points(&mesh.vertices, &device);
@@ -391,22 +408,52 @@ fn a_dpf_step_on_one_frame_leaves_the_other_frames_untouched() {
         .with_hidden(8)
         .with_n_hidden(1)
         .init(0, &ad);
-    let config = doma::train::FitConfig::new(DomaFieldConfig::new(Variant::Trans)).with_quiet(true);
+    let config =
+        doma::train::FitConfig::new(doma::field::model::ModelConfig::Dpf(DpfConfig::new(3)));
     let mut trainer = doma::train::Trainer::new(dpf, &config, &data, &device).unwrap();
-    let weights = |t: &doma::train::Trainer<'_, doma::field::dpf::Dpf>| -> Vec<Vec<f64>> {
+    let weights = |t: &doma::train::Trainer<doma::field::dpf::Dpf, _>| -> Vec<Vec<f64>> {
         t.field()
             .nets
             .iter()
-            .map(|n| to_vec(n.weights[0].val()))
+            .map(|n| to_vec(n.sine[0].weight.val()))
             .collect()
     };
     // A step on frame 0 gives frame 0 Adam moments; a step on frame 1 must then leave
     // frame 0 alone (with one stacked parameter, its momentum would move it again).
-    trainer.step(0, 1e-2);
+    trainer.step(0, 1e-2).unwrap();
     let before = weights(&trainer);
-    trainer.step(1, 1e-2);
+    trainer.step(1, 1e-2).unwrap();
     let after = weights(&trainer);
     assert_eq!(after[0], before[0], "frame 0 moved during frame 1's step");
     assert_eq!(after[2], before[2]);
     assert_ne!(after[1], before[1]);
+}
+
+#[test]
+fn dpf_runs_its_frame_sirens_through_the_analytic_jacobian_too() {
+    let _g = backward_lock();
+    let device = Device::flex().autodiff();
+    let dpf = DpfConfig::new(3).with_hidden(16).init(5, &device);
+    let x = tensor2(common::random_points(20, 9), [20, 3], &device);
+    let t = doma::data::normalized_time(2, 3);
+    // Values, tangents and the θ-gradient of L_H, by each method.
+    let run = |method: &dyn JacobianMethod| {
+        let raw = dpf.raw_dual(x.clone(), t, method);
+        let tangent = raw.tangent.clone().expect("tangents");
+        let l = doma::loss::smoothness(tangent.clone(), doma::loss::SmoothnessNorm::Squared);
+        let grads = l.backward();
+        let g = to_vec(
+            dpf.nets[2].sine[0]
+                .weight
+                .val()
+                .grad(&grads)
+                .expect("a gradient"),
+        );
+        (to_vec(raw.value), to_vec(tangent), g)
+    };
+    let (v_ad, j_ad, g_ad) = run(&Autodiff);
+    let (v_an, j_an, g_an) = run(&doma::jacobian::Analytic);
+    assert!(rel_err(&v_an, &v_ad) < 1e-5, "values");
+    assert!(rel_err(&j_an, &j_ad) < 1e-4, "tangents");
+    assert!(rel_err(&g_an, &g_ad) < 1e-3, "θ-gradient of L_H");
 }

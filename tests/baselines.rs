@@ -8,10 +8,12 @@ use burn::module::Param;
 use burn::tensor::{Device, Tensor, TensorData};
 use common::{backward_lock, rel_err, tensor2, to_vec};
 use doma::data::Trajectories;
+use doma::field::MotionField;
 use doma::field::baselines::bone_cloud::BoneCloudConfig;
 use doma::field::baselines::dct::{DctConfig, dct_basis};
 use doma::field::baselines::mlp::MlpConfig;
-use doma::field::{DomaFieldConfig, MotionField, Variant};
+use doma::field::model::ModelConfig;
+use doma::prelude::*;
 use doma::train::{FitConfig, fit_model};
 
 fn x(n: usize, seed: u64, device: &Device) -> Tensor<2> {
@@ -159,16 +161,15 @@ fn the_smoothness_loss_trains_a_baseline_through_the_common_fit_loop() {
         .map(|v| v as f32)
         .collect();
     let data = Trajectories::new(4, 30, positions).unwrap();
-    let config = FitConfig::new(DomaFieldConfig::new(Variant::Trans))
-        .with_iterations(20)
-        .with_learning_rate(1e-3)
-        .with_smoothness_weight(0.1)
-        .with_quiet(true);
-    let model = MlpConfig::new()
+    let mlp = MlpConfig::new()
         .with_hidden(32)
         .with_layers(3)
-        .with_pe_octaves(6)
-        .init(0, &ad);
+        .with_pe_octaves(6);
+    let config = FitConfig::new(ModelConfig::Mlp(mlp.clone()))
+        .with_iterations(20)
+        .with_learning_rate(1e-3)
+        .with_smoothness_weight(0.1);
+    let model = mlp.init(0, &ad);
     let fitted = fit_model(model, &config, &data, &device).unwrap();
     let (first, last) = (&fitted.history[0], fitted.history.last().unwrap());
     assert!(
@@ -177,4 +178,32 @@ fn the_smoothness_loss_trains_a_baseline_through_the_common_fit_loop() {
     );
     // L_H is in the total once the output layer has moved off zero.
     assert!(last.total_loss > last.trajectory_loss, "{last:?}");
+}
+
+#[test]
+fn the_analytic_jacobian_is_refused_for_models_without_siren_layers() {
+    let device = Device::flex();
+    let data = Trajectories::new(3, 8, (0..72).map(|i| i as f32 * 0.01).collect()).unwrap();
+    for model in [
+        ModelConfig::Mlp(MlpConfig::new().with_hidden(8)),
+        ModelConfig::DctNerf(DctConfig::new(3).with_hidden(8)),
+        ModelConfig::BoneCloud(BoneCloudConfig::new(3).with_bones(4)),
+    ] {
+        let name = model.paper_name();
+        let analytic = FitConfig::new(model.clone())
+            .with_iterations(1)
+            .with_jacobian(doma::jacobian::JacobianKind::Analytic);
+        match doma::train::fit(&analytic, &data, &device) {
+            Err(doma::DomaError::InvalidConfig(m)) => {
+                assert!(m.contains("analytic") && m.contains(name), "{m}")
+            }
+            other => panic!("{name}: analytic was not refused: {other:?}"),
+        }
+        // The model's own check says the same before anything is built.
+        assert!(analytic.model.check_jacobian(analytic.jacobian).is_err());
+        // Autodiff, the general method, applies.
+        let _g = backward_lock();
+        let fitted = doma::train::fit(&FitConfig::new(model).with_iterations(1), &data, &device);
+        assert!(fitted.is_ok(), "{name}: {fitted:?}");
+    }
 }

@@ -18,7 +18,7 @@ fn check_jacobian(name: &str, f: &dyn MotionField, t: f64, tol: f64) {
     let device = f64_flex();
     let n = 8;
     let xs = common::random_points(n, 11);
-    let out = f.warp_dual(tensor2(xs.clone(), [n, 3], &device), t, Some(&Autodiff));
+    let out = f.warp_dual(tensor2(xs.clone(), [n, 3], &device), t, &Autodiff);
     let tangent = to_vec(out.warped.tangent.expect("tangents"));
     let h = 1e-6;
     for c in 0..3 {

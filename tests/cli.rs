@@ -1,6 +1,7 @@
 //! The `doma` binary: bad flags are refused with a clear message, and a tiny run
 //! prints the table and writes one JSON record per run.
 
+use doma::prelude::*;
 use std::process::Command;
 
 fn doma(args: &[&str]) -> (bool, String, String) {
@@ -435,7 +436,7 @@ fn ctrl_c_saves_a_checkpoint_and_the_fit_resumes() {
     let config = run.join("config.json");
     let mut c: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&config).unwrap()).unwrap();
-    c["fit"]["iterations"] = serde_json::json!(history.len() + 2);
+    c["fit"]["schedule"]["iterations"] = serde_json::json!(history.len() + 2);
     std::fs::write(&config, c.to_string()).unwrap();
     let (ok, _, err) = doma(&["fit", "--resume", run.to_str().unwrap()]);
     assert!(ok, "{err}");
@@ -482,7 +483,7 @@ fn fit_reads_a_config_file_and_flags_override_it() {
     std::fs::create_dir_all(&dir).unwrap();
     let config = dir.join("fit.json");
     // A FitConfig as a run's config.json holds it: Scaled SE(3), width 16, 50 iterations.
-    let fit = doma::train::FitConfig::new(
+    let fit = doma::train::FitConfig::doma(
         doma::field::DomaFieldConfig::new(doma::field::Variant::ScaledSe3).with_hidden(16),
     )
     .with_iterations(50);
@@ -505,9 +506,58 @@ fn fit_reads_a_config_file_and_flags_override_it() {
     assert!(ok, "{err}");
     let saved: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap();
-    assert_eq!(saved["fit"]["field"]["variant"], "scaled-se3");
-    assert_eq!(saved["fit"]["field"]["hidden"], 16);
-    assert_eq!(saved["fit"]["iterations"], 2, "the flag overrides the file");
+    let model = &saved["fit"]["model"]["doma"];
+    assert_eq!(model["variant"], "scaled-se3");
+    assert_eq!(model["shape"]["hidden"], 16);
+    assert_eq!(
+        saved["fit"]["schedule"]["iterations"], 2,
+        "the flag overrides the file"
+    );
+    // The saved recipe holds no display flags.
+    assert!(saved["fit"].get("quiet").is_none());
+    // A partial config takes defaults for the rest: only the variant and the budget.
+    std::fs::write(
+        &config,
+        r#"{"model": {"doma": {"variant": "trans"}}, "schedule": {"iterations": 1}}"#,
+    )
+    .unwrap();
+    let partial = dir.join("partial");
+    let (ok, _, err) = doma(&[
+        "fit",
+        faerie,
+        "--frames",
+        "112..116",
+        "--out",
+        partial.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(ok, "{err}");
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(partial.join("config.json")).unwrap())
+            .unwrap();
+    assert_eq!(saved["fit"]["model"]["doma"]["variant"], "trans");
+    assert_eq!(saved["fit"]["model"]["doma"]["shape"]["hidden"], 128);
+    assert_eq!(saved["fit"]["schedule"]["learning_rate"], 1e-4);
+    assert_eq!(
+        saved["fit"]["smoothness_sampling"]["jitter"], 0.0,
+        "Trans: no jitter"
+    );
+    // An analytic Jacobian for a model without SIREN layers is refused, not substituted.
+    std::fs::write(&config, r#"{"model": {"mlp": {}}, "jacobian": "analytic"}"#).unwrap();
+    let (ok, _, err) = doma(&[
+        "fit",
+        faerie,
+        "--out",
+        dir.join("r3").to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.contains("fit.json") && err.contains("analytic"),
+        "{err}"
+    );
     // A config file that is not JSON names the file.
     std::fs::write(&config, "{ nope").unwrap();
     let (ok, _, err) = doma(&[

@@ -3,9 +3,11 @@
 
 use doma::backend::BackendKind;
 use doma::data::Trajectories;
+use doma::experiments::Experiment;
 use doma::experiments::fluid::{self, FluidRecord, mean_motion};
 use doma::experiments::image2d::{self, Image2dJob, Motion2d, grid};
 use doma::field::Variant;
+use doma::field::model::ModelName;
 
 #[test]
 fn the_pixel_grid_is_centred_and_y_up() {
@@ -44,11 +46,11 @@ fn mean_motion_and_the_fluid_table_by_hand() {
     let clip =
         Trajectories::new(2, 2, vec![0., 0., 0., 1., 1., 1., 3., 4., 0., 1., 1., 1.]).unwrap();
     assert_eq!(mean_motion(&clip), 2.5);
-    let rec = |clip: usize, variant: &str, hidden: usize, epe: f64| FluidRecord {
-        experiment: "fluid".into(),
+    let rec = |clip: usize, variant: ModelName, hidden: usize, epe: f64| FluidRecord {
+        experiment: Experiment::Fluid,
         clip_start: clip,
         motion: 0.1,
-        variant: variant.into(),
+        variant,
         hidden,
         iters: 1,
         epe_x1e4: epe,
@@ -58,12 +60,18 @@ fn mean_motion_and_the_fluid_table_by_hand() {
         curve: vec![],
     };
     let t = fluid::table(&[
-        rec(10, "DPF", 64, 100.0),
-        rec(20, "DPF", 64, 300.0),
-        rec(10, "DPF", 128, 50.0),
+        rec(10, ModelName::Dpf, 64, 100.0),
+        rec(20, ModelName::Dpf, 64, 300.0),
+        rec(10, ModelName::Dpf, 128, 50.0),
     ]);
     assert!(t.contains("2 clips"), "{t}");
     assert!(t.contains("200.00") && t.contains("50.00"), "{t}");
+    // The records keep their JSON spelling: typed enums, the same strings as ever.
+    let json = serde_json::to_value(rec(10, ModelName::DomaAffinity, 64, 1.0)).unwrap();
+    assert_eq!(json["experiment"], "fluid");
+    assert_eq!(json["variant"], "DOMA-Affinity");
+    let back: FluidRecord = serde_json::from_value(json).unwrap();
+    assert_eq!(back.variant, ModelName::DomaAffinity);
 }
 
 #[test]
@@ -170,4 +178,33 @@ fn a_tiny_fluid_run_records_its_learning_curve() {
         assert_eq!(r.curve[1].test_epe_x1e4, r.epe_x1e4, "{r:?}");
         assert!(r.curve.iter().all(|c| c.train_epe_x1e4 > 0.0), "{r:?}");
     }
+}
+
+#[test]
+fn mesh_records_keep_their_json_spelling() {
+    use doma::experiments::meshes::{AlignReg, MeshRecord};
+    let r = MeshRecord {
+        experiment: Experiment::MeshAlignment,
+        sequence: "cdp".into(),
+        variant: ModelName::DomaTrans,
+        reg: AlignReg::Ah,
+        iters: 1,
+        backend: BackendKind::Flex,
+        epe_x1e4: None,
+        cd_x1e4: Some(1.0),
+        cdn: None,
+        std_e: None,
+        std_v: None,
+        params: 1,
+        checkpoint_bytes: 1,
+        seconds: 0.0,
+    };
+    let json = serde_json::to_value(&r).unwrap();
+    assert_eq!(json["experiment"], "mesh_alignment");
+    assert_eq!(json["variant"], "DOMA-Trans");
+    assert_eq!(json["reg"], "ah");
+    assert_eq!(json["backend"], "flex");
+    assert_eq!(serde_json::from_value::<MeshRecord>(json).unwrap(), r);
+    let table = doma::experiments::meshes::table(&[r]);
+    assert!(table.contains("DOMA-Trans-AH"), "{table}");
 }

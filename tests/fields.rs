@@ -6,6 +6,7 @@ use burn::tensor::{Device, Tensor};
 use common::{random_points, tensor2, to_vec};
 use doma::field::{MotionField, Variant, rotation};
 use doma::jacobian::Dual;
+use doma::prelude::*;
 
 /// A rotation matrix (row-major) from an axis and an angle (Rodrigues).
 fn rotation_matrix(axis: [f64; 3], angle: f64) -> [[f64; 3]; 3] {

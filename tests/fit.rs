@@ -9,8 +9,9 @@ use doma::DomaError;
 use doma::backend::{BackendKind, wgpu_available};
 use doma::data::Trajectories;
 use doma::data::synthetic::{Motion, benchmark_sequence};
-use doma::field::{DomaField, DomaFieldConfig, MotionField, Variant};
-use doma::train::{FitConfig, fit};
+use doma::field::{DomaFieldConfig, MotionField, Variant};
+use doma::prelude::*;
+use doma::train::{FitConfig, SmoothnessSampling, fit};
 
 /// A small piece of the synthetic protocol: 64 training points, 5 frames.
 fn small_data() -> (Trajectories, Trajectories) {
@@ -27,12 +28,10 @@ fn small_data() -> (Trajectories, Trajectories) {
 }
 
 fn config(variant: Variant, iters: usize) -> FitConfig {
-    FitConfig::new(DomaFieldConfig::new(variant).with_hidden(32))
-        .with_iterations(iters)
-        .with_quiet(true)
+    FitConfig::doma(DomaFieldConfig::new(variant).with_hidden(32)).with_iterations(iters)
 }
 
-fn predictions(field: &DomaField, data: &Trajectories, device: &Device) -> Vec<f64> {
+fn predictions(field: &dyn MotionField, data: &Trajectories, device: &Device) -> Vec<f64> {
     to_vec(field.warp(data.frame_tensor(0, device), data.time(3)))
 }
 
@@ -100,13 +99,13 @@ fn the_same_seed_gives_the_same_fit() {
 
 #[test]
 fn the_learning_rate_schedule_is_the_authors_lambda_lr() {
-    let c = config(Variant::Trans, 1000);
+    let c = config(Variant::Trans, 1000).schedule;
     assert_eq!(c.lr_factor(0), 1.0);
     assert_eq!(c.lr_factor(10), 1.0);
     assert!((c.lr_factor(11) - (1.0 - 1.0 / 991.0)).abs() < 1e-15);
     assert!((c.lr_factor(999) - 2.0 / 991.0).abs() < 1e-15);
     // Short runs never decay, and never divide by zero.
-    let short = config(Variant::Trans, 9);
+    let short = config(Variant::Trans, 9).schedule;
     assert!((0..9).all(|e| short.lr_factor(e) == 1.0));
 }
 
@@ -118,7 +117,10 @@ fn bad_configs_are_refused() {
         config(Variant::Trans, 0),
         config(Variant::Trans, 1).with_learning_rate(-1.0),
         config(Variant::Trans, 1).with_smoothness_weight(f64::NAN),
-        config(Variant::Trans, 1).with_smoothness_points(Some(0)),
+        config(Variant::Trans, 1)
+            .with_smoothness_sampling(SmoothnessSampling::new().with_max_points(Some(0))),
+        // A model far over the size limit is refused, not allocated.
+        FitConfig::doma(DomaFieldConfig::new(Variant::Trans).with_hidden(200_000)),
     ] {
         assert!(matches!(
             fit(&c, &train, &device),
@@ -192,8 +194,7 @@ fn an_observed_fit_sees_every_kth_iteration_and_the_last_and_ends_where_a_plain_
     let config = config(Variant::Affinity, 5).with_learning_rate(1e-3);
     let mut seen = Vec::new();
     let mut last_prediction = Vec::new();
-    let field = config.field.init(config.seed, &device.clone().autodiff());
-    let observed = doma::train::Trainer::new(field, &config, &train, &device)
+    let observed = doma::train::Trainer::from_config(&config, &train, &device)
         .unwrap()
         .run_observed(2, |r, f| {
             seen.push(r.iteration + 1);
@@ -211,8 +212,7 @@ fn an_observed_fit_sees_every_kth_iteration_and_the_last_and_ends_where_a_plain_
     assert_eq!(a, b);
     assert_eq!(last_prediction, a);
     // An error from the observer stops the fit.
-    let field = config.field.init(config.seed, &device.clone().autodiff());
-    let err = doma::train::Trainer::new(field, &config, &train, &device)
+    let err = doma::train::Trainer::from_config(&config, &train, &device)
         .unwrap()
         .run_observed(1, |_, _| Err(DomaError::InvalidConfig("stop".into())));
     assert!(matches!(err, Err(DomaError::InvalidConfig(_))));

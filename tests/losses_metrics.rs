@@ -7,6 +7,7 @@ use common::{tensor2, to_vec};
 use doma::data::Trajectories;
 use doma::loss::{self, SmoothnessNorm};
 use doma::metrics;
+use doma::prelude::*;
 
 fn scalar(t: Tensor<1>) -> f64 {
     to_vec(t)[0]

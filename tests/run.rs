@@ -4,12 +4,14 @@
 
 mod common;
 
+use doma::prelude::*;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 use burn::tensor::Device;
 use common::backward_lock;
 use doma::DomaError;
+use doma::field::model::Model;
 use doma::field::{DomaFieldConfig, Variant};
 use doma::jacobian::JacobianKind;
 use doma::run::{FitOutcome, RunConfig, RunDir, eval_run, fit_run, info, warp_run};
@@ -26,12 +28,11 @@ fn temp(tag: &str) -> PathBuf {
 }
 
 fn config() -> RunConfig {
-    let fit = FitConfig::new(DomaFieldConfig::new(Variant::Affinity).with_hidden(32))
+    let fit = FitConfig::doma(DomaFieldConfig::new(Variant::Affinity).with_hidden(32))
         .with_iterations(6)
         .with_smoothness_weight(0.1)
         .with_jacobian(JacobianKind::Analytic)
-        .with_seed(3)
-        .with_quiet(true);
+        .with_seed(3);
     let mut c = RunConfig::new(faerie(), fit);
     c.frames = Some([112, 118]);
     c.checkpoint_every = 2;
@@ -39,10 +40,10 @@ fn config() -> RunConfig {
 }
 
 fn weights(run: &RunDir, c: &RunConfig) -> Vec<doma::siren::LayerWeights> {
-    run.load_field(c, &Device::flex())
-        .unwrap()
-        .siren
-        .to_weights()
+    match run.load_field(c, &Device::flex()).unwrap() {
+        Model::Doma(field) => field.siren.to_weights(),
+        other => panic!("a DOMA run loaded as {other:?}"),
+    }
 }
 
 #[test]
@@ -51,20 +52,21 @@ fn a_resumed_fit_equals_an_uninterrupted_one_bit_exactly() {
     let device = Device::flex();
     let never = AtomicBool::new(false);
     let whole = RunDir::new(temp("whole"));
-    let outcome = fit_run(&whole, Some(config()), &device, &never, None).unwrap();
+    let outcome = fit_run(&whole, Some(config()), &device, &never, None, false).unwrap();
     assert!(matches!(outcome, FitOutcome::Finished(_)));
 
     // Interrupted after 3 iterations (between two checkpoints), then resumed twice over.
     let parts = RunDir::new(temp("parts"));
-    let outcome = fit_run(&parts, Some(config()), &device, &never, Some(3)).unwrap();
+    let outcome = fit_run(&parts, Some(config()), &device, &never, Some(3), false).unwrap();
     assert_eq!(outcome, FitOutcome::Interrupted { iterations_done: 3 });
     assert!(
         !parts.model().exists(),
         "no final model before the fit ends"
     );
-    let outcome = fit_run(&parts, None, &device, &never, Some(5)).unwrap();
+    let outcome = fit_run(&parts, None, &device, &never, Some(5), false).unwrap();
     assert_eq!(outcome, FitOutcome::Interrupted { iterations_done: 5 });
-    let FitOutcome::Finished(report) = fit_run(&parts, None, &device, &never, None).unwrap() else {
+    let FitOutcome::Finished(report) = fit_run(&parts, None, &device, &never, None, false).unwrap()
+    else {
         panic!("the resumed fit did not finish");
     };
     assert_eq!(report.iterations, 6);
@@ -85,7 +87,7 @@ fn a_resumed_fit_equals_an_uninterrupted_one_bit_exactly() {
     assert_eq!(history(&whole), history(&parts));
     // A finished run cannot be started again in the same folder.
     assert!(matches!(
-        fit_run(&whole, Some(config()), &device, &never, None),
+        fit_run(&whole, Some(config()), &device, &never, None, false),
         Err(DomaError::InvalidConfig(_))
     ));
 }
@@ -96,14 +98,14 @@ fn a_non_finite_loss_keeps_the_last_good_checkpoint() {
     let device = Device::flex();
     let never = AtomicBool::new(false);
     let run = RunDir::new(temp("nan"));
-    fit_run(&run, Some(config()), &device, &never, Some(2)).unwrap();
+    fit_run(&run, Some(config()), &device, &never, Some(2), false).unwrap();
     let good = std::fs::read(run.resume()).unwrap();
     // Make the continuation diverge: an absurd learning rate overflows the outputs.
     let mut c: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run.config()).unwrap()).unwrap();
-    c["fit"]["learning_rate"] = serde_json::json!(1e37);
+    c["fit"]["schedule"]["learning_rate"] = serde_json::json!(1e37);
     std::fs::write(run.config(), c.to_string()).unwrap();
-    match fit_run(&run, None, &device, &never, None) {
+    match fit_run(&run, None, &device, &never, None, false) {
         Err(DomaError::NonFiniteLoss { iteration, .. }) => assert!(iteration >= 2),
         other => panic!("expected NonFiniteLoss, got {other:?}"),
     }
@@ -122,8 +124,13 @@ fn eval_warp_and_info_read_a_finished_run() {
     let run = RunDir::new(temp("done"));
     // Trans: `y = x + o` starts near the identity, so even a short fit keeps the shape.
     let mut c = config();
-    c.fit.field.variant = Variant::Trans;
-    let FitOutcome::Finished(report) = fit_run(&run, Some(c), &device, &never, None).unwrap()
+    c.fit = FitConfig::doma(DomaFieldConfig::new(Variant::Trans).with_hidden(32))
+        .with_iterations(6)
+        .with_smoothness_weight(0.1)
+        .with_jacobian(JacobianKind::Analytic)
+        .with_seed(3);
+    let FitOutcome::Finished(report) =
+        fit_run(&run, Some(c), &device, &never, None, false).unwrap()
     else {
         panic!()
     };
@@ -215,4 +222,35 @@ fn eval_warp_and_info_read_a_finished_run() {
         Err(DomaError::Malformed { reason, .. }) => assert!(reason.contains("not a doma run")),
         other => panic!("{other:?}"),
     }
+}
+
+#[test]
+fn an_unfinished_run_is_read_in_memory_without_writing_into_its_folder() {
+    let _g = backward_lock();
+    let device = Device::flex();
+    let never = AtomicBool::new(false);
+    let run = RunDir::new(temp("unfinished"));
+    fit_run(&run, Some(config()), &device, &never, Some(2), false).unwrap();
+    let listing = |dir: &std::path::Path| -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    };
+    let before = listing(&run.dir);
+    let report = eval_run(&run, None, &device).unwrap();
+    assert!(report.epe_x1e4.is_finite());
+    assert_eq!(listing(&run.dir), before, "eval wrote into the run folder");
+    // The field read from the checkpoint is the one the fit had reached: the same
+    // as that run's own report after finishing.
+    let FitOutcome::Finished(done) = fit_run(&run, None, &device, &never, None, false).unwrap()
+    else {
+        panic!()
+    };
+    assert_eq!(
+        eval_run(&run, None, &device).unwrap().epe_x1e4,
+        done.epe_x1e4
+    );
 }

@@ -1,6 +1,7 @@
 //! The SIREN initialiser against REFERENCE §1, and the parameter counts.
 
 use doma::field::{DomaFieldConfig, MotionField, Variant};
+use doma::prelude::*;
 use doma::siren::{LayerRole, SirenConfig, SirenInitializer};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

@@ -7,6 +7,8 @@
 //! instrumentation. Every parser returns `Err(reason)` for a bad input, never panics; the
 //! `doma` crate adds the file name and turns the result into its own types.
 
+#![forbid(unsafe_code)]
+
 pub mod anime;
 pub mod npy;
 pub mod obj;

@@ -1,6 +1,6 @@
 //! Triangle meshes: OBJ files and sequences, vertex normals, unique edges, area-weighted
-//! surface sampling, and warping a mesh through a fitted field (Sec. 4.2, Tab. 1 and Tab. 3
-//! evaluate on meshes).
+//! surface sampling (Sec. 4.2, Tab. 1 and Tab. 3 evaluate on meshes). Warping a mesh through
+//! a fitted field is [`crate::warp`], above both `data` and `field`.
 //!
 //! OBJ is read by a small parser of our own rather than `tobj`: a mesh's vertex order *is*
 //! its point identity here (vertex `i` of the OBJ is point `i` of the `.traj`), and `tobj`
@@ -9,14 +9,12 @@
 
 use std::path::{Path, PathBuf};
 
-use burn::tensor::{Device, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 pub use doma_formats::obj::{TriMesh, check_faces, encode_obj, parse_obj};
 
 use super::Trajectories;
-use crate::field::MotionField;
 use crate::io::write_atomic;
 use crate::{DomaError, Result};
 
@@ -136,14 +134,6 @@ fn face_cross(vertices: &[[f32; 3]], f: [u32; 3]) -> [f32; 3] {
     cross(sub(b, a), sub(c, a))
 }
 
-/// Unit face normals (counter-clockwise winding); zero for a degenerate face.
-pub fn face_normals(vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> Vec<[f32; 3]> {
-    faces
-        .iter()
-        .map(|&f| normalize(face_cross(vertices, f)))
-        .collect()
-}
-
 /// Face areas.
 pub fn face_areas(vertices: &[[f32; 3]], faces: &[[u32; 3]]) -> Vec<f32> {
     faces
@@ -257,49 +247,4 @@ impl SurfaceSamples {
             .map(|&f| normalize(face_cross(vertices, faces[f as usize])))
             .collect()
     }
-}
-
-/// Warps `points` (`[V, 3]`) through `field` at normalised time `t`, in chunks of
-/// at most 65 536 rows so that memory stays bounded.
-pub fn warp_points(
-    field: &dyn MotionField,
-    points: &[[f32; 3]],
-    t: f64,
-    device: &Device,
-) -> Result<Vec<[f32; 3]>> {
-    const CHUNK: usize = 65_536;
-    let mut out = Vec::with_capacity(points.len());
-    for chunk in points.chunks(CHUNK) {
-        let x = Tensor::<2>::from_data(
-            TensorData::new(chunk.as_flattened().to_vec(), [chunk.len(), 3]),
-            device,
-        );
-        let y = field
-            .warp(x, t)
-            .try_into_vec_as::<f32>()
-            .map_err(|e| DomaError::Device(format!("{e:?}")))?;
-        out.extend(as_points(&y));
-    }
-    Ok(out)
-}
-
-/// The canonical mesh warped to every frame of a `frames`-frame sequence: `[T, V, 3]`.
-/// Normals for any frame follow from [`vertex_normals`].
-pub fn warp_mesh_sequence(
-    field: &dyn MotionField,
-    canonical: &TriMesh,
-    frames: usize,
-    device: &Device,
-) -> Result<Trajectories> {
-    let mut positions = Vec::with_capacity(frames * canonical.vertices.len() * 3);
-    for k in 0..frames {
-        let y = warp_points(
-            field,
-            &canonical.vertices,
-            super::normalized_time(k, frames),
-            device,
-        )?;
-        positions.extend_from_slice(y.as_flattened());
-    }
-    Trajectories::new(frames, canonical.vertices.len(), positions)
 }

@@ -3,6 +3,7 @@
 pub mod anime;
 pub mod mesh;
 pub mod npy;
+pub mod sequence;
 pub mod synthetic;
 pub mod traj;
 

@@ -13,15 +13,19 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::backend::BackendKind;
-use crate::checkpoint::{Precision, encode_checkpoint};
+use crate::checkpoint::Precision;
 use crate::data::Trajectories;
-use crate::experiments::meshes::{AlignModel, load_sequence, split_indices};
-use crate::field::dpf::DpfConfig;
-use crate::field::{DomaFieldConfig, MotionField, Variant};
+use crate::data::sequence::{load_sequence, split_indices};
+use crate::experiments::Experiment;
+use crate::experiments::meshes::AlignModel;
+use crate::field::MotionField;
+use crate::field::model::ModelName;
+use crate::jacobian::JacobianKind;
 use crate::metrics::{EPE_SCALE, evaluate_epe};
+use crate::prelude::*;
+use crate::siren::SirenShape;
 use crate::train::{FitConfig, Trainer};
 use crate::{DomaError, Result};
-use burn::module::Module;
 
 /// What to run.
 #[derive(Clone, Debug)]
@@ -72,13 +76,13 @@ pub struct CurvePoint {
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct FluidRecord {
     /// `fluid`.
-    pub experiment: String,
+    pub experiment: Experiment,
     /// The clip's first frame.
     pub clip_start: usize,
     /// The clip's mean particle displacement (normalised units).
     pub motion: f64,
     /// The model's paper name.
-    pub variant: String,
+    pub variant: ModelName,
     /// Hidden width.
     pub hidden: usize,
     /// Iterations.
@@ -118,13 +122,12 @@ pub fn run(
     mut on_skip: impl FnMut(usize, f64),
 ) -> Result<Vec<FluidRecord>> {
     let device = job.backend.device()?;
-    let ad = device.clone().autodiff();
     if job.clip_len < 2 || job.step == 0 {
         return Err(DomaError::InvalidConfig(
             "clips need at least 2 frames and a step of at least 1".into(),
         ));
     }
-    let total = crate::experiments::meshes::load_sequence(&job.data, None, None, 1)?
+    let total = load_sequence(&job.data, None, None, 1)?
         .trajectories
         .frames();
     let starts: Vec<usize> = match &job.clips {
@@ -158,12 +161,11 @@ pub fn run(
         );
         for &model in &job.models {
             for &hidden in &job.widths {
-                let config =
-                    FitConfig::new(DomaFieldConfig::new(Variant::Trans).with_hidden(hidden))
-                        .with_iterations(job.iterations)
-                        .with_jacobian(crate::jacobian::JacobianKind::Analytic)
-                        .with_seed(job.seed)
-                        .with_quiet(job.quiet);
+                let shape = SirenShape::new().with_hidden(hidden);
+                let config = FitConfig::new(model.config(clip.frames(), shape))
+                    .with_iterations(job.iterations)
+                    .with_jacobian(JacobianKind::Analytic)
+                    .with_seed(job.seed);
                 let clip_run = ClipRun {
                     job,
                     start,
@@ -174,20 +176,7 @@ pub fn run(
                     test: &test,
                     device: &device,
                 };
-                let r = match model {
-                    AlignModel::Dpf => clip_run.fit(
-                        DpfConfig::new(clip.frames())
-                            .with_hidden(hidden)
-                            .init(job.seed, &ad),
-                        &config,
-                    )?,
-                    AlignModel::Trans => clip_run.fit(config.field.init(job.seed, &ad), &config)?,
-                    AlignModel::Affinity => {
-                        let mut c = config.clone();
-                        c.field.variant = Variant::Affinity;
-                        clip_run.fit(c.field.init(job.seed, &ad), &c)?
-                    }
-                };
+                let r = clip_run.fit(&config)?;
                 on_run(&r);
                 records.push(r);
             }
@@ -211,29 +200,30 @@ struct ClipRun<'a> {
 impl ClipRun<'_> {
     /// Fits `field` to the training half (recording the learning curve if asked) and
     /// scores it on the held-out half.
-    fn fit<M: MotionField + Module>(&self, field: M, config: &FitConfig) -> Result<FluidRecord> {
+    fn fit(&self, config: &FitConfig) -> Result<FluidRecord> {
         let mut curve = Vec::new();
-        let fitted = Trainer::new(field, config, self.train, self.device)?.run_observed(
-            self.job.eval_every,
-            |r, f| {
-                curve.push(CurvePoint {
-                    iteration: r.iteration + 1,
-                    train_epe_x1e4: evaluate_epe(&f, self.train, self.device)? * EPE_SCALE,
-                    test_epe_x1e4: evaluate_epe(&f, self.test, self.device)? * EPE_SCALE,
-                });
-                Ok(())
-            },
-        )?;
+        let trainer = Trainer::from_config(config, self.train, self.device)?;
+        let fitted =
+            trainer
+                .progress(!self.job.quiet)
+                .run_observed(self.job.eval_every, |r, f| {
+                    curve.push(CurvePoint {
+                        iteration: r.iteration + 1,
+                        train_epe_x1e4: evaluate_epe(&f, self.train, self.device)? * EPE_SCALE,
+                        test_epe_x1e4: evaluate_epe(&f, self.test, self.device)? * EPE_SCALE,
+                    });
+                    Ok(())
+                })?;
         Ok(FluidRecord {
-            experiment: "fluid".into(),
+            experiment: Experiment::Fluid,
             clip_start: self.start,
             motion: self.motion,
-            variant: self.model.paper_name().into(),
+            variant: self.model.name(),
             hidden: self.hidden,
             iters: self.job.iterations,
             epe_x1e4: evaluate_epe(&fitted.field, self.test, self.device)? * EPE_SCALE,
             params: fitted.field.param_count(),
-            checkpoint_bytes: encode_checkpoint(fitted.field, Precision::F32)?.len() as u64,
+            checkpoint_bytes: fitted.field.encode(Precision::F32)?.len() as u64,
             seconds: fitted.seconds,
             curve,
         })
@@ -245,10 +235,10 @@ pub fn table(records: &[FluidRecord]) -> String {
     let mut widths: Vec<usize> = records.iter().map(|r| r.hidden).collect();
     widths.sort_unstable();
     widths.dedup();
-    let mut models: Vec<&str> = Vec::new();
+    let mut models: Vec<ModelName> = Vec::new();
     for r in records {
-        if !models.contains(&r.variant.as_str()) {
-            models.push(&r.variant);
+        if !models.contains(&r.variant) {
+            models.push(r.variant);
         }
     }
     let clips = {

@@ -10,7 +10,7 @@
 //! authors' cat photograph is not available; the colours come from a procedural image
 //! (rings and a checkerboard), which only matters for the pictures.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -21,10 +21,13 @@ use crate::Result;
 use crate::backend::BackendKind;
 use crate::data::Trajectories;
 use crate::data::mesh::as_points;
+use crate::experiments::Experiment;
+use crate::field::model::ModelName;
 use crate::field::{DomaFieldConfig, Variant};
 use crate::metrics::{EPE_SCALE, epe, predict};
 use crate::plot::{Canvas, Rgb, ramp};
-use crate::train::{FitConfig, fit};
+use crate::prelude::*;
+use crate::train::{FitConfig, Trainer};
 
 /// The four 2-D motions.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -141,11 +144,11 @@ pub struct Image2dJob {
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Image2dRecord {
     /// `image2d`.
-    pub experiment: String,
+    pub experiment: Experiment,
     /// The motion.
     pub motion: Motion2d,
     /// The variant's paper name.
-    pub variant: String,
+    pub variant: ModelName,
     /// Hidden width.
     pub hidden: usize,
     /// Grid resolution.
@@ -200,12 +203,13 @@ pub fn run(job: &Image2dJob, mut on_run: impl FnMut(&Image2dRecord)) -> Result<V
         }
         for &variant in &job.variants {
             for &hidden in &job.widths {
-                let config = FitConfig::new(DomaFieldConfig::new(variant).with_hidden(hidden))
+                let config = FitConfig::doma(DomaFieldConfig::new(variant).with_hidden(hidden))
                     .with_iterations(job.iterations)
                     .with_jacobian(crate::jacobian::JacobianKind::Analytic)
-                    .with_seed(job.seed)
-                    .with_quiet(job.quiet);
-                let fitted = fit(&config, &train, &device)?;
+                    .with_seed(job.seed);
+                let fitted = Trainer::from_config(&config, &train, &device)?
+                    .progress(!job.quiet)
+                    .run()?;
                 let predicted = predict(&fitted.field, &test, &device)?;
                 let e = epe(&predicted, &test)?;
                 if let (Some(dir), true) = (&job.png_dir, Some(&hidden) == job.widths.iter().min())
@@ -221,14 +225,14 @@ pub fn run(job: &Image2dJob, mut on_run: impl FnMut(&Image2dRecord)) -> Result<V
                     )?;
                 }
                 let record = Image2dRecord {
-                    experiment: "image2d".into(),
+                    experiment: Experiment::Image2d,
                     motion,
-                    variant: variant.paper_name().into(),
+                    variant: ModelName::of_variant(variant),
                     hidden,
                     resolution: job.resolution,
                     iters: job.iterations,
                     epe_x1e4: e * EPE_SCALE,
-                    params: crate::field::MotionField::param_count(&fitted.field),
+                    params: fitted.field.param_count(),
                     seconds: fitted.seconds,
                 };
                 on_run(&record);
@@ -241,10 +245,10 @@ pub fn run(job: &Image2dJob, mut on_run: impl FnMut(&Image2dRecord)) -> Result<V
 
 /// Tab. A7's layout: one row per (variant, width), one column per motion.
 pub fn table(records: &[Image2dRecord]) -> String {
-    let mut rows: Vec<(String, usize)> = Vec::new();
+    let mut rows: Vec<(ModelName, usize)> = Vec::new();
     for r in records {
-        if !rows.contains(&(r.variant.clone(), r.hidden)) {
-            rows.push((r.variant.clone(), r.hidden));
+        if !rows.contains(&(r.variant, r.hidden)) {
+            rows.push((r.variant, r.hidden));
         }
     }
     let mut out = format!("{:<22}", "EPE (x1e-4)");
@@ -264,9 +268,4 @@ pub fn table(records: &[Image2dRecord]) -> String {
         out += "\n";
     }
     out
-}
-
-/// Where `doma image2d` writes its pictures by default.
-pub fn default_png_dir() -> PathBuf {
-    Path::new("results").join("image2d")
 }

@@ -6,30 +6,29 @@
 //! faces, `.anime`, `.npy`/`.npz`, a clip `A..B` with a stride) and write one
 //! [`MeshRecord`] per run.
 
-use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use rand::SeedableRng;
-use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::backend::BackendKind;
-use crate::checkpoint::{Precision, encode_checkpoint};
-use crate::data::mesh::{
-    SurfaceSamples, TriMesh, as_points, read_obj, unique_edges, warp_mesh_sequence,
-};
-use crate::data::{Trajectories, anime, npy, traj};
+use crate::checkpoint::Precision;
+use crate::data::Trajectories;
+use crate::data::mesh::{SurfaceSamples, TriMesh, as_points, unique_edges};
+use crate::data::sequence::{Sequence, split_indices};
+use crate::experiments::Experiment;
 use crate::field::baselines::Baseline;
-use crate::field::baselines::bone_cloud::BoneCloudConfig;
-use crate::field::baselines::dct::DctConfig;
-use crate::field::baselines::mlp::MlpConfig;
 use crate::field::dpf::DpfConfig;
+use crate::field::model::{Model, ModelConfig, ModelName};
 use crate::field::{DomaFieldConfig, MotionField, Variant};
 use crate::jacobian::JacobianKind;
 use crate::metrics::{EPE_SCALE, chamfer_with_normals, evaluate_epe, std_edges, std_vertices};
+use crate::prelude::*;
 use crate::register::{RegistrationConfig, RegistrationTask, register};
-use crate::train::{FitConfig, Fitted, fit, fit_model};
+use crate::siren::SirenShape;
+use crate::train::{FitConfig, Fitted, Trainer};
+use crate::warp::warp_mesh_sequence;
 use crate::{DomaError, Result};
 
 /// Chamfer distances are reported ×1e4 (REFERENCE §7).
@@ -37,109 +36,17 @@ pub const CD_SCALE: f64 = 1e4;
 /// STD(E) and STD(V) are reported ×1e3: millimetres for data in metres, as in Tab. 3.
 pub const STD_SCALE: f64 = 1e3;
 
-/// An animated mesh: vertex trajectories `[T, V, 3]` and, when known, the triangles.
-#[derive(Clone, Debug)]
-pub struct Sequence {
-    /// A short name for the records (the file stem).
-    pub name: String,
-    /// The vertices' positions in every frame.
-    pub trajectories: Trajectories,
-    /// The triangles (vertex order = trajectory point order).
-    pub faces: Option<Vec<[u32; 3]>>,
-    /// The normalisation applied: `x' = (x − center) / scale`.
-    pub center: [f32; 3],
-    /// See `center`.
-    pub scale: f32,
-}
-
-/// Loads `data` (`.traj`, `.anime`, `.npy`, `.npz`, or a folder of OBJ frames with equal
-/// vertex counts); the faces come from `mesh` (an OBJ
-/// whose vertices are the points in order), else from the `.anime`, else from a sibling
-/// `NAME.obj` next to a `.traj`. Then keeps `frames` every `stride`-th frame, and
-/// normalises the coordinates ([`Trajectories::normalized`]: frame 0's bounding box centred,
-/// its longest side spanning `[−1, 1]`); every metric is in these units. An OBJ whose
-/// vertex count differs from the point count is refused, naming the file.
-pub fn load_sequence(
-    data: &Path,
-    mesh: Option<&Path>,
-    frames: Option<Range<usize>>,
-    stride: usize,
-) -> Result<Sequence> {
-    let ext = data
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .unwrap_or_default();
-    let (trajectories, mut faces) = match ext.as_str() {
-        _ if data.is_dir() => {
-            let (t, f) = crate::data::mesh::read_obj_sequence(data)?;
-            (t, Some(f))
-        }
-        "traj" => (traj::read_traj(data)?, None),
-        "anime" => {
-            let a = anime::read_anime(data)?;
-            (a.trajectories, Some(a.faces))
-        }
-        "npy" => (npy::read_npy_trajectories(data)?, None),
-        "npz" => (npy::read_npz_trajectories(data, None)?, None),
-        _ => {
-            return Err(DomaError::Malformed {
-                path: data.to_path_buf(),
-                reason:
-                    "unknown format: expected .traj, .anime, .npy, .npz or a folder of .obj frames"
-                        .into(),
-            });
-        }
-    };
-    let sibling = data.with_extension("obj");
-    let obj = mesh
-        .map(Path::to_path_buf)
-        .or_else(|| (faces.is_none() && ext == "traj" && sibling.is_file()).then_some(sibling));
-    if let Some(obj) = obj {
-        let m = read_obj(&obj)?;
-        if m.vertices.len() != trajectories.points() {
-            return Err(DomaError::Malformed {
-                path: obj,
-                reason: format!(
-                    "{} vertices, but {} has {} points",
-                    m.vertices.len(),
-                    data.display(),
-                    trajectories.points()
-                ),
-            });
-        }
-        faces = Some(m.faces);
-    }
-    let trajectories = match frames {
-        Some(r) => trajectories.select_frames(r, stride)?,
-        None if stride > 1 => trajectories.select_frames(0..trajectories.frames(), stride)?,
-        None => trajectories,
-    };
-    // Fit and measure in normalised coordinates, so that one ω₀ suits every user's units.
-    let (trajectories, center, scale) = trajectories.normalized();
-    let name = data
-        .file_stem()
-        .map_or("data".into(), |s| s.to_string_lossy().into_owned());
-    Ok(Sequence {
-        name,
-        trajectories,
-        faces,
-        center,
-        scale,
-    })
-}
-
 /// One run's record (one JSON object per run); the fields that do not apply are omitted.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct MeshRecord {
     /// `novel_points` or `mesh_alignment`.
-    pub experiment: String,
+    pub experiment: Experiment,
     /// The sequence (file stem) and clip.
     pub sequence: String,
-    /// The model: a DOMA variant's paper name or `DPF`.
-    pub variant: String,
+    /// The model: a DOMA variant's or a baseline's paper name.
+    pub variant: ModelName,
     /// The regulariser: `none`, `a`, `h` or `ah`.
-    pub reg: String,
+    pub reg: AlignReg,
     /// Iterations.
     pub iters: usize,
     /// The backend.
@@ -212,26 +119,12 @@ pub struct NovelPointsJob {
     pub samples: usize,
     /// The backend.
     pub backend: BackendKind,
-    /// How `L_H` would be differentiated (unused without a regulariser; kept for speed).
+    /// The Jacobian method of the SIREN models (their fused value path; `L_H` is off).
     pub jacobian: JacobianKind,
     /// Seeds the split, the weights and the samples.
     pub seed: u64,
     /// No progress bars.
     pub quiet: bool,
-}
-
-/// A seeded split of `n` indices into `round(fraction · n)` and the rest.
-pub fn split_indices(n: usize, fraction: f64, seed: u64) -> Result<(Vec<usize>, Vec<usize>)> {
-    let n_train = (fraction * n as f64).round() as usize;
-    if !(fraction > 0.0 && fraction < 1.0) || n_train == 0 || n_train >= n {
-        return Err(DomaError::InvalidConfig(format!(
-            "a training fraction of {fraction} does not split {n} points into two non-empty sets"
-        )));
-    }
-    let mut order: Vec<usize> = (0..n).collect();
-    order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
-    let test = order.split_off(n_train);
-    Ok((order, test))
 }
 
 /// Runs `novel_points`: one record per variant, `on_run` after each.
@@ -253,13 +146,6 @@ pub fn novel_points(
         .map(|f| TriMesh::new(as_points(data.frame(0)), f.clone()))
         .transpose()
         .map_err(DomaError::InvalidData)?;
-    let mut records = Vec::new();
-    let ad = device.clone().autodiff();
-    let base = FitConfig::new(DomaFieldConfig::new(Variant::Trans))
-        .with_iterations(job.iterations)
-        .with_jacobian(job.jacobian)
-        .with_seed(job.seed)
-        .with_quiet(job.quiet);
     let ctx = NovelContext {
         job,
         test: &test,
@@ -267,47 +153,51 @@ pub fn novel_points(
         canonical: canonical.as_ref(),
         device: &device,
     };
-    for &variant in &job.variants {
-        let mut config = base.clone();
-        config.field = DomaFieldConfig::new(variant);
-        let fitted = fit(&config, &train, &device)?;
-        let record = ctx.record(variant.paper_name(), fitted)?;
-        on_run(&record);
-        records.push(record);
-    }
-    for &baseline in &job.baselines {
-        let config = base.clone().with_learning_rate(baseline.learning_rate());
-        let t = data.frames();
-        let record = match baseline {
-            Baseline::Mlp | Baseline::MlpPe6 => {
-                let octaves = if baseline == Baseline::MlpPe6 { 6 } else { 0 };
-                let model = MlpConfig::new()
-                    .with_pe_octaves(octaves)
-                    .init(job.seed, &ad);
-                ctx.record(
-                    baseline.paper_name(),
-                    fit_model(model, &config, &train, &device)?,
-                )?
-            }
-            Baseline::DctNerf => {
-                let model = DctConfig::new(t).init(job.seed, &ad);
-                ctx.record(
-                    baseline.paper_name(),
-                    fit_model(model, &config, &train, &device)?,
-                )?
-            }
-            Baseline::BoneCloud => {
-                let model = BoneCloudConfig::new(t).init(train.frame(0), job.seed, &ad);
-                ctx.record(
-                    baseline.paper_name(),
-                    fit_model(model, &config, &train, &device)?,
-                )?
-            }
-        };
+    let mut records = Vec::new();
+    for model in job.models(data.frames()) {
+        let config = job.fit_config(model);
+        let fitted = Trainer::from_config(&config, &train, &device)?
+            .progress(!job.quiet)
+            .run()?;
+        let record = ctx.record(config.model.name(), fitted)?;
         on_run(&record);
         records.push(record);
     }
     Ok(records)
+}
+
+impl NovelPointsJob {
+    /// The models to fit, in the table's order: the variants, then the baselines for a
+    /// `frames`-frame sequence.
+    pub fn models(&self, frames: usize) -> Vec<ModelConfig> {
+        let variants = self.variants.iter().map(|&v| ModelConfig::doma(v));
+        variants
+            .chain(self.baselines.iter().map(|b| b.config(frames)))
+            .collect()
+    }
+
+    /// The fit of `model`: the job's budget and seed, the baseline's learning rate, and
+    /// the job's Jacobian method where it applies (a SIREN model); the others are
+    /// differentiated by autodiff, the only method that applies to them.
+    pub fn fit_config(&self, model: ModelConfig) -> FitConfig {
+        let jacobian = if model.is_siren() {
+            self.jacobian
+        } else {
+            JacobianKind::Autodiff
+        };
+        let lr = match &model {
+            ModelConfig::BoneCloud(_) => Baseline::BoneCloud.learning_rate(),
+            _ => 1e-4,
+        };
+        let base = match &model {
+            ModelConfig::Doma(field) => FitConfig::doma(field.clone()),
+            other => FitConfig::new(other.clone()),
+        };
+        base.with_iterations(self.iterations)
+            .with_learning_rate(lr)
+            .with_jacobian(jacobian)
+            .with_seed(self.seed)
+    }
 }
 
 /// What every `novel_points` fit is measured against.
@@ -321,11 +211,7 @@ struct NovelContext<'a> {
 
 impl NovelContext<'_> {
     /// EPE on the held-out points, CD/CDN of the warped canonical mesh, size: one record.
-    fn record<M: MotionField + burn::module::Module>(
-        &self,
-        name: &str,
-        fitted: Fitted<M>,
-    ) -> Result<MeshRecord> {
+    fn record(&self, name: ModelName, fitted: Fitted<Model>) -> Result<MeshRecord> {
         let (job, device) = (self.job, self.device);
         let epe = evaluate_epe(&fitted.field, self.test, device)?;
         let (cd, cdn) = match self.canonical {
@@ -338,10 +224,10 @@ impl NovelContext<'_> {
             None => (None, None),
         };
         Ok(MeshRecord {
-            experiment: "novel_points".into(),
+            experiment: Experiment::NovelPoints,
             sequence: job.sequence.name.clone(),
-            variant: name.into(),
-            reg: "none".into(),
+            variant: name,
+            reg: AlignReg::None,
             iters: job.iterations,
             backend: job.backend,
             epe_x1e4: Some(epe * EPE_SCALE),
@@ -350,7 +236,7 @@ impl NovelContext<'_> {
             std_e: None,
             std_v: None,
             params: fitted.field.param_count(),
-            checkpoint_bytes: encode_checkpoint(fitted.field, Precision::F32)?.len() as u64,
+            checkpoint_bytes: fitted.field.encode(Precision::F32)?.len() as u64,
             seconds: fitted.seconds,
         })
     }
@@ -369,12 +255,22 @@ pub enum AlignModel {
 }
 
 impl AlignModel {
-    /// The paper's row name.
-    pub fn paper_name(self) -> &'static str {
+    /// The model with SIREN body `shape`, for a `frames`-frame sequence.
+    pub fn config(self, frames: usize, shape: SirenShape) -> ModelConfig {
+        let doma = |v| ModelConfig::Doma(DomaFieldConfig::new(v).with_shape(shape.clone()));
         match self {
-            AlignModel::Dpf => "DPF",
-            AlignModel::Trans => "DOMA-Trans",
-            AlignModel::Affinity => "DOMA-Affinity",
+            AlignModel::Dpf => ModelConfig::Dpf(DpfConfig::new(frames).with_shape(shape)),
+            AlignModel::Trans => doma(Variant::Trans),
+            AlignModel::Affinity => doma(Variant::Affinity),
+        }
+    }
+
+    /// The paper's row name.
+    pub fn name(self) -> ModelName {
+        match self {
+            AlignModel::Dpf => ModelName::Dpf,
+            AlignModel::Trans => ModelName::DomaTrans,
+            AlignModel::Affinity => ModelName::DomaAffinity,
         }
     }
 }
@@ -441,6 +337,18 @@ pub struct MeshAlignmentJob {
     pub samples: usize,
     /// The backend.
     pub backend: BackendKind,
+    /// No progress bars.
+    pub quiet: bool,
+}
+
+impl MeshAlignmentJob {
+    /// The model config of `model` at the job's SIREN shape, for `frames` frames.
+    pub fn model(&self, model: AlignModel, frames: usize) -> ModelConfig {
+        let shape = SirenShape::new()
+            .with_hidden(self.hidden)
+            .with_n_hidden(self.n_hidden);
+        model.config(frames, shape)
+    }
 }
 
 /// Runs `mesh_alignment`: one record per (model, regulariser).
@@ -484,37 +392,22 @@ pub fn mesh_alignment(
                 .with_aiap_weight(if aiap { job.aiap_weight } else { 0.0 })
                 .with_smoothness_weight(if h { job.h_weight } else { 0.0 });
             let seed = job.config.seed;
-            // Each model is fitted, evaluated and sized by the same code.
-            let (warped, params, bytes, seconds) = match model {
-                AlignModel::Dpf => {
-                    let field = DpfConfig::new(data.frames())
-                        .with_hidden(job.hidden)
-                        .with_n_hidden(job.n_hidden)
-                        .init(seed, &ad);
-                    let f = register(field, &task, &config, &device)?;
-                    summarise(f.field, f.seconds, &template, data.frames(), &device)?
-                }
-                AlignModel::Trans | AlignModel::Affinity => {
-                    let variant = if model == AlignModel::Trans {
-                        Variant::Trans
-                    } else {
-                        Variant::Affinity
-                    };
-                    let field = DomaFieldConfig::new(variant)
-                        .with_hidden(job.hidden)
-                        .with_n_hidden(job.n_hidden)
-                        .init(seed, &ad);
-                    let f = register(field, &task, &config, &device)?;
-                    summarise(f.field, f.seconds, &template, data.frames(), &device)?
-                }
-            };
+            let field = job.model(model, data.frames()).init(seed, &[], &ad);
+            let fitted = register(field, &task, &config, &device, !job.quiet)?;
+            let (warped, params, bytes, seconds) = summarise(
+                fitted.field,
+                fitted.seconds,
+                &template,
+                data.frames(),
+                &device,
+            )?;
             let (cd, cdn) = mesh_chamfer(&warped, data, &faces, job.samples, seed)?;
             let record = MeshRecord {
-                experiment: "mesh_alignment".into(),
+                experiment: Experiment::MeshAlignment,
                 sequence: seq.name.clone(),
-                variant: model.paper_name().into(),
-                reg: reg.name().into(),
-                iters: job.config.iterations,
+                variant: model.name(),
+                reg,
+                iters: job.config.schedule.iterations,
                 backend: job.backend,
                 epe_x1e4: None,
                 cd_x1e4: Some(cd * CD_SCALE),
@@ -533,8 +426,8 @@ pub fn mesh_alignment(
 }
 
 /// The warped template in every frame, the parameter count and the checkpoint size.
-fn summarise<M: MotionField + burn::module::Module>(
-    field: M,
+fn summarise(
+    field: Model,
     seconds: f64,
     template: &TriMesh,
     frames: usize,
@@ -542,7 +435,7 @@ fn summarise<M: MotionField + burn::module::Module>(
 ) -> Result<(Trajectories, usize, u64, f64)> {
     let warped = warp_mesh_sequence(&field, template, frames, device)?;
     let params = field.param_count();
-    let bytes = encode_checkpoint(field, Precision::F32)?.len() as u64;
+    let bytes = field.encode(Precision::F32)?.len() as u64;
     Ok((warped, params, bytes, seconds))
 }
 
@@ -565,10 +458,7 @@ pub fn table(records: &[MeshRecord]) -> String {
         "seconds"
     );
     for r in records {
-        let reg = match r.reg.as_str() {
-            "none" => String::new(),
-            other => format!("-{}", other.to_uppercase()),
-        };
+        let reg = r.reg.suffix();
         out += &format!(
             "{:<22} {:>10} {:>10} {:>8} {:>9} {:>9} {:>10} {:>12} {:>9.1}\n",
             format!("{}{reg}", r.variant),
@@ -583,11 +473,6 @@ pub fn table(records: &[MeshRecord]) -> String {
         );
     }
     out
-}
-
-/// Writes the records as a JSON array, atomically.
-pub fn write_json(path: &Path, records: &[MeshRecord]) -> Result<()> {
-    crate::checkpoint::save_json(&records, path)
 }
 
 /// The default data of the mesh experiments: `data/cdp_male_wave.traj` in the crate.

@@ -5,7 +5,6 @@
 //! FLOPs count the matmuls only (`2·m·k·n` each), the same for both methods: the useful
 //! work of a SIREN with stacked tangents, not what a method happens to execute.
 
-use std::path::Path;
 use std::time::Instant;
 
 use burn::tensor::{Device, Tensor, TensorData};
@@ -38,10 +37,10 @@ pub enum BenchKind {
 pub struct BenchRow {
     /// `jacobian` or `fit_step`.
     pub kind: BenchKind,
-    /// The backend's name.
-    pub backend: String,
-    /// The Jacobian method's name.
-    pub method: String,
+    /// The backend.
+    pub backend: BackendKind,
+    /// The Jacobian method.
+    pub method: JacobianKind,
     /// Points whose Jacobian is taken (for `fit_step`, the smoothness points).
     pub points: usize,
     /// Milliseconds per step, the median after warm-up.
@@ -134,7 +133,7 @@ pub fn jacobian_row(
     let jac = method.method();
     let ms = median_ms(
         || {
-            let raw = field.raw_dual(x.clone(), 0.5, Some(jac.as_ref()));
+            let raw = field.raw_dual(x.clone(), 0.5, jac.as_ref());
             let tangent = raw.tangent.expect("a Jacobian method yields tangents");
             let l = loss::smoothness(tangent, SmoothnessNorm::Squared) + raw.value.mean();
             let grads = l.backward();
@@ -146,8 +145,8 @@ pub fn jacobian_row(
     )?;
     Ok(BenchRow {
         kind: BenchKind::Jacobian,
-        backend: backend.name().into(),
-        method: method.name().into(),
+        backend,
+        method,
         points,
         ms,
         gflops: siren_flops(4 * points, &widths()) / (ms * 1e6),
@@ -163,20 +162,21 @@ pub fn fit_step_row(
 ) -> Result<BenchRow> {
     let device = backend.device()?;
     let seq = benchmark_sequence(Motion::Rotation, 0)?;
-    let config = FitConfig::new(DomaFieldConfig::new(Variant::Affinity))
+    let config = FitConfig::doma(DomaFieldConfig::new(Variant::Affinity))
         .with_smoothness_weight(0.1)
-        .with_jacobian(method)
-        .with_quiet(true);
-    let field = config.field.init(0, &device.clone().autodiff());
-    let mut trainer = Trainer::new(field, &config, &seq.train, &device)?;
+        .with_jacobian(method);
+    let mut trainer = Trainer::from_config(&config, &seq.train, &device)?;
     // REFERENCE §4.2: min(1024, N) jittered training points, so 750 here.
     let n = seq.train.points();
-    let h_points = config.smoothness_sampling().0.map_or(n, |m| m.min(n));
+    let h_points = config
+        .smoothness_sampling
+        .max_points
+        .map_or(n, |m| m.min(n));
     let frames = seq.train.frames();
     let mut k = 0;
     let ms = median_ms(
         || {
-            let _ = trainer.step(k % frames, config.learning_rate);
+            let _ = trainer.step(k % frames, config.schedule.learning_rate);
             k += 1;
             sync(&device)
         },
@@ -186,8 +186,8 @@ pub fn fit_step_row(
     let flops = siren_flops(seq.train.points(), &widths()) + siren_flops(4 * h_points, &widths());
     Ok(BenchRow {
         kind: BenchKind::FitStep,
-        backend: backend.name().into(),
-        method: method.name().into(),
+        backend,
+        method,
         points: h_points,
         ms,
         gflops: flops / (ms * 1e6),
@@ -233,13 +233,6 @@ pub fn table(rows: &[BenchRow]) -> String {
         );
     }
     s
-}
-
-/// Writes the rows as a JSON array, atomically.
-pub fn write_json(path: &Path, rows: &[BenchRow]) -> Result<()> {
-    let text = serde_json::to_string_pretty(rows)
-        .map_err(|e| DomaError::InvalidData(format!("cannot serialise the rows: {e}")))?;
-    crate::io::write_atomic(path, text.as_bytes())
 }
 
 #[cfg(test)]

@@ -1,17 +1,16 @@
 //! The synthetic benchmark (paper Tab. 2): fit each variant to each synthetic motion
 //! and report the EPE on the held-out points.
 
-use std::path::Path;
-
 use serde::{Deserialize, Serialize};
 
+use crate::Result;
 use crate::backend::BackendKind;
 use crate::data::synthetic::{Motion, benchmark_sequence};
 use crate::field::{DomaFieldConfig, Variant};
 use crate::jacobian::JacobianKind;
 use crate::metrics::{EPE_SCALE, evaluate_epe};
-use crate::train::{FitConfig, fit};
-use crate::{DomaError, Result};
+use crate::prelude::*;
+use crate::train::{FitConfig, Trainer};
 
 /// The regulariser of a run: the rows "", "-E" and "-H" of Tab. 2.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -81,13 +80,12 @@ impl SyntheticJob {
             Regularizer::H => (self.h_weight, 0.0),
             Regularizer::E => (0.0, self.e_weight),
         };
-        FitConfig::new(DomaFieldConfig::new(variant).with_hidden(self.hidden))
+        FitConfig::doma(DomaFieldConfig::new(variant).with_hidden(self.hidden))
             .with_iterations(self.iterations)
             .with_smoothness_weight(w_h)
             .with_elasticity_weight(w_e)
             .with_jacobian(self.jacobian)
             .with_seed(self.seed)
-            .with_quiet(self.quiet)
     }
 }
 
@@ -121,7 +119,10 @@ pub fn run(job: &SyntheticJob, mut on_run: impl FnMut(&SyntheticRun)) -> Result<
     for &motion in &job.motions {
         let seq = benchmark_sequence(motion, 0)?;
         for &variant in &job.variants {
-            let fitted = fit(&job.fit_config(variant), &seq.train, &device)?;
+            let config = job.fit_config(variant);
+            let fitted = Trainer::from_config(&config, &seq.train, &device)?
+                .progress(!job.quiet)
+                .run()?;
             let epe = evaluate_epe(&fitted.field, &seq.test, &device)?;
             let run = SyntheticRun {
                 motion,
@@ -177,11 +178,4 @@ pub fn table(runs: &[SyntheticRun]) -> String {
         out += "\n";
     }
     out
-}
-
-/// Writes the runs as a JSON array, atomically.
-pub fn write_json(path: &Path, runs: &[SyntheticRun]) -> Result<()> {
-    let text = serde_json::to_string_pretty(runs)
-        .map_err(|e| DomaError::InvalidData(format!("cannot serialise the runs: {e}")))?;
-    crate::io::write_atomic(path, text.as_bytes())
 }

@@ -4,7 +4,7 @@
 //! identity is added to `A`: the network has to learn `A ≈ I` (REFERENCE §2).
 
 use super::LocalAffine;
-use crate::jacobian::Dual;
+use crate::dual::Dual;
 
 /// Raw outputs per point.
 pub const OUTPUTS: usize = 12;

@@ -1,7 +1,7 @@
 //! The frame-wise DPF baseline (DESIGN §1, REFERENCE §2): one 3-D-input SIREN per frame,
 //! `g_k(x) = x + u_k(x)`, with no time input and nothing shared between frames.
 //!
-//! The `T` networks live in one module, one parameter per frame and layer. A fit step on
+//! The `T` networks live in one module, one [`Siren`] per frame. A fit step on
 //! frame `k` uses frame `k`'s parameters alone (one matmul per layer), so only they get a
 //! gradient and Adam leaves the other frames' weights and moments untouched, exactly as
 //! PyTorch's Adam skips the authors' separate nets. [`Dpf::warp_all`] evaluates every frame
@@ -16,29 +16,30 @@
 //! the authors'.
 
 use burn::config::Config;
-use burn::module::{Module, Param};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::module::Module;
+use burn::tensor::{Device, Tensor};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use super::{MotionField, Variant, WarpOutput};
-use crate::jacobian::{Dual, JacobianMethod};
-use crate::siren::{SirenConfig, SirenInitializer};
+use super::{MotionField, Variant};
+use crate::dual::Dual;
+use crate::jacobian::JacobianMethod;
+use crate::siren::{Siren, SirenConfig, SirenInitializer, SirenShape, WithSirenShape};
 
 /// The shape of a DPF model.
 #[derive(Config, Debug)]
 pub struct DpfConfig {
     /// The number of frames `T` (one SIREN each).
     pub frames: usize,
-    /// Hidden width `d`.
-    #[config(default = 128)]
-    pub hidden: usize,
-    /// Hidden sine layers `n` after the first.
-    #[config(default = 2)]
-    pub n_hidden: usize,
-    /// Sine frequency `ω₀`.
-    #[config(default = 30.0)]
-    pub omega: f64,
+    /// Each frame SIREN's width, depth and frequency.
+    #[config(default = "SirenShape::new()")]
+    pub shape: SirenShape,
+}
+
+impl WithSirenShape for DpfConfig {
+    fn shape_mut(&mut self) -> &mut SirenShape {
+        &mut self.shape
+    }
 }
 
 impl DpfConfig {
@@ -46,9 +47,7 @@ impl DpfConfig {
     pub fn siren(&self) -> SirenConfig {
         SirenConfig::new(3)
             .with_d_in(3)
-            .with_hidden(self.hidden)
-            .with_n_hidden(self.n_hidden)
-            .with_omega(self.omega)
+            .with_shape(self.shape.clone())
     }
 
     /// `T ×` the per-frame SIREN's parameters.
@@ -64,54 +63,26 @@ impl DpfConfig {
     pub fn init(&self, seed: u64, device: &Device) -> Dpf {
         assert!(self.frames > 0, "DPF needs at least one frame");
         let siren = self.siren();
+        let omega = self.shape.omega;
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let nets = (0..self.frames)
             .map(|_| {
-                let layers = SirenInitializer::new(self.omega).init(&siren, &mut rng);
-                FrameNet {
-                    weights: layers
-                        .iter()
-                        .map(|l| {
-                            Param::from_data(
-                                TensorData::new(l.weight.clone(), [l.fan_in, l.fan_out]),
-                                device,
-                            )
-                        })
-                        .collect(),
-                    biases: layers
-                        .iter()
-                        .map(|l| {
-                            Param::from_data(TensorData::new(l.bias.clone(), [l.fan_out]), device)
-                        })
-                        .collect(),
-                }
+                let layers = SirenInitializer::new(omega).init(&siren, &mut rng);
+                Siren::from_weights(&layers, omega, device)
             })
             .collect();
         Dpf {
             nets,
-            omega: self.omega,
             frames: self.frames,
         }
     }
 }
 
-/// One frame's SIREN `x ↦ u_k(x)`: per layer (sine layers first, output last) a
-/// `[fan_in, fan_out]` weight and a `[fan_out]` bias.
-#[derive(Module, Debug)]
-pub struct FrameNet {
-    /// The weights.
-    pub weights: Vec<Param<Tensor<2>>>,
-    /// The biases.
-    pub biases: Vec<Param<Tensor<1>>>,
-}
-
 /// `T` SIRENs `x ↦ u_k(x)`; the warp to frame `k` is `x + u_k(x)`.
 #[derive(Module, Debug)]
 pub struct Dpf {
-    /// One net per frame.
-    pub nets: Vec<FrameNet>,
-    /// The sine frequency `ω₀`.
-    pub omega: f64,
+    /// One SIREN per frame, input `x` (no time), output the displacement.
+    pub nets: Vec<Siren>,
     /// `T`.
     pub frames: usize,
 }
@@ -122,37 +93,30 @@ impl Dpf {
         crate::field::frame_of(t, self.frames)
     }
 
-    /// Frame `k`'s displacement `u_k(x)` on duals, `x: [N, 3]`.
-    pub fn displacement_dual(&self, x: Dual, k: usize) -> Dual {
-        let net = &self.nets[k];
-        let last = net.weights.len() - 1;
-        let mut h = x;
-        for (l, (w, b)) in net.weights.iter().zip(&net.biases).enumerate() {
-            h = h.linear(w.val(), Some(b.val()));
-            if l < last {
-                h = h.mul_scalar(self.omega).sin();
-            }
-        }
-        h
-    }
-
     /// Every frame's warp of the same points at once, `x: [N, 3]` → `[T, N, 3]`: the
     /// layers' weights stacked to `[T, d_in, d_out]`, one batched matmul per layer.
     pub fn warp_all(&self, x: Tensor<2>) -> Tensor<3> {
         let [n, _] = x.dims();
         let x3 = x.unsqueeze_dim::<3>(0).repeat_dim(0, self.frames); // [T, N, 3]
-        let layers = self.nets[0].weights.len();
+        let layers = |net: &Siren| -> Vec<burn::nn::Linear> {
+            net.sine.iter().chain([&net.output]).cloned().collect()
+        };
+        let per_frame: Vec<Vec<burn::nn::Linear>> = self.nets.iter().map(layers).collect();
+        let depth = per_frame[0].len();
+        let omega = self.nets[0].omega;
         let mut h = x3.clone();
-        for l in 0..layers {
-            let w = Tensor::stack(
-                self.nets.iter().map(|net| net.weights[l].val()).collect(),
+        for l in 0..depth {
+            let w = Tensor::stack(per_frame.iter().map(|f| f[l].weight.val()).collect(), 0);
+            let b: Tensor<2> = Tensor::stack(
+                per_frame
+                    .iter()
+                    .map(|f| f[l].bias.as_ref().expect("SIREN layers have a bias").val())
+                    .collect(),
                 0,
             );
-            let b: Tensor<2> =
-                Tensor::stack(self.nets.iter().map(|net| net.biases[l].val()).collect(), 0);
             h = h.matmul(w) + b.unsqueeze_dim::<3>(1);
-            if l + 1 < layers {
-                h = h.mul_scalar(self.omega).sin();
+            if l + 1 < depth {
+                h = h.mul_scalar(omega).sin();
             }
         }
         debug_assert_eq!(h.dims(), [self.frames, n, 3]);
@@ -161,32 +125,17 @@ impl Dpf {
 }
 
 impl MotionField for Dpf {
-    /// The raw output is the displacement `u_k(x)` of the frame nearest `t`. Any
-    /// `jacobian` method gets the forward mode on duals (the Analytic kernels are
-    /// SIREN-with-time specific).
-    fn raw_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> Dual {
-        let x = crate::field::spatial_input(x, jacobian);
-        self.displacement_dual(x, self.frame_of(t))
+    /// The raw output is the displacement `u_k(x)` of the frame nearest `t`: frame `k`'s
+    /// SIREN run through `method`, so Analytic's fused kernels serve DPF too (with Burn's
+    /// `sin` this baseline's steps were about 5× slower than a DOMA step of the same
+    /// width, all of it in `sinf`/`cosf`).
+    fn raw(&self, x: Dual, t: f64, method: &dyn JacobianMethod) -> Dual {
+        super::siren_raw(&self.nets[self.frame_of(t)], x, method, |x| x)
     }
 
     /// A displacement model: `A = I`, `u = raw`.
     fn head(&self) -> Variant {
         Variant::Trans
-    }
-
-    /// The value path of the fit loop: frame `k`'s sine layers through `method`'s
-    /// [`JacobianMethod::sine_layer`] (fused for [`crate::jacobian::Analytic`]; with
-    /// Burn's `sin` this baseline's steps were about 5× slower than a DOMA step of the
-    /// same width, all of it in `sinf`/`cosf`).
-    fn warp_values(&self, x: Tensor<2>, t: f64, method: &dyn JacobianMethod) -> WarpOutput {
-        let net = &self.nets[self.frame_of(t)];
-        let last = net.weights.len() - 1;
-        let mut h = x.clone();
-        for (w, b) in net.weights.iter().zip(&net.biases).take(last) {
-            h = method.sine_layer(h, w.val(), b.val(), self.omega);
-        }
-        let u = h.matmul(net.weights[last].val()) + net.biases[last].val().unsqueeze_dim::<2>(0);
-        crate::field::head_warp(Variant::Trans, x, Dual::constant(u), None)
     }
 
     fn param_count(&self) -> usize {

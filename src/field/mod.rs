@@ -2,12 +2,14 @@
 //! transformation `(A, u)`, so that `y = A x + u` (Eq. 4).
 //!
 //! The heads ([`trans`], [`se3`], [`scaled_se3`], [`affinity`]) are written once, on
-//! [`Dual`]s: with a [`JacobianMethod`] the warp's Jacobian `∂y/∂x` comes out for every
-//! variant; without one the same code is a plain forward pass.
+//! [`Dual`]s: with tangents from a [`JacobianMethod`] the warp's Jacobian `∂y/∂x` comes out
+//! for every variant; on plain values the same code is a plain forward pass.
+//! [`model::ModelConfig`] names every model, the DOMA variants and the baselines.
 
 pub mod affinity;
 pub mod baselines;
 pub mod dpf;
+pub mod model;
 pub mod rotation;
 pub mod scaled_se3;
 pub mod se3;
@@ -19,8 +21,9 @@ use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 use std::ops::{Add, Mul};
 
-use crate::jacobian::{Dual, JacobianMethod};
-use crate::siren::{Siren, SirenConfig};
+use crate::dual::Dual;
+use crate::jacobian::{Autodiff, JacobianMethod};
+use crate::siren::{Siren, SirenConfig, SirenShape, WithSirenShape};
 
 /// The DOMA variants, which differ in the degrees of freedom of `A` (Sec. 3.2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -88,7 +91,7 @@ impl Variant {
 
 impl std::fmt::Display for Variant {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
+        f.pad(self.name())
     }
 }
 
@@ -131,7 +134,7 @@ impl LocalAffine {
 }
 
 /// What a field evaluation returns: the raw network outputs and the warped points,
-/// each with spatial tangents when a Jacobian was requested.
+/// each with spatial tangents when they come from [`MotionField::warp_dual`].
 #[derive(Clone, Debug)]
 pub struct WarpOutput {
     /// The raw outputs `o = f(x, t)`, `[N, O]` (tangents: `∂o/∂x`, used by `L_H`).
@@ -141,44 +144,72 @@ pub struct WarpOutput {
 }
 
 /// A motion field: canonical points `x` at normalised time `t ∈ [-1, 1]` → positions.
+///
+/// Every model whose network is made of SIREN layers runs them through the
+/// [`JacobianMethod`] it is given, for values and for tangents alike. A model without
+/// SIREN layers (the MLP baselines, BoneCloud) can only be differentiated on duals: it
+/// accepts [general](JacobianMethod::is_general) methods alone
+/// ([`MotionField::accepts`]), and the fit refuses the others instead of substituting one.
 pub trait MotionField {
-    /// The raw network outputs `o = f(x, t)`, `[N, O]`, at `x: [N, 3]`; with `jacobian`
-    /// they carry their spatial tangents `∂o/∂x` (what `L_H` penalises).
-    fn raw_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> Dual;
+    /// The raw network outputs `o = f(x, t)`, `[N, O]`, at `x: [N, 3]` through `method`.
+    /// When `x` carries its spatial seed ([`Dual::seed_spatial`]), `o` carries `∂o/∂x`
+    /// (what `L_H` penalises, Eq. 13); on a constant `x` it is the value path, which a
+    /// method may fuse ([`crate::jacobian::Analytic`] does).
+    fn raw(&self, x: Dual, t: f64, method: &dyn JacobianMethod) -> Dual;
+
+    /// The raw outputs with their spatial tangents `∂o/∂x`.
+    fn raw_dual(&self, x: Tensor<2>, t: f64, method: &dyn JacobianMethod) -> Dual {
+        self.raw(Dual::seed_spatial(x), t, method)
+    }
+
+    /// The raw outputs alone, `[N, O]`.
+    fn raw_values(&self, x: Tensor<2>, t: f64, method: &dyn JacobianMethod) -> Tensor<2> {
+        self.raw(Dual::constant(x), t, method).value
+    }
 
     /// How the raw outputs become a local transformation `(A, u)` (Eq. 4): the DOMA
     /// field's variant; [`Variant::Trans`] (`A = I`, `u = raw`) for the displacement
     /// models (DPF, MLP, DCT-NeRF); [`Variant::Affinity`] for BoneCloud's blended map.
     fn head(&self) -> Variant;
 
-    /// Evaluates the field at `x: [N, 3]`, time `t`: the raw outputs through
-    /// [`MotionField::head`]. With `jacobian`, the outputs carry their spatial tangents.
-    fn warp_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> WarpOutput {
-        let raw = self.raw_dual(x.clone(), t, jacobian);
-        head_warp(self.head(), x, raw, jacobian)
+    /// Whether the model's network is made of SIREN layers (the default), which every
+    /// Jacobian method can differentiate.
+    fn has_siren_layers(&self) -> bool {
+        true
     }
 
-    /// Like `warp_dual(x, t, None)` (no tangents), but through `method`'s value path,
-    /// which a method may fuse ([`crate::jacobian::Analytic`] does). The fit loop uses it
-    /// for the trajectory loss.
-    fn warp_values(&self, x: Tensor<2>, t: f64, method: &dyn JacobianMethod) -> WarpOutput {
-        let _ = method;
-        self.warp_dual(x, t, None)
-    }
-
-    /// The local transformation `(A [N, 3, 3], u [N, 3])` at `x`, `t` (Eq. 4).
-    fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {
-        self.head()
-            .local_affine(self.raw_dual(x, t, None))
-            .matrices()
+    /// Whether `method` applies to this model: every method for a SIREN-based model,
+    /// only the general ones for the others.
+    fn accepts(&self, method: &dyn JacobianMethod) -> bool {
+        self.has_siren_layers() || method.is_general()
     }
 
     /// The number of trainable parameters.
     fn param_count(&self) -> usize;
 
-    /// The warped positions `y(x, t)`, `[N, 3]`.
+    /// The warp `y = A x + u` at `x: [N, 3]`, time `t` (Eq. 4), with the tangents of the
+    /// raw outputs and of `y` (`∂y/∂x`, the elasticity loss's input) computed by `method`.
+    fn warp_dual(&self, x: Tensor<2>, t: f64, method: &dyn JacobianMethod) -> WarpOutput {
+        let raw = self.raw_dual(x.clone(), t, method);
+        head_warp(self.head(), x, raw)
+    }
+
+    /// The warp without tangents, through `method`'s value path. The fit loop uses it for
+    /// the trajectory loss.
+    fn warp_values(&self, x: Tensor<2>, t: f64, method: &dyn JacobianMethod) -> WarpOutput {
+        let raw = Dual::constant(self.raw_values(x.clone(), t, method));
+        head_warp(self.head(), x, raw)
+    }
+
+    /// The local transformation `(A [N, 3, 3], u [N, 3])` at `x`, `t` (Eq. 4).
+    fn local_transform(&self, x: Tensor<2>, t: f64) -> (Tensor<3>, Tensor<2>) {
+        let raw = Dual::constant(self.raw_values(x, t, &Autodiff));
+        self.head().local_affine(raw).matrices()
+    }
+
+    /// The warped positions `y(x, t)`, `[N, 3]`, by Burn's plain ops (evaluation).
     fn warp(&self, x: Tensor<2>, t: f64) -> Tensor<2> {
-        self.warp_dual(x, t, None).warped.value
+        self.warp_values(x, t, &Autodiff).warped.value
     }
 }
 
@@ -192,26 +223,32 @@ pub fn frame_of(t: f64, frames: usize) -> usize {
     k.clamp(0.0, (frames - 1) as f64) as usize
 }
 
-/// `x` as a dual: seeded for spatial tangents when a Jacobian is requested.
-pub fn spatial_input(x: Tensor<2>, jacobian: Option<&dyn JacobianMethod>) -> Dual {
-    match jacobian {
-        Some(_) => Dual::seed_spatial(x),
-        None => Dual::constant(x),
-    }
+/// The warp `y = A x + u` of raw outputs `raw` at `x` through `head` (Eq. 4). When `raw`
+/// carries tangents, `x` is seeded with its own (`∂x/∂x = I`) so that `y` gets `∂y/∂x`.
+pub fn head_warp(head: Variant, x: Tensor<2>, raw: Dual) -> WarpOutput {
+    let x = if raw.has_tangent() {
+        Dual::seed_spatial(x)
+    } else {
+        Dual::constant(x)
+    };
+    let warped = head.local_affine(raw.clone()).apply(x);
+    WarpOutput { raw, warped }
 }
 
-/// The warp `y = A x + u` of raw outputs `raw` at `x` through `head` (Eq. 4), with the
-/// tangents of `x` when a Jacobian is requested.
-pub fn head_warp(
-    head: Variant,
-    x: Tensor<2>,
-    raw: Dual,
-    jacobian: Option<&dyn JacobianMethod>,
-) -> WarpOutput {
-    let warped = head
-        .local_affine(raw.clone())
-        .apply(spatial_input(x, jacobian));
-    WarpOutput { raw, warped }
+/// A SIREN's raw outputs at `x` through `method`: its forward mode when `x` carries
+/// tangents, its value path otherwise. `input` builds the network's input from `x`'s
+/// values (`[x, t]` for DOMA, `x` for DPF).
+pub fn siren_raw(
+    siren: &Siren,
+    x: Dual,
+    method: &dyn JacobianMethod,
+    input: impl FnOnce(Tensor<2>) -> Tensor<2>,
+) -> Dual {
+    if x.has_tangent() {
+        method.forward_dual(siren, input(x.value))
+    } else {
+        Dual::constant(method.forward(siren, input(x.value)))
+    }
 }
 
 /// `[x, t]`: appends a constant time column to `x: [N, 3]`.
@@ -221,29 +258,26 @@ pub fn time_input(x: Tensor<2>, t: f64) -> Tensor<2> {
     Tensor::cat(vec![x, time], 1)
 }
 
-/// The shape of a DOMA field: its variant and its SIREN.
+/// The shape of a DOMA field: its variant (the head, Eq. 4, 10–12) and its SIREN body.
 #[derive(Config, Debug)]
 pub struct DomaFieldConfig {
     /// The head.
     pub variant: Variant,
-    /// Hidden width `d`.
-    #[config(default = 128)]
-    pub hidden: usize,
-    /// Hidden sine layers `n` after the first.
-    #[config(default = 2)]
-    pub n_hidden: usize,
-    /// Sine frequency `ω₀`.
-    #[config(default = 30.0)]
-    pub omega: f64,
+    /// The SIREN's width, depth and frequency.
+    #[config(default = "SirenShape::new()")]
+    pub shape: SirenShape,
+}
+
+impl WithSirenShape for DomaFieldConfig {
+    fn shape_mut(&mut self) -> &mut SirenShape {
+        &mut self.shape
+    }
 }
 
 impl DomaFieldConfig {
-    /// The SIREN of this field (input `[x, y, z, t]`).
+    /// The SIREN of this field (input `[x, y, z, t]`, output the head's raw parameters).
     pub fn siren(&self) -> SirenConfig {
-        SirenConfig::new(self.variant.outputs())
-            .with_hidden(self.hidden)
-            .with_n_hidden(self.n_hidden)
-            .with_omega(self.omega)
+        SirenConfig::new(self.variant.outputs()).with_shape(self.shape.clone())
     }
 
     /// A field initialised from `seed` on `device`.
@@ -266,21 +300,12 @@ pub struct DomaField {
 }
 
 impl MotionField for DomaField {
-    fn raw_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> Dual {
-        let xt = time_input(x, t);
-        match jacobian {
-            Some(method) => method.forward_dual(&self.siren, xt),
-            None => Dual::constant(self.siren.forward(xt)),
-        }
+    fn raw(&self, x: Dual, t: f64, method: &dyn JacobianMethod) -> Dual {
+        siren_raw(&self.siren, x, method, |x| time_input(x, t))
     }
 
     fn head(&self) -> Variant {
         self.variant
-    }
-
-    fn warp_values(&self, x: Tensor<2>, t: f64, method: &dyn JacobianMethod) -> WarpOutput {
-        let raw = Dual::constant(method.forward(&self.siren, time_input(x.clone(), t)));
-        head_warp(self.variant, x, raw, None)
     }
 
     fn param_count(&self) -> usize {

@@ -2,7 +2,7 @@
 //! with the exact layout of the authors' code (REFERENCE §2.1), written on duals so
 //! that its Jacobian comes out in forward mode.
 
-use crate::jacobian::Dual;
+use crate::dual::Dual;
 use std::ops::{Mul, Sub};
 
 /// The smallest norm that [`normalize`] divides by (PyTorch's `F.normalize` default).

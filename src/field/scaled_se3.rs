@@ -3,7 +3,7 @@
 //! `s = softplus(o[0])` (β = 1), `Q` is the Gram–Schmidt of `o[1..7]` and `u = o[7..10]`.
 
 use super::{LocalAffine, rotation};
-use crate::jacobian::Dual;
+use crate::dual::Dual;
 use std::ops::Mul;
 
 /// Raw outputs per point.

@@ -4,7 +4,7 @@
 //! `u = o[6..9]`.
 
 use super::{LocalAffine, rotation};
-use crate::jacobian::Dual;
+use crate::dual::Dual;
 
 /// Raw outputs per point.
 pub const OUTPUTS: usize = 9;

@@ -1,7 +1,7 @@
 //! DOMA-Trans (Eq. 10): `y = x + u(x, t)`; `A = I`, 3 raw outputs.
 
 use super::LocalAffine;
-use crate::jacobian::Dual;
+use crate::dual::Dual;
 
 /// Raw outputs per point.
 pub const OUTPUTS: usize = 3;

@@ -8,10 +8,9 @@
 //! plug in without touching it.
 
 pub mod analytic;
-mod dual;
 
+pub use crate::dual::Dual;
 pub use analytic::Analytic;
-pub use dual::Dual;
 
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
@@ -33,14 +32,11 @@ pub trait JacobianMethod: std::fmt::Debug + Send + Sync {
     /// tangents `[3, N, O]` with respect to the three spatial inputs.
     fn forward_dual(&self, siren: &Siren, xt: Tensor<2>) -> Dual;
 
-    /// One value-only sine layer `sin(ω (h W + b))` (Eq. 1), `h: [N, fan_in]`,
-    /// `w: [fan_in, fan_out]`. The default is Burn's ops; a method may fuse it. Models
-    /// built from bare weights rather than a [`Siren`] (DPF's frame nets) call it, so
-    /// that they get the same kernels as the DOMA fields they are compared with.
-    fn sine_layer(&self, h: Tensor<2>, w: Tensor<2>, b: Tensor<1>, omega: f64) -> Tensor<2> {
-        (h.matmul(w) + b.unsqueeze_dim::<2>(0))
-            .mul_scalar(omega)
-            .sin()
+    /// Whether the method works for any model written on [`Dual`]s (automatic forward
+    /// mode), or only for SIREN layers (the hand-derived kernels). A model without SIREN
+    /// layers accepts general methods alone ([`crate::field::MotionField::accepts`]).
+    fn is_general(&self) -> bool {
+        false
     }
 }
 
@@ -57,6 +53,10 @@ impl JacobianMethod for Autodiff {
 
     fn forward_dual(&self, siren: &Siren, xt: Tensor<2>) -> Dual {
         siren.forward_dual(Dual::seed_spatial(xt))
+    }
+
+    fn is_general(&self) -> bool {
+        true
     }
 }
 
@@ -90,6 +90,6 @@ impl JacobianKind {
 
 impl std::fmt::Display for JacobianKind {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
+        f.pad(self.name())
     }
 }

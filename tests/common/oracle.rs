@@ -2,6 +2,7 @@
 //! per output channel) and central finite differences.
 
 use burn::tensor::{Device, Tensor};
+use doma::prelude::*;
 
 use super::{random_points, rel_err, tensor2, to_vec};
 use doma::field::{DomaField, DomaFieldConfig, MotionField, Variant};
@@ -26,7 +27,11 @@ fn pick(
     which: Output,
     jac: Option<&dyn JacobianMethod>,
 ) -> (Tensor<2>, Option<Tensor<3>>) {
-    let out = field.warp_dual(x, T, jac);
+    // No method: the plain forward pass (no tangents).
+    let out = match jac {
+        Some(method) => field.warp_dual(x, T, method),
+        None => field.warp_values(x, T, &Autodiff),
+    };
     let d = match which {
         Output::Raw => out.raw,
         Output::Warp => out.warped,
@@ -141,7 +146,7 @@ pub fn jacobian_loss(
     method: &dyn JacobianMethod,
     device: &Device,
 ) -> Tensor<1> {
-    let out = field.warp_dual(tensor2(x.to_vec(), [N, 3], device), T, Some(method));
+    let out = field.warp_dual(tensor2(x.to_vec(), [N, 3], device), T, method);
     let mut l = loss::smoothness(out.raw.tangent.unwrap(), SmoothnessNorm::Squared);
     if elastic {
         l = l + loss::elasticity(out.warped.tangent.unwrap());

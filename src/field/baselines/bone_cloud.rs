@@ -18,9 +18,10 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::ops::Mul;
 
+use crate::dual::Dual;
 use crate::field::rotation::gram_schmidt;
 use crate::field::{MotionField, Variant};
-use crate::jacobian::{Dual, JacobianMethod};
+use crate::jacobian::JacobianMethod;
 
 /// The shape of a BoneCloud model.
 #[derive(Config, Debug)]
@@ -125,13 +126,24 @@ impl BoneCloud {
     }
 }
 
-impl MotionField for BoneCloud {
+impl BoneCloud {
     /// The raw outputs are the blended `A` (row-major) and `u` at the frame nearest `t`.
-    fn raw_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> Dual {
-        let x = crate::field::spatial_input(x, jacobian);
+    fn raw_on_duals(&self, x: Dual, t: f64) -> Dual {
         let w = self.skinning_weights(x);
         let (rot, trans) = self.bone_transforms(self.frame_of(t));
         Dual::cat(vec![w.clone().linear(rot, None), w.linear(trans, None)])
+    }
+}
+
+impl MotionField for BoneCloud {
+    /// Forward mode on duals (the method is a general one: [`MotionField::accepts`]).
+    fn raw(&self, x: Dual, t: f64, _general: &dyn JacobianMethod) -> Dual {
+        self.raw_on_duals(x, t)
+    }
+
+    /// No SIREN layers: forward mode on duals, so general methods only.
+    fn has_siren_layers(&self) -> bool {
+        false
     }
 
     /// Linear blend skinning is a blended local affine map.

@@ -14,8 +14,9 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 
 use super::mlp::{Mlp, MlpConfig};
+use crate::dual::Dual;
 use crate::field::MotionField;
-use crate::jacobian::{Dual, JacobianMethod};
+use crate::jacobian::JacobianMethod;
 
 /// The shape of a DCT-NeRF model.
 #[derive(Config, Debug)]
@@ -105,13 +106,24 @@ impl DctNerf {
     }
 }
 
-impl MotionField for DctNerf {
+impl DctNerf {
     /// The raw output is the displacement `u(x, k)` at the frame nearest `t`.
-    fn raw_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> Dual {
-        let device = x.device();
-        let input = crate::field::spatial_input(x, jacobian);
-        let coefficients = self.mlp.forward_dual(input);
+    fn raw_on_duals(&self, x: Dual, t: f64) -> Dual {
+        let device = x.value.device();
+        let coefficients = self.mlp.forward_dual(x);
         coefficients.linear(self.basis_matrix(self.frame_of(t), &device), None)
+    }
+}
+
+impl MotionField for DctNerf {
+    /// Forward mode on duals (the method is a general one: [`MotionField::accepts`]).
+    fn raw(&self, x: Dual, t: f64, _general: &dyn JacobianMethod) -> Dual {
+        self.raw_on_duals(x, t)
+    }
+
+    /// No SIREN layers: forward mode on duals, so general methods only.
+    fn has_siren_layers(&self) -> bool {
+        false
     }
 
     /// A displacement model: `A = I`, `u = raw`.

@@ -11,12 +11,13 @@
 use burn::config::Config;
 use burn::module::Module;
 use burn::nn::Linear;
-use burn::tensor::{Device, Tensor};
+use burn::tensor::Device;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use crate::dual::Dual;
 use crate::field::{MotionField, time_input};
-use crate::jacobian::{Dual, JacobianMethod};
+use crate::jacobian::JacobianMethod;
 use crate::siren::{LayerWeights, linear_from};
 
 /// The shape of an MLP-ReLU baseline.
@@ -148,11 +149,21 @@ impl Mlp {
 }
 
 impl MotionField for Mlp {
-    /// The raw output is the displacement `o = MLP(γ([x, t]))`.
-    fn raw_dual(&self, x: Tensor<2>, t: f64, jacobian: Option<&dyn JacobianMethod>) -> Dual {
-        let xt = time_input(x, t);
-        let input = crate::field::spatial_input(xt, jacobian);
+    /// The raw output is the displacement `o = MLP(γ([x, t]))`, in forward mode on duals
+    /// (the method is a general one: [`MotionField::accepts`]).
+    fn raw(&self, x: Dual, t: f64, _general: &dyn JacobianMethod) -> Dual {
+        let xt = time_input(x.value.clone(), t);
+        let input = if x.has_tangent() {
+            Dual::seed_spatial(xt)
+        } else {
+            Dual::constant(xt)
+        };
         self.forward_dual(input)
+    }
+
+    /// No SIREN layers: forward mode on duals, so general methods only.
+    fn has_siren_layers(&self) -> bool {
+        false
     }
 
     /// A displacement model: `A = I`, `u = raw`.

@@ -42,6 +42,17 @@ impl Baseline {
         }
     }
 
+    /// The model of this baseline for a `frames`-frame sequence, with the paper's sizes.
+    pub fn config(self, frames: usize) -> super::model::ModelConfig {
+        use super::model::ModelConfig;
+        match self {
+            Baseline::Mlp => ModelConfig::Mlp(mlp::MlpConfig::new()),
+            Baseline::MlpPe6 => ModelConfig::Mlp(mlp::MlpConfig::new().with_pe_octaves(6)),
+            Baseline::DctNerf => ModelConfig::DctNerf(dct::DctConfig::new(frames)),
+            Baseline::BoneCloud => ModelConfig::BoneCloud(bone_cloud::BoneCloudConfig::new(frames)),
+        }
+    }
+
     /// Adam's learning rate (REFERENCE §5: 1e-3 for BoneCloud, 1e-4 otherwise).
     pub fn learning_rate(self) -> f64 {
         match self {

@@ -171,10 +171,6 @@ impl JacobianMethod for Analytic {
         "analytic"
     }
 
-    fn sine_layer(&self, h: Tensor<2>, w: Tensor<2>, b: Tensor<1>, omega: f64) -> Tensor<2> {
-        sine_layer(h, w, b, omega)
-    }
-
     fn forward(&self, siren: &Siren, xt: Tensor<2>) -> Tensor<2> {
         let mut h = xt;
         for layer in &siren.sine {

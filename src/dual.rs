@@ -248,11 +248,6 @@ impl Dual {
         }
     }
 
-    /// Drops the tangents.
-    pub fn without_tangent(self) -> Self {
-        Dual::constant(self.value)
-    }
-
     /// The Jacobian as a `[N, C, 3]` tensor (`J[n, c, k] = ∂value[n, c] / ∂x_k`), or
     /// `None` if no tangents were carried.
     pub fn jacobian(&self) -> Option<Tensor<3>> {

@@ -1,0 +1,72 @@
+//! `doma bench`: the speed table (Jacobian step and training step per backend and method).
+
+use std::path::PathBuf;
+
+use crate::Result;
+use crate::backend::{BackendKind, wgpu_available};
+use crate::cli::{Selection, check_output_folder, selection};
+use crate::experiments::speed::{self, BenchJob};
+use crate::jacobian::JacobianKind;
+
+/// The flags of `doma bench` (and `cargo run --example jacobian_speed`).
+#[derive(clap::Parser, Debug, Clone)]
+#[command(about = "Time the Jacobian step and the training step per backend and Jacobian method")]
+pub struct BenchArgs {
+    /// The backends to time (comma-separated: flex, ndarray, wgpu; `all`: flex, ndarray
+    /// and wgpu when an adapter exists).
+    #[arg(long, default_value = "flex", value_parser = selection::<BackendKind>)]
+    pub backend: Selection<BackendKind>,
+    /// The Jacobian methods to time (comma-separated: autodiff, analytic; or all).
+    #[arg(long, default_value = "all", value_parser = selection::<JacobianKind>)]
+    pub jacobian: Selection<JacobianKind>,
+    /// Point counts of the `jacobian` rows, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1024,16384", value_parser = clap::value_parser!(u64).range(1..))]
+    pub points: Vec<u64>,
+    /// Untimed warm-up steps per row.
+    #[arg(long, default_value_t = 5)]
+    pub warmup: u64,
+    /// Timed steps per row; the median is reported.
+    #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps: u64,
+    /// Also write one JSON record per row (kind, backend, method, points, ms, gflops).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+impl BenchArgs {
+    /// The library job these flags describe (`all` skips wgpu without an adapter).
+    pub fn job(&self) -> BenchJob {
+        let mut backends = self.backend.items.clone();
+        if self.backend.all && !wgpu_available() {
+            eprintln!("no wgpu adapter: skipping wgpu");
+            backends.retain(|&b| b != BackendKind::Wgpu);
+        }
+        BenchJob {
+            backends,
+            methods: self.jacobian.items.clone(),
+            points: self.points.iter().map(|&p| p as usize).collect(),
+            warmup: self.warmup as usize,
+            steps: self.steps as usize,
+        }
+    }
+}
+
+/// Times every row, then prints the table.
+pub fn run(args: &BenchArgs) -> Result<()> {
+    if let Some(path) = &args.json {
+        check_output_folder(path)?;
+    }
+    let rows = speed::run(&args.job(), |r| {
+        eprintln!(
+            "{:?} {} {} {} points: {:.2} ms",
+            r.kind, r.backend, r.method, r.points, r.ms
+        )
+    })?;
+    println!();
+    print!("{}", speed::table(&rows));
+    if let Some(path) = &args.json {
+        crate::checkpoint::save_json(&rows, path)?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,324 @@
+//! The `doma` command line, one module per subcommand, shared by the binary and the
+//! examples (`cargo run --example synthetic -- --help` takes the same flags as
+//! `doma synthetic --help`). Each module holds its clap arguments, the mapping from
+//! flags to a library job, and the printing; the work is in [`crate::experiments`] and
+//! [`crate::run`].
+
+pub mod bench;
+pub mod eval;
+pub mod fit;
+pub mod fluid;
+pub mod image2d;
+pub mod info;
+pub mod mesh_alignment;
+pub mod novel_points;
+pub mod plot;
+pub mod synthetic;
+pub mod warp;
+
+use std::path::{Path, PathBuf};
+
+use clap::{Parser, Subcommand, ValueEnum};
+
+use crate::backend::BackendKind;
+use crate::{DomaError, Result};
+
+/// DOMA motion fields (CVPR 2024) on Burn: fit SIREN motion fields to point trajectories.
+#[derive(Parser, Debug)]
+#[command(name = "doma", version, about)]
+pub struct Cli {
+    /// The subcommand.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Fit the synthetic benchmark (paper Tab. 2) and print the EPE table.
+    Synthetic(synthetic::SyntheticArgs),
+    /// Time the Jacobian step and the training step per backend and Jacobian method.
+    Bench(bench::BenchArgs),
+    /// Fit 25 % of an animated mesh's vertices, predict the rest (paper Tab. 1): EPE, CD, CDN.
+    NovelPoints(novel_points::NovelPointsArgs),
+    /// Align the frame-0 template to every frame with guidance keypoints (paper Tab. 3).
+    MeshAlignment(mesh_alignment::MeshAlignmentArgs),
+    /// DPF vs Trans vs Affinity on 10-frame clips of a fluid simulation (supplement Tab. A8).
+    Fluid(fluid::FluidArgs),
+    /// Trans vs Affinity on a deforming 2-D pixel grid at widths 32/64/128 (supplement Tab. A7).
+    Image2d(image2d::Image2dArgs),
+    /// Fit a motion field to your own data into a run folder (resumable).
+    Fit(fit::FitArgs),
+    /// Print the metrics of a fitted run, on its held-out points or on new data.
+    Eval(eval::EvalArgs),
+    /// Warp a canonical mesh through a fitted run and write an OBJ sequence.
+    Warp(warp::WarpArgs),
+    /// Print a run's model, parameter count, checkpoint size and data shape.
+    Info(info::InfoArgs),
+    /// Write PNG plots of a run (loss, per-frame EPE, 3-view error scatters) to RUN/plots/.
+    Plot(plot::PlotArgs),
+}
+
+impl Command {
+    /// Runs the subcommand.
+    pub fn run(self) -> Result<()> {
+        match self {
+            Command::Synthetic(a) => synthetic::run(&a),
+            Command::Bench(a) => bench::run(&a),
+            Command::NovelPoints(a) => novel_points::run(&a),
+            Command::MeshAlignment(a) => mesh_alignment::run(&a),
+            Command::Fluid(a) => fluid::run(&a),
+            Command::Image2d(a) => image2d::run(&a),
+            Command::Fit(a) => fit::run(&a),
+            Command::Eval(a) => eval::run(&a),
+            Command::Warp(a) => warp::run(&a),
+            Command::Info(a) => info::run(&a),
+            Command::Plot(a) => plot::run(&a),
+        }
+    }
+}
+
+/// Sets up the process for the CLI and the examples: glibc's allocator for training
+/// loops, the default signal disposition on a closed pipe (`doma eval RUN | head` exits
+/// quietly, as Unix tools do), and Burn's default device ([`crate::backend::pin_default_device`]).
+///
+/// # Safety
+/// Call it first in `main`, before any other thread exists (it sets an environment
+/// variable and a signal disposition).
+pub unsafe fn init_process() {
+    crate::backend::tune_allocator();
+    // SAFETY: restoring the default disposition of a signal; the caller guarantees that
+    // no other thread exists yet.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+        crate::backend::pin_default_device();
+    }
+}
+
+/// The compute backend of a subcommand that runs on one device.
+#[derive(clap::Args, Debug, Clone)]
+pub struct DeviceArgs {
+    /// The compute backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    pub backend: BackendKind,
+}
+
+/// The flags every experiment shares: backend, seed, progress and the JSON records.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ExperimentArgs {
+    /// The compute backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    pub backend: BackendKind,
+    /// Seed of the split, the weights, the samples and the frame order.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// No progress bars.
+    #[arg(long)]
+    pub quiet: bool,
+    /// Also write one JSON record per run to this file (atomically).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+impl ExperimentArgs {
+    /// Fails before minutes of work when the JSON file's folder does not exist.
+    pub fn check_json(&self) -> Result<()> {
+        match &self.json {
+            Some(path) => check_output_folder(path),
+            None => Ok(()),
+        }
+    }
+
+    /// Writes `records` to the JSON file, if one was asked for, and says so.
+    pub fn write_json<T: serde::Serialize>(&self, records: &T) -> Result<()> {
+        if let Some(path) = &self.json {
+            crate::checkpoint::save_json(records, path)?;
+            eprintln!("wrote {}", path.display());
+        }
+        Ok(())
+    }
+}
+
+/// Fails early when `path`'s folder does not exist, before minutes of work.
+pub fn check_output_folder(path: &Path) -> Result<()> {
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
+    if let Some(dir) = dir
+        && !dir.is_dir()
+    {
+        return Err(DomaError::Usage(format!(
+            "{}: the folder does not exist",
+            dir.display()
+        )));
+    }
+    Ok(())
+}
+
+/// A comma-separated list of a library enum's values, or `all` of them.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Selection<T> {
+    /// The values, in the order given (`all`: the enum's order).
+    pub items: Vec<T>,
+    /// Whether `all` was given.
+    pub all: bool,
+}
+
+/// The clap value parser of a [`Selection`]: `a,b,c` or `all`.
+pub fn selection<T: ValueEnum + Clone + Send + Sync + 'static>(
+    s: &str,
+) -> std::result::Result<Selection<T>, String> {
+    if s.trim() == "all" {
+        return Ok(Selection {
+            items: T::value_variants().to_vec(),
+            all: true,
+        });
+    }
+    let items = s
+        .split(',')
+        .map(|part| T::from_str(part.trim(), true))
+        .collect::<std::result::Result<Vec<T>, String>>()?;
+    if items.is_empty() {
+        return Err("an empty list".into());
+    }
+    Ok(Selection { items, all: false })
+}
+
+/// A finite, non-negative float.
+pub fn non_negative(s: &str) -> std::result::Result<f64, String> {
+    let v: f64 = s.parse().map_err(|_| format!("`{s}` is not a number"))?;
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("`{s}` must be finite and non-negative"))
+    }
+}
+
+/// A fraction strictly between 0 and 1.
+pub fn fraction(s: &str) -> std::result::Result<f64, String> {
+    let v: f64 = s.parse().map_err(|_| format!("`{s}` is not a number"))?;
+    if v > 0.0 && v < 1.0 {
+        Ok(v)
+    } else {
+        Err(format!("`{s}` must be strictly between 0 and 1"))
+    }
+}
+
+/// Refuses a list of hidden widths that holds 0, naming the flag.
+pub fn check_widths(widths: &[usize]) -> Result<()> {
+    if widths.contains(&0) {
+        return Err(DomaError::Usage(
+            "--widths: a hidden width must be at least 1".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Which part of a sequence to use, and its faces (`fit`, `novel-points`, `mesh-alignment`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct ClipArgs {
+    /// An OBJ whose vertices are the points in order, for the faces (default: NAME.obj next
+    /// to a .traj, or the .anime's own faces).
+    #[arg(long)]
+    pub mesh: Option<PathBuf>,
+    /// A clip of the frames, `A..B` (B excluded) or `A..=B`.
+    #[arg(long, value_parser = crate::data::parse_frame_range)]
+    pub frames: Option<std::ops::Range<usize>>,
+    /// Keep every N-th frame of the clip.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub stride: Option<u64>,
+}
+
+/// Where a mesh experiment's sequence comes from (`novel-points`, `mesh-alignment`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct SequenceArgs {
+    /// The sequence: .traj, .anime, .npy, .npz or a folder of OBJ frames (default: the
+    /// crate's data/cdp_male_wave.traj).
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// The clip and the faces.
+    #[command(flatten)]
+    pub clip: ClipArgs,
+}
+
+impl SequenceArgs {
+    /// Loads the sequence (every `default_stride`-th frame unless `--stride` says
+    /// otherwise), named after the file, the clip and the stride.
+    pub fn load(&self, default_stride: usize) -> Result<crate::data::sequence::Sequence> {
+        let data = self
+            .data
+            .clone()
+            .unwrap_or_else(crate::experiments::meshes::default_data);
+        let clip = &self.clip;
+        let stride = clip.stride.map_or(default_stride, |s| s as usize);
+        let mut seq = crate::data::sequence::load_sequence(
+            &data,
+            clip.mesh.as_deref(),
+            clip.frames.clone(),
+            stride,
+        )?;
+        if let Some(r) = &clip.frames {
+            seq.name = format!("{}[{}..{}]", seq.name, r.start, r.end);
+        }
+        if stride > 1 {
+            seq.name = format!("{}/{stride}", seq.name);
+        }
+        Ok(seq)
+    }
+
+    /// Says what a mesh experiment is about to fit.
+    pub fn announce(
+        experiment: &str,
+        seq: &crate::data::sequence::Sequence,
+        iterations: u64,
+        backend: BackendKind,
+    ) {
+        eprintln!(
+            "{experiment} on {}: {} frames, {} vertices, {iterations} iterations, backend {backend}",
+            seq.name,
+            seq.trajectories.frames(),
+            seq.trajectories.points(),
+        );
+    }
+}
+
+/// The models of the Tab. 3 and Tab. A8 comparisons (`mesh-alignment`, `fluid`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct AlignModelArgs {
+    /// The models (comma-separated).
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "dpf,trans,affinity"
+    )]
+    pub model: Vec<crate::experiments::meshes::AlignModel>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::Variant;
+
+    #[test]
+    fn a_selection_is_a_list_or_all() {
+        let all = selection::<Variant>("all").unwrap();
+        assert_eq!((all.items, all.all), (Variant::ALL.to_vec(), true));
+        let two = selection::<Variant>("affinity,trans").unwrap();
+        assert_eq!(two.items, vec![Variant::Affinity, Variant::Trans]);
+        assert!(!two.all);
+        let err = selection::<Variant>("trans,bones").unwrap_err();
+        assert!(err.contains("bones"), "{err}");
+    }
+
+    #[test]
+    fn number_flags_are_checked() {
+        assert_eq!(non_negative("0.5"), Ok(0.5));
+        assert!(non_negative("-1").is_err() && non_negative("inf").is_err());
+        assert!(fraction("0").is_err() && fraction("1").is_err() && fraction("0.75").is_ok());
+        assert!(
+            check_widths(&[32, 0])
+                .unwrap_err()
+                .to_string()
+                .contains("--widths")
+        );
+    }
+}

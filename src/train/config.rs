@@ -1,0 +1,325 @@
+//! The recipe of a fit, saved as a run's `config.json`: the model, the optimiser, the
+//! schedule, the loss weights and the `L_H` sample points, each an explicit field.
+
+use std::path::Path;
+
+use burn::config::Config;
+use burn::optim::AdamConfig;
+use serde_json::Value;
+
+use crate::field::model::ModelConfig;
+use crate::field::{DomaFieldConfig, Variant};
+use crate::jacobian::JacobianKind;
+use crate::loss::SmoothnessNorm;
+use crate::{DomaError, Result};
+
+/// Adam as the authors run it: PyTorch's defaults, `ε = 1e-8`.
+pub fn default_adam() -> AdamConfig {
+    AdamConfig::new().with_epsilon(1e-8)
+}
+
+/// The learning-rate schedule: `iterations` passes over the frames, Adam's base rate, and
+/// the authors' LambdaLR (flat, then a linear decay).
+#[derive(Config, Debug, PartialEq)]
+pub struct ScheduleConfig {
+    /// Iterations (passes over all frames); the paper's budget is 1000.
+    #[config(default = 1000)]
+    pub iterations: usize,
+    /// Adam's base learning rate (1e-4 for the DOMA variants).
+    #[config(default = 1e-4)]
+    pub learning_rate: f64,
+    /// Iterations at the full learning rate before the linear decay (the authors' 10 for
+    /// a fit, 0 for a registration).
+    #[config(default = 10)]
+    pub lr_flat_iterations: usize,
+}
+
+impl ScheduleConfig {
+    /// The learning-rate factor during iteration `e` (0-based): 1 for the first
+    /// `lr_flat_iterations + 1` iterations, then a linear decay,
+    /// `1 − (e − flat) / (iterations − flat + 1)` (the authors' LambdaLR).
+    pub fn lr_factor(&self, e: usize) -> f64 {
+        let flat = self.lr_flat_iterations;
+        if e <= flat {
+            1.0
+        } else {
+            1.0 - (e - flat) as f64 / (self.iterations + 1 - flat) as f64
+        }
+    }
+
+    /// The learning rate during iteration `e`.
+    pub fn learning_rate_at(&self, e: usize) -> f64 {
+        self.learning_rate * self.lr_factor(e)
+    }
+
+    /// Refuses values that cannot run.
+    pub fn validate(&self) -> Result<()> {
+        if self.iterations == 0 {
+            return Err(DomaError::InvalidConfig(
+                "iterations must be at least 1".into(),
+            ));
+        }
+        if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
+            return Err(DomaError::InvalidConfig(format!(
+                "learning rate {} must be positive",
+                self.learning_rate
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The builders of a config that nests a [`ScheduleConfig`] (a fit's, a registration's),
+/// written once: `FitConfig::doma(field).with_iterations(200)`.
+pub trait WithSchedule: Sized {
+    /// The nested schedule.
+    fn schedule_mut(&mut self) -> &mut ScheduleConfig;
+
+    /// Sets the number of iterations.
+    fn with_iterations(mut self, iterations: usize) -> Self {
+        self.schedule_mut().iterations = iterations;
+        self
+    }
+
+    /// Sets Adam's base learning rate.
+    fn with_learning_rate(mut self, learning_rate: f64) -> Self {
+        self.schedule_mut().learning_rate = learning_rate;
+        self
+    }
+}
+
+impl WithSchedule for FitConfig {
+    fn schedule_mut(&mut self) -> &mut ScheduleConfig {
+        &mut self.schedule
+    }
+}
+
+/// Refuses the first of `weights` (name, value) that is negative or not finite.
+pub fn check_weights(weights: &[(&str, f64)]) -> Result<()> {
+    match weights.iter().find(|(_, w)| !(w.is_finite() && *w >= 0.0)) {
+        Some((name, w)) => Err(DomaError::InvalidConfig(format!(
+            "{name} {w} must be finite and non-negative"
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// The weights of the regularisers next to the trajectory L1.
+#[derive(Config, Debug, PartialEq)]
+pub struct LossConfig {
+    /// The weight `w_H` of the smoothness loss `L_H` (Eq. 13; 0 = off; the paper's "-H"
+    /// uses 0.1).
+    #[config(default = 0.0)]
+    pub smoothness_weight: f64,
+    /// The per-entry penalty of `L_H`.
+    #[config(default = "SmoothnessNorm::Squared")]
+    pub smoothness_norm: SmoothnessNorm,
+    /// The weight `w_E` of the elasticity loss (0 = off).
+    #[config(default = 0.0)]
+    pub elasticity_weight: f64,
+}
+
+impl LossConfig {
+    /// Refuses negative or non-finite weights.
+    pub fn validate(&self) -> Result<()> {
+        check_weights(&[
+            ("smoothness weight", self.smoothness_weight),
+            ("elasticity weight", self.elasticity_weight),
+        ])
+    }
+}
+
+/// Where `L_H` is evaluated: at most `max_points` training points (a fresh random subset
+/// each step; `None`: all of them), jittered by Gaussian noise of standard deviation
+/// `jitter`.
+#[derive(Config, Debug, PartialEq)]
+pub struct SmoothnessSampling {
+    /// At most this many points carry `L_H` (`None`: every training point).
+    pub max_points: Option<usize>,
+    /// The standard deviation of the jitter (0: the training points themselves).
+    #[config(default = 0.0)]
+    pub jitter: f64,
+}
+
+impl SmoothnessSampling {
+    /// The authors' choice for `variant` (REFERENCE §4.2): Affinity uses a random subset
+    /// of at most 1024 training points jittered by `σ = 0.1`; the other variants use every
+    /// training point, unjittered.
+    pub fn authors(variant: Variant) -> Self {
+        if variant == Variant::Affinity {
+            SmoothnessSampling::new()
+                .with_max_points(Some(1024))
+                .with_jitter(0.1)
+        } else {
+            SmoothnessSampling::new()
+        }
+    }
+
+    /// Refuses an empty sample or a negative jitter.
+    pub fn validate(&self) -> Result<()> {
+        if self.max_points == Some(0) {
+            return Err(DomaError::InvalidConfig(
+                "smoothness points must be at least 1".into(),
+            ));
+        }
+        if !(self.jitter.is_finite() && self.jitter >= 0.0) {
+            return Err(DomaError::InvalidConfig(format!(
+                "smoothness jitter {} must be finite and non-negative",
+                self.jitter
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Everything that defines a fit; saved as a run's `config.json` (under `fit`), so that
+/// any run can be reproduced from its folder. Display flags are not part of it.
+#[derive(Config, Debug)]
+pub struct FitConfig {
+    /// The model: a DOMA variant or a baseline.
+    pub model: ModelConfig,
+    /// Adam's hyper-parameters.
+    #[config(default = "default_adam()")]
+    pub optimizer: AdamConfig,
+    /// Iterations and learning rate.
+    #[config(default = "ScheduleConfig::new()")]
+    pub schedule: ScheduleConfig,
+    /// The regularisers' weights.
+    #[config(default = "LossConfig::new()")]
+    pub loss: LossConfig,
+    /// Where `L_H` is evaluated.
+    #[config(default = "SmoothnessSampling::new()")]
+    pub smoothness_sampling: SmoothnessSampling,
+    /// How the spatial Jacobian is computed (for `L_H`, the elasticity loss, and the
+    /// fused value path of SIREN layers).
+    #[config(default = "JacobianKind::Autodiff")]
+    pub jacobian: JacobianKind,
+    /// Seeds the initial weights, the frame order and the `L_H` samples.
+    #[config(default = 0)]
+    pub seed: u64,
+}
+
+impl FitConfig {
+    /// A fit of a DOMA field with the authors' `L_H` sampling for its variant
+    /// ([`SmoothnessSampling::authors`]).
+    pub fn doma(field: DomaFieldConfig) -> Self {
+        let sampling = SmoothnessSampling::authors(field.variant);
+        FitConfig::new(ModelConfig::Doma(field)).with_smoothness_sampling(sampling)
+    }
+
+    /// Sets the weight `w_H` of `L_H`.
+    pub fn with_smoothness_weight(mut self, weight: f64) -> Self {
+        self.loss.smoothness_weight = weight;
+        self
+    }
+
+    /// Sets the weight `w_E` of the elasticity loss.
+    pub fn with_elasticity_weight(mut self, weight: f64) -> Self {
+        self.loss.elasticity_weight = weight;
+        self
+    }
+
+    /// Refuses values that cannot run, and a Jacobian method that does not apply to the
+    /// model.
+    pub fn validate(&self) -> Result<()> {
+        self.schedule.validate()?;
+        self.loss.validate()?;
+        self.smoothness_sampling.validate()?;
+        self.model.validate()?;
+        self.model.check_jacobian(self.jacobian)
+    }
+
+    /// Reads a fit config from a JSON file that may give only some fields: the model
+    /// defaults to DOMA-Affinity with the analytic Jacobian (what `doma fit` fits), the
+    /// `L_H` sampling to the authors' for the file's variant, and every other missing field
+    /// to its default. Errors name the file.
+    pub fn load_partial(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| DomaError::io(path, e))?;
+        let malformed = |reason: String| DomaError::Malformed {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let given: Value =
+            serde_json::from_str(&text).map_err(|e| malformed(format!("not JSON: {e}")))?;
+        let Value::Object(fields) = &given else {
+            return Err(malformed("a fit config is a JSON object".into()));
+        };
+        let model = match fields.get("model") {
+            Some(m) => serde_json::from_value::<ModelConfig>(merge_model(m))
+                .map_err(|e| malformed(format!("model: {e}")))?,
+            None => ModelConfig::doma(Variant::Affinity),
+        };
+        let base = match &model {
+            ModelConfig::Doma(field) => FitConfig::doma(field.clone()),
+            other => FitConfig::new(other.clone()),
+        }
+        .with_jacobian(JacobianKind::Analytic);
+        let mut merged = serde_json::to_value(&base)
+            .map_err(|e| malformed(format!("cannot serialise the defaults: {e}")))?;
+        let mut given = given;
+        if let Value::Object(g) = &mut given {
+            g.remove("model");
+        }
+        merge(&mut merged, given);
+        let config: FitConfig =
+            serde_json::from_value(merged).map_err(|e| malformed(e.to_string()))?;
+        config.validate().map_err(|e| malformed(e.to_string()))?;
+        Ok(config)
+    }
+}
+
+/// A partial model config filled from its kind's defaults: `{"doma": {"variant": "trans"}}`
+/// gets the paper's SIREN shape, `{"dpf": {"frames": 10}}` the paper's DPF.
+fn merge_model(given: &Value) -> Value {
+    use crate::field::baselines::{bone_cloud::BoneCloudConfig, dct::DctConfig, mlp::MlpConfig};
+    use crate::field::dpf::DpfConfig;
+    let Some((kind, fields)) = given
+        .as_object()
+        .filter(|o| o.len() == 1)
+        .and_then(|o| o.iter().next())
+    else {
+        return given.clone();
+    };
+    let frames = fields
+        .get("frames")
+        .and_then(Value::as_u64)
+        .map(|f| f as usize);
+    let default = match (kind.as_str(), frames) {
+        ("doma", _) => {
+            let variant = fields
+                .get("variant")
+                .and_then(|v| serde_json::from_value::<Variant>(v.clone()).ok())
+                .unwrap_or(Variant::Affinity);
+            Some(ModelConfig::doma(variant))
+        }
+        ("mlp", _) => Some(ModelConfig::Mlp(MlpConfig::new())),
+        ("dpf", Some(t)) => Some(ModelConfig::Dpf(DpfConfig::new(t))),
+        ("dct-nerf", Some(t)) => Some(ModelConfig::DctNerf(DctConfig::new(t))),
+        ("bone-cloud", Some(t)) => Some(ModelConfig::BoneCloud(BoneCloudConfig::new(t))),
+        _ => None,
+    };
+    match default.and_then(|d| serde_json::to_value(d).ok()) {
+        Some(mut d) => {
+            merge(&mut d, given.clone());
+            d
+        }
+        None => given.clone(),
+    }
+}
+
+/// Overlays `given` on `base`, object by object.
+fn merge(base: &mut Value, given: Value) {
+    match (base, given) {
+        (Value::Object(b), Value::Object(g)) => {
+            for (k, v) in g {
+                match b.get_mut(&k) {
+                    Some(slot) => merge(slot, v),
+                    None => {
+                        b.insert(k, v);
+                    }
+                }
+            }
+        }
+        (slot, v) => *slot = v,
+    }
+}

@@ -1,0 +1,48 @@
+//! Fitting a motion field (REFERENCE §5): the recipe ([`FitConfig`]) and the one loop that
+//! runs it ([`Trainer`]).
+//!
+//! One *iteration* is one pass over all `T` frames in a fresh random order; each frame is
+//! one Adam step. What a step minimises is an [`Objective`]: the trajectory fit
+//! ([`TrajectoryObjective`]: the trajectory L1, plus `w_H · L_H` (Eq. 13) and `w_E ·`
+//! elasticity when their weights are positive) or the guided registration of Eq. 14
+//! ([`crate::register`]). The learning rate follows the authors' LambdaLR schedule
+//! ([`ScheduleConfig`]).
+
+mod config;
+mod objective;
+mod trainer;
+
+pub use config::{
+    FitConfig, LossConfig, ScheduleConfig, SmoothnessSampling, WithSchedule, check_weights,
+    default_adam,
+};
+pub use objective::{Objective, TrajectoryObjective};
+pub use trainer::{
+    Fitted, Hooks, IterationRecord, Outcome, RngState, Trainer, TrainerSnapshot, gaussian,
+};
+
+use burn::module::Module;
+use burn::tensor::Device;
+
+use crate::Result;
+use crate::data::Trajectories;
+use crate::field::MotionField;
+use crate::field::model::Model;
+
+/// Fits the model of `config` to the training trajectories `data` on `device` (any
+/// backend; autodiff is switched on here). No progress bar; see [`Trainer::progress`].
+pub fn fit(config: &FitConfig, data: &Trajectories, device: &Device) -> Result<Fitted<Model>> {
+    Trainer::from_config(config, data, device)?.run()
+}
+
+/// Fits `field` (parameters on `device.autodiff()`) by `config`'s objective, optimiser
+/// and schedule; `config.model` is not read. The returned field is a validation snapshot
+/// (no autodiff graph).
+pub fn fit_model<M: MotionField + Module>(
+    field: M,
+    config: &FitConfig,
+    data: &Trajectories,
+    device: &Device,
+) -> Result<Fitted<M>> {
+    Trainer::new(field, config, data, device)?.run()
+}
