@@ -41,32 +41,8 @@ pub fn load_sequence(
     frames: Option<Range<usize>>,
     stride: usize,
 ) -> Result<Sequence> {
-    let ext = data
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .unwrap_or_default();
-    let (trajectories, mut faces) = match ext.as_str() {
-        _ if data.is_dir() => {
-            let (t, f) = crate::data::mesh::read_obj_sequence(data)?;
-            (t, Some(f))
-        }
-        "traj" => (traj::read_traj(data)?, None),
-        "anime" => {
-            let a = anime::read_anime(data)?;
-            (a.trajectories, Some(a.faces))
-        }
-        "npy" => (npy::read_npy_trajectories(data)?, None),
-        "npz" => (npy::read_npz_trajectories(data, None)?, None),
-        _ => {
-            return Err(DomaError::Malformed {
-                path: data.to_path_buf(),
-                reason:
-                    "unknown format: expected .traj, .anime, .npy, .npz or a folder of .obj frames"
-                        .into(),
-            });
-        }
-    };
+    let (trajectories, mut faces) = read_any(data)?;
+    let ext = extension(data);
     let sibling = data.with_extension("obj");
     let obj = mesh
         .map(Path::to_path_buf)
@@ -102,6 +78,40 @@ pub fn load_sequence(
         faces,
         center,
         scale,
+    })
+}
+
+/// The file's extension, lower-case ("" if none).
+fn extension(data: &Path) -> String {
+    data.extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default()
+}
+
+/// Reads any supported sequence file (or OBJ folder) by its extension: the trajectories,
+/// and the faces where the format has them.
+pub fn read_any(data: &Path) -> Result<(Trajectories, Option<Vec<[u32; 3]>>)> {
+    Ok(match extension(data).as_str() {
+        _ if data.is_dir() => {
+            let (t, f) = super::mesh::read_obj_sequence(data)?;
+            (t, Some(f))
+        }
+        "traj" => (traj::read_traj(data)?, None),
+        "anime" => {
+            let a = anime::read_anime(data)?;
+            (a.trajectories, Some(a.faces))
+        }
+        "npy" => (npy::read_npy_trajectories(data)?, None),
+        "npz" => (npy::read_npz_trajectories(data, None)?, None),
+        _ => {
+            return Err(DomaError::Malformed {
+                path: data.to_path_buf(),
+                reason:
+                    "unknown format: expected .traj, .anime, .npy, .npz or a folder of .obj frames"
+                        .into(),
+            });
+        }
     })
 }
 

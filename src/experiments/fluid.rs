@@ -115,6 +115,32 @@ pub fn mean_motion(clip: &Trajectories) -> f64 {
         / n as f64
 }
 
+impl FluidJob {
+    /// The first frame of every clip: the explicit list, or `start, start + step, …`.
+    /// A listed clip that runs past the sequence is refused before any fit.
+    pub fn clip_starts(&self) -> Result<Vec<usize>> {
+        let total = load_sequence(&self.data, None, None, 1)?
+            .trajectories
+            .frames();
+        let len = self.clip_len;
+        Ok(match &self.clips {
+            Some(list) => {
+                if let Some(bad) = list.iter().find(|&&s| s + len > total) {
+                    return Err(DomaError::InvalidConfig(format!(
+                        "clip {bad}: frames {bad}..{} run past the sequence's {total} frames",
+                        bad + len
+                    )));
+                }
+                list.clone()
+            }
+            None if self.start + len <= total => {
+                (self.start..=total - len).step_by(self.step).collect()
+            }
+            None => Vec::new(),
+        })
+    }
+}
+
 /// Runs the job; `on_run` after each fit, `on_skip(start, motion)` for a trivial clip.
 pub fn run(
     job: &FluidJob,
@@ -127,24 +153,7 @@ pub fn run(
             "clips need at least 2 frames and a step of at least 1".into(),
         ));
     }
-    let total = load_sequence(&job.data, None, None, 1)?
-        .trajectories
-        .frames();
-    let starts: Vec<usize> = match &job.clips {
-        Some(list) => {
-            if let Some(bad) = list.iter().find(|&&s| s + job.clip_len > total) {
-                return Err(DomaError::InvalidConfig(format!(
-                    "clip {bad}: frames {bad}..{} run past the sequence's {total} frames",
-                    bad + job.clip_len
-                )));
-            }
-            list.clone()
-        }
-        None if job.start + job.clip_len <= total => (job.start..=total - job.clip_len)
-            .step_by(job.step)
-            .collect(),
-        None => Vec::new(),
-    };
+    let starts = job.clip_starts()?;
     let mut records = Vec::new();
     for start in starts {
         let clip =

@@ -176,14 +176,20 @@ fn render(title: &str, points: &[[f32; 3]], colours: &[Rgb]) -> Canvas {
     c
 }
 
+/// A seeded split of the pixels: a quarter for training, the rest held out.
+fn split_pixels(n: usize, seed: u64) -> (Vec<usize>, Vec<usize>) {
+    let mut order: Vec<usize> = (0..n).collect();
+    order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
+    let test = order.split_off(n / 4);
+    (order, test)
+}
+
 /// Runs the job; `on_run` after each fit.
 pub fn run(job: &Image2dJob, mut on_run: impl FnMut(&Image2dRecord)) -> Result<Vec<Image2dRecord>> {
     let device = job.backend.device()?;
     let pixels = grid(job.resolution);
-    let mut order: Vec<usize> = (0..pixels.len()).collect();
-    order.shuffle(&mut ChaCha8Rng::seed_from_u64(job.seed));
-    let n_train = pixels.len() / 4;
-    let (train_idx, test_idx) = order.split_at(n_train);
+    let (train_idx, test_idx) = split_pixels(pixels.len(), job.seed);
+    let (train_idx, test_idx) = (&train_idx[..], &test_idx[..]);
     let colours: Vec<Rgb> = test_idx
         .iter()
         .map(|&i| colour(pixels[i].0, pixels[i].1))

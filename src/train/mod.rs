@@ -9,17 +9,19 @@
 //! ([`ScheduleConfig`]).
 
 mod config;
+mod hooks;
 mod objective;
+mod record;
 mod trainer;
 
 pub use config::{
     FitConfig, LossConfig, ScheduleConfig, SmoothnessSampling, WithSchedule, check_weights,
     default_adam,
 };
+pub use hooks::Hooks;
 pub use objective::{Objective, TrajectoryObjective};
-pub use trainer::{
-    Fitted, Hooks, IterationRecord, Outcome, RngState, Trainer, TrainerSnapshot, gaussian,
-};
+pub use record::{Fitted, IterationRecord, Outcome, RngState, TrainerSnapshot, gaussian};
+pub use trainer::Trainer;
 
 use burn::module::Module;
 use burn::tensor::Device;

@@ -8,7 +8,7 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
 use super::config::{FitConfig, LossConfig, SmoothnessSampling};
-use super::trainer::gaussian;
+use super::record::gaussian;
 use crate::data::Trajectories;
 use crate::field::MotionField;
 use crate::jacobian::JacobianMethod;

@@ -2,183 +2,25 @@
 //! guard, checkpoints, resume, interrupts and observation for learning curves. Every fit
 //! in doma (the experiments, `doma fit`, the guided registration) runs through it.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::Instant;
 
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Device, Tensor};
 use indicatif::{ProgressBar, ProgressStyle};
+use rand::SeedableRng;
 use rand::seq::SliceRandom;
-use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde::{Deserialize, Serialize};
 
 use super::config::{FitConfig, ScheduleConfig};
+use super::hooks::Hooks;
 use super::objective::{Objective, TrajectoryObjective};
+use super::record::{Fitted, IterationRecord, Outcome, RngState, TrainerSnapshot};
 use crate::data::Trajectories;
 use crate::field::MotionField;
 use crate::field::model::Model;
 use crate::{DomaError, Result};
-
-/// The record of one iteration.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct IterationRecord {
-    /// 0-based iteration.
-    pub iteration: usize,
-    /// The learning rate used.
-    pub learning_rate: f64,
-    /// The primary loss (the trajectory L1; the guidance L1 of a registration), averaged
-    /// over the iteration's steps.
-    pub trajectory_loss: f64,
-    /// The whole step loss, averaged over the iteration's steps.
-    pub total_loss: f64,
-    /// Seconds since the fit started (over all resumed parts).
-    pub seconds: f64,
-}
-
-/// A fitted field and how the fit went.
-#[derive(Debug)]
-pub struct Fitted<M> {
-    /// The field, moved off the autodiff graph (ready for evaluation).
-    pub field: M,
-    /// One record per iteration.
-    pub history: Vec<IterationRecord>,
-    /// Wall time of the loop, seconds (over all resumed parts).
-    pub seconds: f64,
-    /// Optimiser steps taken (`iterations × T`).
-    pub steps: usize,
-}
-
-/// How [`Trainer::run_with`] ended.
-#[derive(Debug)]
-pub enum Outcome<M> {
-    /// Every iteration ran.
-    Finished(Fitted<M>),
-    /// Interrupted after this many iterations (a checkpoint was offered at that point).
-    Interrupted {
-        /// Iterations done.
-        iterations_done: usize,
-    },
-}
-
-/// A standard normal draw (Box–Muller), so that the samples are the same on every
-/// backend for a given seed.
-pub fn gaussian(rng: &mut impl Rng) -> f64 {
-    let u1: f64 = 1.0 - rng.random::<f64>(); // (0, 1]
-    let u2: f64 = rng.random();
-    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-}
-
-/// The position of a ChaCha8 stream, to resume it exactly.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct RngState {
-    /// The 32-byte key.
-    pub seed: [u8; 32],
-    /// The stream number.
-    pub stream: u64,
-    /// The word position.
-    pub word_pos: u128,
-}
-
-impl RngState {
-    fn of(rng: &ChaCha8Rng) -> Self {
-        RngState {
-            seed: rng.get_seed(),
-            stream: rng.get_stream(),
-            word_pos: rng.get_word_pos(),
-        }
-    }
-
-    fn restore(&self) -> ChaCha8Rng {
-        let mut rng = ChaCha8Rng::from_seed(self.seed);
-        rng.set_stream(self.stream);
-        rng.set_word_pos(self.word_pos);
-        rng
-    }
-}
-
-/// A fit's resumable state ([`Trainer::snapshot`]): with the config and the data, all a
-/// resumed fit needs to reach the same weights as an uninterrupted one.
-#[derive(Clone, Debug)]
-pub struct TrainerSnapshot {
-    /// The field's parameters, a burnpack.
-    pub model: Vec<u8>,
-    /// Adam's state, a burnpack.
-    pub optimizer: Vec<u8>,
-    /// The random stream.
-    pub rng: RngState,
-    /// Iterations done.
-    pub iterations_done: usize,
-    /// Their records.
-    pub history: Vec<IterationRecord>,
-}
-
-/// What [`Trainer::run_with`] does between iterations besides fitting.
-type ObserveFn<'a, M> = Box<dyn FnMut(&IterationRecord, M) -> Result<()> + 'a>;
-type CheckpointFn<'a> = Box<dyn FnMut(&TrainerSnapshot) -> Result<()> + 'a>;
-
-/// Hooks of a run: observation, checkpoints and interrupts.
-pub struct Hooks<'a, M> {
-    observe: Option<(usize, ObserveFn<'a, M>)>,
-    checkpoint: Option<(usize, CheckpointFn<'a>)>,
-    interrupt: Option<&'a AtomicBool>,
-    stop_after: Option<usize>,
-}
-
-impl<M> Default for Hooks<'_, M> {
-    fn default() -> Self {
-        Hooks {
-            observe: None,
-            checkpoint: None,
-            interrupt: None,
-            stop_after: None,
-        }
-    }
-}
-
-impl<'a, M> Hooks<'a, M> {
-    /// No hooks.
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    /// Calls `observe(record, field)` after every `every`-th iteration and after the last,
-    /// with a validation copy of the field (learning curves); `every = 0` never calls it.
-    pub fn observe(
-        mut self,
-        every: usize,
-        observe: impl FnMut(&IterationRecord, M) -> Result<()> + 'a,
-    ) -> Self {
-        if every > 0 {
-            self.observe = Some((every, Box::new(observe)));
-        }
-        self
-    }
-
-    /// Calls `save(snapshot)` after every `every`-th iteration, after the last, and when
-    /// interrupted.
-    pub fn checkpoint(
-        mut self,
-        every: usize,
-        save: impl FnMut(&TrainerSnapshot) -> Result<()> + 'a,
-    ) -> Self {
-        self.checkpoint = Some((every.max(1), Box::new(save)));
-        self
-    }
-
-    /// Stops after the iteration during which `flag` was set (e.g. by Ctrl-C).
-    pub fn interrupt(mut self, flag: &'a AtomicBool) -> Self {
-        self.interrupt = Some(flag);
-        self
-    }
-
-    /// Stops after `iterations` iterations in all (tests simulate an interrupt with it).
-    pub fn stop_after(mut self, iterations: usize) -> Self {
-        self.stop_after = Some(iterations);
-        self
-    }
-}
 
 /// The state of a fit in progress: the field on the autodiff device, its objective,
 /// Adam's state, the schedule and the random stream. [`Trainer::step`] is one optimiser
@@ -444,16 +286,6 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
                 .expect("a valid template"),
             )
             .with_position(self.history.len() as u64)
-    }
-}
-
-impl<M> Outcome<M> {
-    /// The fitted field of a run without interrupts.
-    fn expect_finished(self) -> Fitted<M> {
-        match self {
-            Outcome::Finished(f) => f,
-            Outcome::Interrupted { .. } => unreachable!("a run without hooks is not interrupted"),
-        }
     }
 }
 

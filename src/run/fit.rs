@@ -1,0 +1,107 @@
+//! `doma fit`: a new or resumed fit into a run folder.
+
+use std::sync::atomic::AtomicBool;
+
+use burn::tensor::Device;
+
+use super::{Report, RunConfig, RunDir, evaluate};
+use crate::checkpoint::{Precision, save_json};
+use crate::data::Trajectories;
+use crate::field::model::Model;
+use crate::io::write_atomic;
+use crate::train::{Fitted, Hooks, Outcome, Trainer};
+use crate::{DomaError, Result};
+
+/// How a fit ended.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FitOutcome {
+    /// All iterations ran; `model.bpk` and `report.json` are written.
+    Finished(Report),
+    /// Interrupted (e.g. Ctrl-C) after this many iterations; a checkpoint holds them.
+    Interrupted {
+        /// Iterations done and saved.
+        iterations_done: usize,
+    },
+}
+
+/// Fits `config` into `run` (a new or empty folder), or resumes the fit saved there when
+/// `config` is `None`. `interrupt` is polled after every iteration: when set, the fit saves
+/// a checkpoint and returns [`FitOutcome::Interrupted`]. `stop_after` (for tests)
+/// interrupts after that many iterations. `progress` shows a progress bar.
+pub fn fit_run(
+    run: &RunDir,
+    config: Option<RunConfig>,
+    device: &Device,
+    interrupt: &AtomicBool,
+    stop_after: Option<usize>,
+    progress: bool,
+) -> Result<FitOutcome> {
+    let resume = config.is_none();
+    let config = match config {
+        Some(c) => start(run, c)?,
+        None => run.load_config()?,
+    };
+    let (train, test) = config.split(&config.load()?.trajectories)?;
+    let ad = device.clone().autodiff();
+    let fit = &config.fit;
+    let field = fit.model.init(fit.seed, train.frame(0), &ad);
+    let mut trainer = Trainer::new(field, fit, &train, device)?.progress(progress);
+    if resume && run.resume().is_file() {
+        let snapshot = run.read_resume()?;
+        trainer
+            .restore(&snapshot)
+            .map_err(|e| DomaError::Malformed {
+                path: run.resume(),
+                reason: e.to_string(),
+            })?;
+    }
+    let mut hooks = Hooks::new()
+        .checkpoint(config.checkpoint_every, |snapshot| {
+            run.write_resume(snapshot)?;
+            save_json(&snapshot.history, &run.history())
+        })
+        .interrupt(interrupt);
+    if let Some(n) = stop_after {
+        hooks = hooks.stop_after(n);
+    }
+    match trainer.run_with(hooks)? {
+        Outcome::Finished(fitted) => finish(run, &fitted, &test, device).map(FitOutcome::Finished),
+        Outcome::Interrupted { iterations_done } => Ok(FitOutcome::Interrupted { iterations_done }),
+    }
+}
+
+/// Makes the run folder of a new fit and writes its config. The data is checked before
+/// the folder is made, so that bad data leaves nothing behind.
+fn start(run: &RunDir, config: RunConfig) -> Result<RunConfig> {
+    config.validate()?;
+    if run.config().exists() {
+        return Err(DomaError::InvalidConfig(format!(
+            "{} already holds a run; resume it with --resume or choose another folder",
+            run.dir.display()
+        )));
+    }
+    config.split(&config.load()?.trajectories)?;
+    std::fs::create_dir_all(&run.dir).map_err(|e| DomaError::io(&run.dir, e))?;
+    save_json(&config, &run.config())?;
+    Ok(config)
+}
+
+/// Writes `model.bpk` and `report.json` (the EPE on the held-out points `test`).
+fn finish(
+    run: &RunDir,
+    fitted: &Fitted<Model>,
+    test: &Trajectories,
+    device: &Device,
+) -> Result<Report> {
+    let encoded = fitted.field.encode(Precision::F32)?;
+    write_atomic(&run.model(), &encoded)?;
+    let what = "the held-out points of the fitted data";
+    let report = Report {
+        checkpoint_bytes: encoded.len() as u64,
+        iterations: fitted.history.len(),
+        seconds: fitted.seconds,
+        ..evaluate(&fitted.field, test, what, device)?
+    };
+    save_json(&report, &run.report())?;
+    Ok(report)
+}

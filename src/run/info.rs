@@ -1,0 +1,67 @@
+//! `doma info`: what a run folder holds.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use super::RunDir;
+use crate::Result;
+use crate::checkpoint::load_json;
+use crate::field::model::ModelConfig;
+use crate::train::IterationRecord;
+
+/// What `doma info` prints.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct RunInfo {
+    /// The model's paper name (a DOMA variant's, or a baseline's).
+    pub variant: String,
+    /// The SIREN's hidden width (SIREN-based models).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub hidden: Option<usize>,
+    /// Its hidden sine layers after the first.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub n_hidden: Option<usize>,
+    /// Trainable parameters.
+    pub params: usize,
+    /// `model.bpk` bytes (0 before the fit finishes).
+    pub checkpoint_bytes: u64,
+    /// The data file.
+    pub data: PathBuf,
+    /// Frames and points of the (clipped) data.
+    pub frames: usize,
+    /// See `frames`.
+    pub points: usize,
+    /// Iterations done of those configured.
+    pub iterations_done: usize,
+    /// Iterations configured.
+    pub iterations: usize,
+}
+
+/// Describes the run in `run`.
+pub fn info(run: &RunDir) -> Result<RunInfo> {
+    let config = run.load_config()?;
+    let seq = config.load()?;
+    let history: Vec<IterationRecord> = if run.history().is_file() {
+        load_json(&run.history())?
+    } else {
+        Vec::new()
+    };
+    let model = &config.fit.model;
+    let shape = match model {
+        ModelConfig::Doma(c) => Some(&c.shape),
+        ModelConfig::Dpf(c) => Some(&c.shape),
+        _ => None,
+    };
+    Ok(RunInfo {
+        variant: model.paper_name().into(),
+        hidden: shape.map(|s| s.hidden),
+        n_hidden: shape.map(|s| s.n_hidden),
+        params: model.num_params(),
+        checkpoint_bytes: std::fs::metadata(run.model()).map(|m| m.len()).unwrap_or(0),
+        data: config.data.clone(),
+        frames: seq.trajectories.frames(),
+        points: seq.trajectories.points(),
+        iterations_done: history.len(),
+        iterations: config.fit.schedule.iterations,
+    })
+}

@@ -1,0 +1,220 @@
+//! A fit of a user's own data, kept in a run folder (`doma fit`, `eval`, `warp`, `info`):
+//!
+//! | file | what |
+//! |---|---|
+//! | `config.json` | [`RunConfig`]: the data, the split, the normalisation and the [`FitConfig`] |
+//! | `resume.ckpt` | the last checkpoint: parameters, Adam's state, the random stream, the history |
+//! | `history.json` | one [`IterationRecord`] per finished iteration |
+//! | `model.bpk` | the fitted field's parameters (burnpack), once the fit is done |
+//! | `report.json` | [`Report`]: the metrics on the held-out points |
+//!
+//! Every file is written atomically. A checkpoint is written every `checkpoint_every`
+//! iterations and on an interrupt; a resumed fit restores the parameters (with the ids
+//! that key Adam's state), Adam's state and the random stream, so it reaches the same
+//! weights as an uninterrupted fit on the same device. A non-finite loss stops the fit with
+//! an error naming the iteration and leaves the last good checkpoint in place.
+
+mod eval;
+mod fit;
+mod info;
+mod plot;
+mod resume;
+mod warp;
+
+pub use eval::{eval_run, evaluate};
+pub use fit::{FitOutcome, fit_run};
+pub use info::{RunInfo, info};
+pub use plot::plot_run;
+pub use warp::warp_run;
+
+use std::path::PathBuf;
+
+use burn::tensor::Device;
+use serde::{Deserialize, Serialize};
+
+use crate::checkpoint::decode_checkpoint;
+use crate::data::Trajectories;
+use crate::data::sequence::{Sequence, load_sequence, split_indices};
+use crate::field::model::{Model, ModelConfig};
+use crate::train::FitConfig;
+use crate::{DomaError, Result};
+
+/// What a run fits and how; saved as `config.json`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RunConfig {
+    /// The data file or OBJ folder (absolute path).
+    pub data: PathBuf,
+    /// An OBJ for the faces, if given.
+    pub mesh: Option<PathBuf>,
+    /// The clip `[start, end)`, if any.
+    pub frames: Option<[usize; 2]>,
+    /// Every `stride`-th frame of the clip.
+    pub stride: usize,
+    /// The fraction of points held out for the report (the paper: 0.75).
+    pub test_fraction: f64,
+    /// Iterations between checkpoints.
+    pub checkpoint_every: usize,
+    /// The compute backend (a resumed fit uses the same one).
+    #[serde(default = "default_backend")]
+    pub backend: crate::backend::BackendKind,
+    /// The fit (variant, iterations, learning rate, regularisers, seed, …).
+    pub fit: FitConfig,
+}
+
+fn default_backend() -> crate::backend::BackendKind {
+    crate::backend::BackendKind::Flex
+}
+
+impl RunConfig {
+    /// A run of `data` with the given fit, the paper's 25 % / 75 % split and a checkpoint
+    /// every 50 iterations.
+    pub fn new(data: PathBuf, fit: FitConfig) -> Self {
+        RunConfig {
+            data,
+            mesh: None,
+            frames: None,
+            stride: 1,
+            test_fraction: 0.75,
+            checkpoint_every: 50,
+            backend: default_backend(),
+            fit,
+        }
+    }
+
+    /// Refuses values that cannot run.
+    pub fn validate(&self) -> Result<()> {
+        self.fit.validate()?;
+        if !(self.test_fraction > 0.0 && self.test_fraction < 1.0) {
+            return Err(DomaError::InvalidConfig(format!(
+                "the test fraction {} must be strictly between 0 and 1",
+                self.test_fraction
+            )));
+        }
+        if self.checkpoint_every == 0 || self.stride == 0 {
+            return Err(DomaError::InvalidConfig(
+                "checkpoint interval and stride must be at least 1".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Loads the run's data, normalised as when it was fitted.
+    pub fn load(&self) -> Result<Sequence> {
+        load_sequence(
+            &self.data,
+            self.mesh.as_deref(),
+            self.frames.map(|[a, b]| a..b),
+            self.stride,
+        )
+    }
+
+    /// The training and held-out points of `data` (a seeded split).
+    pub fn split(&self, data: &Trajectories) -> Result<(Trajectories, Trajectories)> {
+        let (train, test) = split_indices(data.points(), 1.0 - self.test_fraction, self.fit.seed)?;
+        Ok((data.select_points(&train)?, data.select_points(&test)?))
+    }
+}
+
+/// The metrics of a fitted run; saved as `report.json`.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Report {
+    /// What was evaluated.
+    pub evaluated_on: String,
+    /// EPE × 10⁴ over all evaluated points and frames (normalised units).
+    pub epe_x1e4: f64,
+    /// EPE × 10⁴ per frame.
+    pub epe_per_frame_x1e4: Vec<f64>,
+    /// Frames evaluated.
+    pub frames: usize,
+    /// Points evaluated.
+    pub points: usize,
+    /// The field's parameter count.
+    pub params: usize,
+    /// The size of `model.bpk` in bytes.
+    pub checkpoint_bytes: u64,
+    /// Iterations fitted.
+    pub iterations: usize,
+    /// Seconds of fitting (over all resumed parts).
+    pub seconds: f64,
+}
+
+/// The files of a run folder.
+#[derive(Clone, Debug)]
+pub struct RunDir {
+    /// The folder.
+    pub dir: PathBuf,
+}
+
+impl RunDir {
+    /// The run folder `dir`.
+    pub fn new(dir: impl Into<PathBuf>) -> Self {
+        RunDir { dir: dir.into() }
+    }
+    /// `config.json`.
+    pub fn config(&self) -> PathBuf {
+        self.dir.join("config.json")
+    }
+    /// `model.bpk`.
+    pub fn model(&self) -> PathBuf {
+        self.dir.join("model.bpk")
+    }
+    /// `resume.ckpt`.
+    pub fn resume(&self) -> PathBuf {
+        self.dir.join("resume.ckpt")
+    }
+    /// `history.json`.
+    pub fn history(&self) -> PathBuf {
+        self.dir.join("history.json")
+    }
+    /// `report.json`.
+    pub fn report(&self) -> PathBuf {
+        self.dir.join("report.json")
+    }
+
+    /// The run's config; a folder without one is not a run.
+    pub fn load_config(&self) -> Result<RunConfig> {
+        let path = self.config();
+        if !path.is_file() {
+            return Err(DomaError::Malformed {
+                path: self.dir.clone(),
+                reason: "not a doma run folder (no config.json)".into(),
+            });
+        }
+        let config: RunConfig = crate::checkpoint::load_json(&path)?;
+        config.validate().map_err(|e| DomaError::Malformed {
+            path,
+            reason: e.to_string(),
+        })?;
+        Ok(config)
+    }
+
+    /// The fitted field (from `model.bpk`, else from the last checkpoint, read in memory:
+    /// nothing is written into the run folder).
+    pub fn load_field(&self, config: &RunConfig, device: &Device) -> Result<Model> {
+        let canonical = self.canonical_training_points(config)?;
+        let fresh = config.fit.model.init(config.fit.seed, &canonical, device);
+        let path = self.model();
+        if path.is_file() {
+            let bytes = std::fs::read(&path).map_err(|e| DomaError::io(&path, e))?;
+            return fresh.decode(&bytes).map_err(|e| DomaError::Malformed {
+                path,
+                reason: e.to_string(),
+            });
+        }
+        let snapshot = self.read_resume()?;
+        decode_checkpoint(fresh, &snapshot.model).map_err(|e| DomaError::Malformed {
+            path: self.resume(),
+            reason: format!("the model part: {e}"),
+        })
+    }
+
+    /// The canonical training points, which place BoneCloud's bones (the other models do
+    /// not read them; the parameters come from the checkpoint anyway).
+    fn canonical_training_points(&self, config: &RunConfig) -> Result<Vec<f32>> {
+        if !matches!(config.fit.model, ModelConfig::BoneCloud(_)) {
+            return Ok(Vec::new());
+        }
+        let sequence = config.load()?;
+        Ok(config.split(&sequence.trajectories)?.0.frame(0).to_vec())
+    }
+}

@@ -1,0 +1,100 @@
+//! `doma plot`: PNG plots of a run.
+
+use std::path::{Path, PathBuf};
+
+use burn::tensor::Device;
+
+use super::RunDir;
+use crate::checkpoint::load_json;
+use crate::data::mesh::as_points;
+use crate::metrics::{EPE_SCALE, epe_per_frame, predict};
+use crate::plot::{Series, line_plot, three_views};
+use crate::train::IterationRecord;
+use crate::{DomaError, Result};
+
+/// Writes the run's plots into `RUN_DIR/plots/`: `loss.png` (trajectory and total loss per
+/// iteration, log scale), `epe_per_frame.png` (held-out EPE per frame) and, for each of
+/// `frames` (default: the middle and the last frame), `points_frame_KKKK.png` (three views
+/// of the held-out points coloured by error). Returns the paths written.
+pub fn plot_run(run: &RunDir, frames: Option<&[usize]>, device: &Device) -> Result<Vec<PathBuf>> {
+    let config = run.load_config()?;
+    let field = run.load_field(&config, device)?;
+    let (_, test) = config.split(&config.load()?.trajectories)?;
+    let t = test.frames();
+    let default = [t / 2, t - 1];
+    let chosen = frames.unwrap_or(&default);
+    if let Some(&bad) = chosen.iter().find(|&&k| k >= t) {
+        return Err(DomaError::InvalidConfig(format!(
+            "frame {bad} is not within the run's {t} frames"
+        )));
+    }
+    let history: Vec<IterationRecord> = load_json(&run.history())?;
+    let dir = run.dir.join("plots");
+    std::fs::create_dir_all(&dir).map_err(|e| DomaError::io(&dir, e))?;
+    let predicted = predict(&field, &test, device)?;
+    let per_frame = epe_per_frame(&predicted, &test)?;
+    let mut written = vec![loss_plot(&history, &dir)?, epe_plot(&per_frame, &dir)?];
+    let canonical = as_points(test.frame(0));
+    for &k in chosen {
+        let (truth, pred) = (as_points(test.frame(k)), as_points(predicted.frame(k)));
+        let mut errors: Vec<f64> = truth
+            .iter()
+            .zip(&pred)
+            .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs() as f64).sum())
+            .collect();
+        errors.sort_by(f64::total_cmp);
+        // The colour scale ends at the 99th percentile, so that one outlier does not wash
+        // out the rest.
+        let max = errors[(errors.len() - 1) * 99 / 100];
+        let title = format!("FRAME {k}: EPE {:.1} X1E-4", per_frame[k] * EPE_SCALE);
+        let path = dir.join(format!("points_frame_{k:04}.png"));
+        three_views(&title, &canonical, &truth, &pred, max).save(&path)?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+/// `loss.png`: the trajectory and total loss per iteration, log scale.
+fn loss_plot(history: &[IterationRecord], dir: &Path) -> Result<PathBuf> {
+    let curve = |f: fn(&IterationRecord) -> f64| {
+        history.iter().map(|r| (r.iteration as f64, f(r))).collect()
+    };
+    let series = [
+        Series {
+            name: "TRAJECTORY L1",
+            color: [40, 60, 200],
+            points: curve(|r| r.trajectory_loss),
+        },
+        Series {
+            name: "TOTAL",
+            color: [210, 30, 30],
+            points: curve(|r| r.total_loss),
+        },
+    ];
+    let path = dir.join("loss.png");
+    line_plot("LOSS", "ITERATION", "LOSS (LOG)", &series, true).save(&path)?;
+    Ok(path)
+}
+
+/// `epe_per_frame.png`: the held-out EPE of each frame.
+fn epe_plot(per_frame: &[f64], dir: &Path) -> Result<PathBuf> {
+    let series = [Series {
+        name: "EPE",
+        color: [30, 170, 90],
+        points: per_frame
+            .iter()
+            .enumerate()
+            .map(|(k, e)| (k as f64, e * EPE_SCALE))
+            .collect(),
+    }];
+    let path = dir.join("epe_per_frame.png");
+    line_plot(
+        "HELD-OUT EPE PER FRAME",
+        "FRAME",
+        "EPE X1E-4",
+        &series,
+        false,
+    )
+    .save(&path)?;
+    Ok(path)
+}

@@ -1,0 +1,81 @@
+//! `doma warp`: a canonical mesh through a fitted run, as an OBJ sequence.
+
+use std::path::{Path, PathBuf};
+
+use burn::tensor::Device;
+
+use super::RunDir;
+use crate::data::mesh::{TriMesh, as_points, encode_obj, read_obj, vertex_normals};
+use crate::data::sequence::Sequence;
+use crate::io::write_atomic;
+use crate::{DomaError, Result};
+
+/// Warps the canonical mesh `mesh` (in the data's own units; default: the run data's own
+/// canonical frame with its faces) through the run's field to frames `frames` (default:
+/// all of the run's frames) and writes `out/frame_0000.obj`, … with recomputed normals, each
+/// atomically. Returns the paths written.
+pub fn warp_run(
+    run: &RunDir,
+    mesh: Option<&Path>,
+    out: &Path,
+    frames: Option<std::ops::Range<usize>>,
+    device: &Device,
+) -> Result<Vec<PathBuf>> {
+    let config = run.load_config()?;
+    let field = run.load_field(&config, device)?;
+    let own = config.load()?;
+    let total = own.trajectories.frames();
+    let range = frames.unwrap_or(0..total);
+    if range.start >= range.end || range.end > total {
+        return Err(DomaError::InvalidConfig(format!(
+            "frames {}..{} are not within the run's {total} frames",
+            range.start, range.end
+        )));
+    }
+    let canonical = match mesh {
+        Some(path) => read_obj(path)?,
+        None => own_canonical_mesh(&own, &config.data)?,
+    };
+    let norm: Vec<[f32; 3]> = canonical
+        .vertices
+        .iter()
+        .map(|v| std::array::from_fn(|c| (v[c] - own.center[c]) / own.scale))
+        .collect();
+    std::fs::create_dir_all(out).map_err(|e| DomaError::io(out, e))?;
+    let mut paths = Vec::new();
+    for k in range {
+        let t = crate::data::normalized_time(k, total);
+        let y = crate::warp::warp_points(&field, &norm, t, device)?;
+        let vertices: Vec<[f32; 3]> = y
+            .iter()
+            .map(|p| std::array::from_fn(|c| p[c] * own.scale + own.center[c]))
+            .collect();
+        let warped = TriMesh {
+            vertices,
+            faces: canonical.faces.clone(),
+        };
+        let normals = vertex_normals(&warped.vertices, &warped.faces);
+        let path = out.join(format!("frame_{k:04}.obj"));
+        write_atomic(
+            &path,
+            encode_obj(&warped.vertices, &warped.faces, Some(&normals)).as_bytes(),
+        )?;
+        paths.push(path);
+    }
+    Ok(paths)
+}
+
+/// The run data's own canonical mesh, in the data's units: frame 0 with the sequence's faces.
+fn own_canonical_mesh(own: &Sequence, data: &Path) -> Result<TriMesh> {
+    let faces = own.faces.clone().ok_or_else(|| {
+        DomaError::InvalidData(format!(
+            "{} has no faces: give the canonical mesh with --mesh",
+            data.display()
+        ))
+    })?;
+    let vertices = as_points(own.trajectories.frame(0))
+        .iter()
+        .map(|p| std::array::from_fn(|c| p[c] * own.scale + own.center[c]))
+        .collect();
+    Ok(TriMesh { vertices, faces })
+}

@@ -1,0 +1,73 @@
+//! What the loop does between iterations besides fitting: observation (learning curves),
+//! checkpoints and interrupts.
+
+use std::sync::atomic::AtomicBool;
+
+use super::record::{IterationRecord, TrainerSnapshot};
+use crate::Result;
+
+/// What [`Trainer::run_with`] does between iterations besides fitting.
+type ObserveFn<'a, M> = Box<dyn FnMut(&IterationRecord, M) -> Result<()> + 'a>;
+type CheckpointFn<'a> = Box<dyn FnMut(&TrainerSnapshot) -> Result<()> + 'a>;
+
+/// Hooks of a run: observation, checkpoints and interrupts.
+pub struct Hooks<'a, M> {
+    pub(super) observe: Option<(usize, ObserveFn<'a, M>)>,
+    pub(super) checkpoint: Option<(usize, CheckpointFn<'a>)>,
+    pub(super) interrupt: Option<&'a AtomicBool>,
+    pub(super) stop_after: Option<usize>,
+}
+
+impl<M> Default for Hooks<'_, M> {
+    fn default() -> Self {
+        Hooks {
+            observe: None,
+            checkpoint: None,
+            interrupt: None,
+            stop_after: None,
+        }
+    }
+}
+
+impl<'a, M> Hooks<'a, M> {
+    /// No hooks.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Calls `observe(record, field)` after every `every`-th iteration and after the last,
+    /// with a validation copy of the field (learning curves); `every = 0` never calls it.
+    pub fn observe(
+        mut self,
+        every: usize,
+        observe: impl FnMut(&IterationRecord, M) -> Result<()> + 'a,
+    ) -> Self {
+        if every > 0 {
+            self.observe = Some((every, Box::new(observe)));
+        }
+        self
+    }
+
+    /// Calls `save(snapshot)` after every `every`-th iteration, after the last, and when
+    /// interrupted.
+    pub fn checkpoint(
+        mut self,
+        every: usize,
+        save: impl FnMut(&TrainerSnapshot) -> Result<()> + 'a,
+    ) -> Self {
+        self.checkpoint = Some((every.max(1), Box::new(save)));
+        self
+    }
+
+    /// Stops after the iteration during which `flag` was set (e.g. by Ctrl-C).
+    pub fn interrupt(mut self, flag: &'a AtomicBool) -> Self {
+        self.interrupt = Some(flag);
+        self
+    }
+
+    /// Stops after `iterations` iterations in all (tests simulate an interrupt with it).
+    pub fn stop_after(mut self, iterations: usize) -> Self {
+        self.stop_after = Some(iterations);
+        self
+    }
+}

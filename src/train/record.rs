@@ -1,0 +1,109 @@
+//! What a fit leaves: the per-iteration records, the fitted field, and the resumable
+//! state of the loop (its random stream included).
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+/// The record of one iteration.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct IterationRecord {
+    /// 0-based iteration.
+    pub iteration: usize,
+    /// The learning rate used.
+    pub learning_rate: f64,
+    /// The primary loss (the trajectory L1; the guidance L1 of a registration), averaged
+    /// over the iteration's steps.
+    pub trajectory_loss: f64,
+    /// The whole step loss, averaged over the iteration's steps.
+    pub total_loss: f64,
+    /// Seconds since the fit started (over all resumed parts).
+    pub seconds: f64,
+}
+
+/// A fitted field and how the fit went.
+#[derive(Debug)]
+pub struct Fitted<M> {
+    /// The field, moved off the autodiff graph (ready for evaluation).
+    pub field: M,
+    /// One record per iteration.
+    pub history: Vec<IterationRecord>,
+    /// Wall time of the loop, seconds (over all resumed parts).
+    pub seconds: f64,
+    /// Optimiser steps taken (`iterations × T`).
+    pub steps: usize,
+}
+
+/// How [`Trainer::run_with`] ended.
+#[derive(Debug)]
+pub enum Outcome<M> {
+    /// Every iteration ran.
+    Finished(Fitted<M>),
+    /// Interrupted after this many iterations (a checkpoint was offered at that point).
+    Interrupted {
+        /// Iterations done.
+        iterations_done: usize,
+    },
+}
+
+/// A standard normal draw (Box–Muller), so that the samples are the same on every
+/// backend for a given seed.
+pub fn gaussian(rng: &mut impl Rng) -> f64 {
+    let u1: f64 = 1.0 - rng.random::<f64>(); // (0, 1]
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+}
+
+/// The position of a ChaCha8 stream, to resume it exactly.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RngState {
+    /// The 32-byte key.
+    pub seed: [u8; 32],
+    /// The stream number.
+    pub stream: u64,
+    /// The word position.
+    pub word_pos: u128,
+}
+
+impl RngState {
+    pub(super) fn of(rng: &ChaCha8Rng) -> Self {
+        RngState {
+            seed: rng.get_seed(),
+            stream: rng.get_stream(),
+            word_pos: rng.get_word_pos(),
+        }
+    }
+
+    pub(super) fn restore(&self) -> ChaCha8Rng {
+        let mut rng = ChaCha8Rng::from_seed(self.seed);
+        rng.set_stream(self.stream);
+        rng.set_word_pos(self.word_pos);
+        rng
+    }
+}
+
+/// A fit's resumable state ([`Trainer::snapshot`]): with the config and the data, all a
+/// resumed fit needs to reach the same weights as an uninterrupted one.
+#[derive(Clone, Debug)]
+pub struct TrainerSnapshot {
+    /// The field's parameters, a burnpack.
+    pub model: Vec<u8>,
+    /// Adam's state, a burnpack.
+    pub optimizer: Vec<u8>,
+    /// The random stream.
+    pub rng: RngState,
+    /// Iterations done.
+    pub iterations_done: usize,
+    /// Their records.
+    pub history: Vec<IterationRecord>,
+}
+
+impl<M> Outcome<M> {
+    /// The fitted field of a run without interrupts.
+    pub(super) fn expect_finished(self) -> Fitted<M> {
+        match self {
+            Outcome::Finished(f) => f,
+            Outcome::Interrupted { .. } => unreachable!("a run without hooks is not interrupted"),
+        }
+    }
+}
