@@ -34,7 +34,7 @@ fn fit_step(c: &mut Criterion) {
                 let mut trainer =
                     Trainer::from_config(&config, &seq.train, &device).expect("a trainer");
                 let mut k = 0;
-                let id = format!("{backend}/{name}/{}", method.name());
+                let id = format!("{backend}/{name}/{method}");
                 group.bench_function(id, |b| {
                     b.iter(|| {
                         let losses = trainer.step(k % 20, 1e-4).expect("a step");
@@ -51,7 +51,7 @@ fn fit_step(c: &mut Criterion) {
             let mut trainer =
                 Trainer::from_config(&config, &seq.train, &device).expect("a trainer");
             let mut k = 0;
-            group.bench_function(format!("{backend}/dpf/{}", method.name()), |b| {
+            group.bench_function(format!("{backend}/dpf/{method}"), |b| {
                 b.iter(|| {
                     let losses = trainer.step(k % 20, 1e-4).expect("a step");
                     k += 1;

@@ -33,7 +33,7 @@ fn jacobian(c: &mut Criterion) {
             let x = Tensor::<2>::from_data(TensorData::new(x, [points, 3]), &ad);
             for method in [JacobianKind::Autodiff, JacobianKind::Analytic] {
                 let jac = method.method();
-                let id = BenchmarkId::new(format!("{backend}/{}", method.name()), points);
+                let id = BenchmarkId::new(format!("{backend}/{method}"), points);
                 group.bench_function(id, |b| {
                     b.iter(|| {
                         let raw = field.raw_dual(x.clone(), 0.5, jac.as_ref());

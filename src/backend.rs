@@ -24,15 +24,6 @@ pub enum BackendKind {
 }
 
 impl BackendKind {
-    /// The lower-case name used on the command line and in JSON records.
-    pub fn name(self) -> &'static str {
-        match self {
-            BackendKind::Flex => "flex",
-            BackendKind::Ndarray => "ndarray",
-            BackendKind::Wgpu => "wgpu",
-        }
-    }
-
     /// A device of this backend (without autodiff), or an error naming why it
     /// cannot run here (for wgpu: no adapter).
     pub fn device(self) -> Result<Device> {
@@ -55,11 +46,7 @@ impl BackendKind {
     }
 }
 
-impl std::fmt::Display for BackendKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.pad(self.name())
-    }
-}
+crate::names::display_as_value_name!(BackendKind);
 
 /// Whether at least one wgpu adapter exists. Never panics: a missing Vulkan
 /// loader is reported as "no adapter".

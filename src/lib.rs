@@ -42,6 +42,7 @@ pub mod io;
 pub mod jacobian;
 pub mod loss;
 pub mod metrics;
+pub mod names;
 pub mod plot;
 pub mod prelude;
 pub mod register;

@@ -165,6 +165,6 @@ fn a_field_warps_with_its_local_transform() {
         let (a, u) = field.local_transform(x.clone(), 0.3);
         let ax: Tensor<2> = a.matmul(x.unsqueeze_dim(2)).squeeze_dim(2);
         let expected = to_vec(ax + u);
-        assert_close(&y, &expected, 1e-5, variant.name());
+        assert_close(&y, &expected, 1e-5, &variant.to_string());
     }
 }

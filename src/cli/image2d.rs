@@ -72,11 +72,7 @@ pub fn run(args: &Image2dArgs) -> Result<()> {
     let records = image2d::run(&args.job(), |r| {
         eprintln!(
             "{} {} {}D: EPE {:.2}e-4 in {:.1} s",
-            r.motion.name(),
-            r.variant,
-            r.hidden,
-            r.epe_x1e4,
-            r.seconds
+            r.motion, r.variant, r.hidden, r.epe_x1e4, r.seconds
         )
     })?;
     print!("{}", image2d::table(&records));

@@ -69,7 +69,7 @@ pub fn run(args: &SyntheticArgs) -> Result<()> {
     let runs = synthetic::run(&job, |r| {
         eprintln!(
             "{:<11} {:<18} EPE x1e-4 {:>10.2}  ({:.1} s, {:.2} ms/step)",
-            r.motion.name(),
+            r.motion,
             format!("{}{}", r.variant.paper_name(), r.reg.suffix()),
             r.epe_x1e4,
             r.seconds,

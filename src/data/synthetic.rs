@@ -97,16 +97,6 @@ impl Motion {
         Motion::Translation,
     ];
 
-    /// The lower-case name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Motion::Rotation => "rotation",
-            Motion::Scaling => "scaling",
-            Motion::Shearing => "shearing",
-            Motion::Translation => "translation",
-        }
-    }
-
     /// Where the point `p` (from `U[−1, 1]³`) is at frame `k` of `frames`.
     pub fn apply(self, p: [f64; 3], k: usize, frames: usize) -> [f64; 3] {
         let lin = |a: f64, b: f64| {
@@ -132,12 +122,6 @@ impl Motion {
                 [x + c, y + c, z + c]
             }
         }
-    }
-}
-
-impl std::fmt::Display for Motion {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
     }
 }
 
@@ -182,3 +166,5 @@ pub fn benchmark_sequence(motion: Motion, seed: u32) -> Result<SyntheticSequence
         test,
     })
 }
+
+crate::names::display_as_value_name!(Motion);

@@ -52,16 +52,6 @@ impl Motion2d {
         Motion2d::Translation,
     ];
 
-    /// The lower-case name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Motion2d::Rotation => "rotation",
-            Motion2d::Scaling => "scaling",
-            Motion2d::Shearing => "shearing",
-            Motion2d::Translation => "translation",
-        }
-    }
-
     /// Where pixel `(x, y)` is at frame `k` of `t`.
     pub fn apply(self, x: f64, y: f64, k: usize, t: usize) -> (f64, f64) {
         let lin = |a: f64, b: f64| a + (b - a) * k as f64 / (t.max(2) - 1) as f64;
@@ -203,9 +193,9 @@ pub fn run(job: &Image2dJob, mut on_run: impl FnMut(&Image2dRecord)) -> Result<V
         let (train, test) = (all.select_points(train_idx)?, all.select_points(test_idx)?);
         let last = job.frames - 1;
         if let Some(dir) = &job.png_dir {
-            let title = format!("{} FRAME {last}: TRUE", motion.name().to_uppercase());
+            let title = format!("{} FRAME {last}: TRUE", motion.to_string().to_uppercase());
             render(&title, &as_points(test.frame(last)), &colours)
-                .save(&dir.join(format!("{}_truth.png", motion.name())))?;
+                .save(&dir.join(format!("{motion}_truth.png")))?;
         }
         for &variant in &job.variants {
             for &hidden in &job.widths {
@@ -222,13 +212,12 @@ pub fn run(job: &Image2dJob, mut on_run: impl FnMut(&Image2dRecord)) -> Result<V
                 {
                     let title = format!(
                         "{} {}-{hidden}: EPE {:.1}",
-                        motion.name().to_uppercase(),
+                        motion.to_string().to_uppercase(),
                         variant.paper_name().to_uppercase(),
                         e * EPE_SCALE
                     );
-                    render(&title, &as_points(predicted.frame(last)), &colours).save(
-                        &dir.join(format!("{}_{}_{hidden}.png", motion.name(), variant.name())),
-                    )?;
+                    render(&title, &as_points(predicted.frame(last)), &colours)
+                        .save(&dir.join(format!("{motion}_{variant}_{hidden}.png")))?;
                 }
                 let record = Image2dRecord {
                     experiment: Experiment::Image2d,
@@ -259,7 +248,7 @@ pub fn table(records: &[Image2dRecord]) -> String {
     }
     let mut out = format!("{:<22}", "EPE (x1e-4)");
     for m in Motion2d::ALL {
-        out += &format!(" | {:>11}", m.name());
+        out += &format!(" | {m:>11}");
     }
     out += "\n";
     for (v, h) in rows {
@@ -275,3 +264,5 @@ pub fn table(records: &[Image2dRecord]) -> String {
     }
     out
 }
+
+crate::names::display_as_value_name!(Motion2d);

@@ -25,15 +25,6 @@ pub enum Regularizer {
 }
 
 impl Regularizer {
-    /// The lower-case name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Regularizer::None => "none",
-            Regularizer::H => "h",
-            Regularizer::E => "e",
-        }
-    }
-
     /// The suffix of the paper's row names ("", "-H", "-E").
     pub fn suffix(self) -> &'static str {
         match self {
@@ -158,7 +149,7 @@ pub fn table(runs: &[SyntheticRun]) -> String {
     motions.sort_by_key(|m| Motion::ALL.iter().position(|x| x == m));
     let mut out = format!("{:<20}", "EPE (x1e-4)");
     for m in &motions {
-        out += &format!(" | {:>11}", m.name());
+        out += &format!(" | {m:>11}");
     }
     out += "\n";
     out += &"-".repeat(20 + 14 * motions.len());
@@ -179,3 +170,5 @@ pub fn table(runs: &[SyntheticRun]) -> String {
     }
     out
 }
+
+crate::names::display_as_value_name!(Regularizer);

@@ -58,16 +58,6 @@ impl Variant {
         }
     }
 
-    /// The command-line name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Variant::Trans => "trans",
-            Variant::Se3 => "se3",
-            Variant::ScaledSe3 => "scaled-se3",
-            Variant::Affinity => "affinity",
-        }
-    }
-
     /// The paper's name.
     pub fn paper_name(self) -> &'static str {
         match self {
@@ -89,11 +79,7 @@ impl Variant {
     }
 }
 
-impl std::fmt::Display for Variant {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.pad(self.name())
-    }
-}
+crate::names::display_as_value_name!(Variant);
 
 /// A per-point affine map `y = A x + u`, with `A` given by its columns (`None` = `I`).
 #[derive(Clone, Debug)]

@@ -78,18 +78,6 @@ impl JacobianKind {
             JacobianKind::Analytic => Box::new(Analytic),
         }
     }
-
-    /// The lower-case name.
-    pub fn name(self) -> &'static str {
-        match self {
-            JacobianKind::Autodiff => "autodiff",
-            JacobianKind::Analytic => "analytic",
-        }
-    }
 }
 
-impl std::fmt::Display for JacobianKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.pad(self.name())
-    }
-}
+crate::names::display_as_value_name!(JacobianKind);

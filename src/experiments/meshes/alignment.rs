@@ -76,16 +76,6 @@ impl AlignReg {
             AlignReg::Ah => "-AH",
         }
     }
-
-    /// The lower-case name.
-    pub fn name(self) -> &'static str {
-        match self {
-            AlignReg::None => "none",
-            AlignReg::A => "a",
-            AlignReg::H => "h",
-            AlignReg::Ah => "ah",
-        }
-    }
 }
 
 /// The settings of `mesh_alignment`.
@@ -203,3 +193,5 @@ pub fn mesh_alignment(
     }
     Ok(records)
 }
+
+crate::names::display_as_value_name!(AlignModel, AlignReg);
