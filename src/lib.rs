@@ -14,6 +14,24 @@
 //! The backend is a runtime value ([`backend::BackendKind`] maps a name to a Burn
 //! `Device`); no code is generic over a backend type.
 //!
+//! A fit, from a config to the error on held-out points:
+//!
+//! ```
+//! use burn::tensor::Device;
+//! use doma::data::synthetic::{Motion, benchmark_sequence};
+//! use doma::field::{DomaFieldConfig, Variant};
+//! use doma::prelude::*;
+//! use doma::train::{FitConfig, Trainer};
+//!
+//! let seq = benchmark_sequence(Motion::Shearing, 0)?;
+//! let field = DomaFieldConfig::new(Variant::Affinity).with_hidden(16);
+//! let config = FitConfig::doma(field).with_iterations(2);
+//! let fitted = Trainer::from_config(&config, &seq.train, &Device::flex())?.run()?;
+//! let epe = doma::metrics::evaluate_epe(&fitted.field, &seq.test, &Device::flex())?;
+//! assert!(epe.is_finite());
+//! # Ok::<(), doma::DomaError>(())
+//! ```
+//!
 //! **Layers**, each importing only those before it:
 //! 1. the core: [`dual`] (forward-mode duals), [`siren`], [`jacobian`], [`field`] (the
 //!    variants and baselines), [`loss`], [`metrics`], [`data`] (trajectories, formats,

@@ -7,14 +7,14 @@ use serde::{Deserialize, Serialize};
 use super::RunDir;
 use crate::Result;
 use crate::checkpoint::load_json;
-use crate::field::model::ModelConfig;
+use crate::field::model::{ModelConfig, ModelName};
 use crate::train::IterationRecord;
 
 /// What `doma info` prints.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct RunInfo {
     /// The model's paper name (a DOMA variant's, or a baseline's).
-    pub variant: String,
+    pub variant: ModelName,
     /// The SIREN's hidden width (SIREN-based models).
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub hidden: Option<usize>,
@@ -53,7 +53,7 @@ pub fn info(run: &RunDir) -> Result<RunInfo> {
         _ => None,
     };
     Ok(RunInfo {
-        variant: model.paper_name().into(),
+        variant: model.name(),
         hidden: shape.map(|s| s.hidden),
         n_hidden: shape.map(|s| s.n_hidden),
         params: model.num_params(),
