@@ -34,6 +34,31 @@ impl ModuleMapper for CastTo {
     }
 }
 
+/// Renumbers every parameter `0, 1, 2, …` in module order. Burn draws parameter ids at
+/// random, and a burnpack stores them, so two identical fits would write different files;
+/// with these ids a reproduction can be checked with a checksum.
+struct StableIds(u64);
+
+impl ModuleMapper for StableIds {
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        let id = burn::module::ParamId::from(self.0);
+        self.0 += 1;
+        Param::initialized(id, param.into_value())
+    }
+}
+
+/// `module` with its parameters renumbered `0, 1, 2, …` (see [`encode_stable`]). Only for
+/// saving a result: an optimizer's state is keyed by the ids it was built with.
+pub fn with_stable_ids<M: Module>(module: M) -> M {
+    module.map(&mut StableIds(0))
+}
+
+/// [`encode_checkpoint`] of `module` with stable parameter ids: the same weights give the
+/// same bytes. What `model.bpk` holds.
+pub fn encode_stable<M: Module>(module: M, precision: Precision) -> Result<Vec<u8>> {
+    encode_checkpoint(with_stable_ids(module), precision)
+}
+
 /// The burnpack bytes of `module`'s parameters in `precision`.
 pub fn encode_checkpoint<M: Module>(module: M, precision: Precision) -> Result<Vec<u8>> {
     let module = match precision {
@@ -55,6 +80,26 @@ pub fn save_checkpoint<M: Module>(module: M, path: &Path, precision: Precision) 
     Ok(bytes.len() as u64)
 }
 
+/// Counts the parameters whose values are not all finite.
+struct NonFinite {
+    index: usize,
+    first_bad: Option<usize>,
+}
+
+impl burn::module::ModuleVisitor for NonFinite {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let finite = param
+            .val()
+            .try_into_vec_as::<f64>()
+            .map(|v| v.iter().all(|x| x.is_finite()))
+            .unwrap_or(false);
+        if !finite && self.first_bad.is_none() {
+            self.first_bad = Some(self.index);
+        }
+        self.index += 1;
+    }
+}
+
 /// Loads the burnpack `bytes` into `module` (a freshly initialised module of the same
 /// shape), casting them to the module's precision. Bytes that are not a burnpack, or hold
 /// other shapes, are [`DomaError::InvalidData`]; [`load_checkpoint`] names the file.
@@ -62,9 +107,21 @@ pub fn decode_checkpoint<M: Module>(module: M, bytes: &[u8]) -> Result<M> {
     let record = ModuleRecord::from_bytes(burn::tensor::Bytes::from_bytes_vec(bytes.to_vec()))
         .map_err(|e| DomaError::InvalidData(format!("not a burnpack checkpoint: {e}")))?
         .cast_to_module_dtype();
-    module
+    let module = module
         .try_load_record(record)
-        .map_err(|e| DomaError::InvalidData(format!("does not fit the model: {e}")))
+        .map_err(|e| DomaError::InvalidData(format!("does not fit the model: {e}")))?;
+    // NaN weights would surface later as NaN predictions blamed on the data.
+    let mut check = NonFinite {
+        index: 0,
+        first_bad: None,
+    };
+    module.visit(&mut check);
+    match check.first_bad {
+        Some(i) => Err(DomaError::InvalidData(format!(
+            "parameter tensor {i} of the checkpoint holds NaN or infinite values"
+        ))),
+        None => Ok(module),
+    }
 }
 
 /// Loads the parameters in `path` into `module` (see [`decode_checkpoint`]). A file that

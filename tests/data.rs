@@ -93,3 +93,25 @@ fn bad_trajectories_are_refused() {
     assert!(t.split_first(2).is_err());
     assert!(t.select_points(&[2]).is_err());
 }
+
+#[test]
+fn extreme_coordinates_normalise_to_finite_values_or_are_refused() {
+    // A frame-0 box from −3·10³⁸ to 3·10³⁸: its width overflows f32, its half does not.
+    let big = 3.0e38f32;
+    let frame = [-big, 0.0, big, big, -big, 0.0, 0.0, big, -big];
+    let t = Trajectories::new(2, 3, [frame, frame].concat()).unwrap();
+    let (n, center, scale) = t.normalized().unwrap();
+    assert!(scale.is_finite() && center.iter().all(|c| c.is_finite()));
+    assert!(
+        n.positions()
+            .iter()
+            .all(|v| v.is_finite() && v.abs() <= 1.0)
+    );
+    assert!(n.positions().contains(&1.0), "not all zeros");
+    // A later frame ~10³⁸ frame-0 boxes away cannot be normalised in f32: refused.
+    let tiny = [0.0, 0.0, 0.0, 1e-3, 0.0, 0.0, 0.0, 1e-3, 0.0];
+    let far = [big, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let t = Trajectories::new(2, 3, [tiny, far].concat()).unwrap();
+    let err = t.normalized().unwrap_err().to_string();
+    assert!(err.contains("frame 1") && err.contains("point 0"), "{err}");
+}

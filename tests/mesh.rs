@@ -318,3 +318,19 @@ fn std_e_and_std_v_on_hand_built_sequences() {
     assert!(std_edges(&rigid, &[[0, 9]]).is_err());
     assert!(std_vertices(&Trajectories::new(2, 1, vec![0.0; 6]).unwrap()).is_err());
 }
+
+#[test]
+fn obj_folders_are_read_in_natural_order() {
+    let dir = std::env::temp_dir().join(format!("doma-natural-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    // frame_10 sorts before frame_2 as plain text; its x is 10.
+    for k in [1, 2, 10] {
+        let obj = format!("v {k} 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n");
+        std::fs::write(dir.join(format!("frame_{k}.obj")), obj).unwrap();
+    }
+    let (t, _) = read_obj_sequence(&dir).unwrap();
+    let xs: Vec<f32> = (0..3).map(|k| t.frame(k)[0]).collect();
+    assert_eq!(xs, vec![1.0, 2.0, 10.0]);
+    std::fs::remove_dir_all(&dir).ok();
+}

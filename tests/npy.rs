@@ -84,7 +84,7 @@ fn a_numpy_style_compressed_zip64_archive_is_read() {
     assert_eq!(members.len(), 2);
     assert_eq!(members[0].0, "points");
     assert_eq!(members[0].1.shape, vec![2, 3, 3]);
-    let expected: Vec<f64> = (0..18).map(|k| k as f64 * 0.5 - 2.0).collect();
+    let expected: Vec<f32> = (0..18).map(|k| k as f32 * 0.5 - 2.0).collect();
     assert_eq!(members[0].1.data, expected);
     assert_eq!(members[1].1.data, vec![-1.0, 0.0, 1.0, 2.0]);
     let t = read_npz_trajectories(&path, Some("points")).unwrap();

@@ -11,6 +11,7 @@ use std::sync::atomic::AtomicBool;
 use burn::tensor::Device;
 use common::backward_lock;
 use doma::DomaError;
+use doma::checkpoint::Precision;
 use doma::field::model::Model;
 use doma::field::{DomaFieldConfig, Variant};
 use doma::jacobian::JacobianKind;
@@ -76,6 +77,13 @@ fn a_resumed_fit_equals_an_uninterrupted_one_bit_exactly() {
         weights(&whole, &c),
         weights(&parts, &c),
         "weights differ after resume"
+    );
+    // Parameter ids are stable, so the same weights are the same file: a checksum checks a
+    // reproduction.
+    assert_eq!(
+        std::fs::read(whole.model()).unwrap(),
+        std::fs::read(parts.model()).unwrap(),
+        "model.bpk differs between identical fits"
     );
     let history = |r: &RunDir| -> Vec<(f64, f64)> {
         let h: Vec<IterationRecord> =
@@ -253,4 +261,37 @@ fn an_unfinished_run_is_read_in_memory_without_writing_into_its_folder() {
         eval_run(&run, None, &device).unwrap().epe_x1e4,
         done.epe_x1e4
     );
+}
+
+/// Every float parameter times NaN.
+struct Poison;
+
+impl burn::module::ModuleMapper for Poison {
+    fn map_float<const D: usize>(
+        &mut self,
+        param: burn::module::Param<burn::tensor::Tensor<D>>,
+    ) -> burn::module::Param<burn::tensor::Tensor<D>> {
+        param.map(|t| t.mul_scalar(f64::NAN))
+    }
+}
+
+#[test]
+fn nan_weights_are_blamed_on_model_bpk_not_on_the_data() {
+    use burn::module::Module;
+    let _g = backward_lock();
+    let device = Device::flex();
+    let never = AtomicBool::new(false);
+    let run = RunDir::new(temp("poison"));
+    let mut c = config();
+    c.fit = c.fit.with_iterations(1);
+    fit_run(&run, Some(c.clone()), &device, &never, None, false).unwrap();
+    let poisoned = run.load_field(&c, &device).unwrap().map(&mut Poison);
+    std::fs::write(run.model(), poisoned.encode(Precision::F32).unwrap()).unwrap();
+    match eval_run(&run, None, &device) {
+        Err(DomaError::Malformed { path, reason }) => {
+            assert_eq!(path, run.model());
+            assert!(reason.contains("NaN"), "{reason}");
+        }
+        other => panic!("{other:?}"),
+    }
 }

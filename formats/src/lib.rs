@@ -77,17 +77,53 @@ pub fn size_mismatch(actual: usize, expected: usize, need: &str) -> String {
     format!("{what}: {actual} bytes, but {need} {expected}")
 }
 
-/// CRC-32 (IEEE 802.3, as zip and PNG use), bitwise: the buffers here are small next to a
-/// fit.
-pub fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    for &b in bytes {
-        crc ^= b as u32;
-        for _ in 0..8 {
-            crc = (crc >> 1) ^ (0xEDB8_8320 & (crc & 1).wrapping_neg());
+/// The CRC-32 lookup table (IEEE 802.3, reflected polynomial `0xEDB88320`).
+const CRC_TABLE: [u32; 256] = {
+    let mut table = [0u32; 256];
+    let mut i = 0;
+    while i < 256 {
+        let mut c = i as u32;
+        let mut k = 0;
+        while k < 8 {
+            c = (c >> 1) ^ (0xEDB8_8320 & (c & 1).wrapping_neg());
+            k += 1;
+        }
+        table[i] = c;
+        i += 1;
+    }
+    table
+};
+
+/// An incremental CRC-32 (IEEE 802.3, as zip and PNG use), so that a member can be checked
+/// while it is inflated, in pieces.
+#[derive(Clone, Copy, Debug)]
+pub struct Crc32(u32);
+
+impl Default for Crc32 {
+    fn default() -> Self {
+        Crc32(!0)
+    }
+}
+
+impl Crc32 {
+    /// Adds `bytes`.
+    pub fn update(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0 >> 8) ^ CRC_TABLE[((self.0 ^ b as u32) & 0xFF) as usize];
         }
     }
-    !crc
+
+    /// The CRC of everything added.
+    pub fn finish(self) -> u32 {
+        !self.0
+    }
+}
+
+/// CRC-32 of `bytes`.
+pub fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = Crc32::default();
+    crc.update(bytes);
+    crc.finish()
 }
 
 #[cfg(test)]

@@ -21,17 +21,37 @@ use crate::{crc32, size_mismatch};
 /// The six magic bytes of a `.npy` file.
 pub const NPY_MAGIC: &[u8; 6] = b"\x93NUMPY";
 
-/// An n-dimensional array read from a `.npy`, values in C (row-major) order.
+/// An n-dimensional array read from a `.npy`, values in C (row-major) order, converted
+/// straight to `f32` (the precision doma fits in) as they are read.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NpyArray {
     /// The shape, outermost first.
     pub shape: Vec<usize>,
     /// `shape.iter().product()` values, C order.
-    pub data: Vec<f64>,
+    pub data: Vec<f32>,
 }
 
+/// A `.npy` header: what the array is, known before any of its values are read.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NpyHeader {
+    /// The shape, outermost first.
+    pub shape: Vec<usize>,
+    /// Elements: the product of `shape` (checked not to overflow).
+    pub count: usize,
+    /// Bytes of the values: `count` × the element size (checked not to overflow).
+    pub payload_bytes: usize,
+    /// Where the values start: the magic, version, length and header text.
+    pub data_start: usize,
+    dtype: Dtype,
+    big: bool,
+    fortran: bool,
+}
+
+/// The longest `.npy` header read (NumPy writes about 128 bytes; version 1 caps it at 64 KiB).
+pub const MAX_HEADER_BYTES: usize = 1 << 16;
+
 /// The element types the reader accepts.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 enum Dtype {
     Float(usize),
     Int(usize),
@@ -46,18 +66,18 @@ impl Dtype {
     }
 
     /// The value of one element; `b` is little-endian.
-    fn value(self, b: &[u8]) -> f64 {
+    fn value(self, b: &[u8]) -> f32 {
         let mut le = [0u8; 8];
         le[..b.len()].copy_from_slice(b);
         let raw = u64::from_le_bytes(le);
         match self {
-            Dtype::Float(4) => f32::from_bits(raw as u32) as f64,
-            Dtype::Float(_) => f64::from_bits(raw),
-            Dtype::Uint(_) => raw as f64,
+            Dtype::Float(4) => f32::from_bits(raw as u32),
+            Dtype::Float(_) => f64::from_bits(raw) as f32,
+            Dtype::Uint(_) => raw as f32,
             Dtype::Int(s) => {
                 // Sign-extend from `s` bytes.
                 let shift = 64 - 8 * s as u32;
-                (((raw << shift) as i64) >> shift) as f64
+                (((raw << shift) as i64) >> shift) as f32
             }
         }
     }
@@ -123,8 +143,9 @@ fn parse_shape(text: &str) -> Result<Vec<usize>, String> {
         .collect()
 }
 
-/// Parses the bytes of a `.npy` file; the error says what is wrong.
-pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
+/// Parses a `.npy` header from the first bytes of a file (at least up to the end of the
+/// header text); the error says what is wrong.
+pub fn parse_npy_header(bytes: &[u8]) -> Result<NpyHeader, String> {
     if bytes.len() < 10 {
         return Err(format!(
             "truncated: {} bytes, shorter than the smallest .npy header",
@@ -143,6 +164,11 @@ pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
         2 | 3 => return Err("truncated: the version 2 header length is cut off".into()),
         v => return Err(format!("unsupported .npy version {v}.{}", bytes[7])),
     };
+    if header_len > MAX_HEADER_BYTES {
+        return Err(format!(
+            "the header says it is {header_len} bytes long, over the {MAX_HEADER_BYTES} read"
+        ));
+    }
     let data_start = start
         .checked_add(header_len)
         .filter(|&e| e <= bytes.len())
@@ -163,44 +189,96 @@ pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
         other => return Err(format!("fortran_order is {other}, not True or False")),
     };
     let shape = parse_shape(header_value(header, "shape")?)?;
+    let overflow = || format!("the shape {shape:?} overflows");
     let count = shape
         .iter()
         .try_fold(1usize, |a, &d| a.checked_mul(d))
-        .ok_or_else(|| format!("the shape {shape:?} overflows"))?;
-    let expected = count
-        .checked_mul(dtype.size())
-        .ok_or_else(|| format!("the shape {shape:?} overflows"))?;
-    let payload = &bytes[data_start..];
-    if payload.len() != expected {
-        return Err(size_mismatch(
-            payload.len(),
-            expected,
-            &format!("shape {shape:?} of {descr} needs"),
-        ));
-    }
-    let size = dtype.size();
-    let mut element = [0u8; 8];
-    let mut values: Vec<f64> = payload
-        .chunks_exact(size)
-        .map(|c| {
-            element[..size].copy_from_slice(c);
-            if big {
-                element[..size].reverse();
-            }
-            dtype.value(&element[..size])
-        })
-        .collect();
-    if fortran && shape.len() > 1 {
-        values = fortran_to_c(&values, &shape);
-    }
-    Ok(NpyArray {
+        .ok_or_else(overflow)?;
+    let payload_bytes = count.checked_mul(dtype.size()).ok_or_else(overflow)?;
+    data_start.checked_add(payload_bytes).ok_or_else(overflow)?;
+    Ok(NpyHeader {
         shape,
-        data: values,
+        count,
+        payload_bytes,
+        data_start,
+        dtype,
+        big,
+        fortran,
     })
 }
 
+impl NpyHeader {
+    /// The descriptor text, for messages.
+    fn describe(&self) -> String {
+        format!("shape {:?} of {:?}", self.shape, self.dtype)
+    }
+}
+
+/// Converts a stream of `.npy` value bytes, in pieces of any length, straight to `f32`.
+struct Values<'h> {
+    header: &'h NpyHeader,
+    out: Vec<f32>,
+    element: [u8; 8],
+    filled: usize,
+}
+
+impl<'h> Values<'h> {
+    fn new(header: &'h NpyHeader) -> Self {
+        Values {
+            header,
+            out: Vec::with_capacity(header.count),
+            element: [0; 8],
+            filled: 0,
+        }
+    }
+
+    fn push(&mut self, mut bytes: &[u8]) {
+        let size = self.header.dtype.size();
+        while !bytes.is_empty() {
+            let take = (size - self.filled).min(bytes.len());
+            self.element[self.filled..self.filled + take].copy_from_slice(&bytes[..take]);
+            self.filled += take;
+            bytes = &bytes[take..];
+            if self.filled == size {
+                if self.header.big {
+                    self.element[..size].reverse();
+                }
+                self.out
+                    .push(self.header.dtype.value(&self.element[..size]));
+                self.filled = 0;
+            }
+        }
+    }
+
+    fn finish(self) -> NpyArray {
+        let shape = self.header.shape.clone();
+        let data = if self.header.fortran && shape.len() > 1 {
+            fortran_to_c(&self.out, &shape)
+        } else {
+            self.out
+        };
+        NpyArray { shape, data }
+    }
+}
+
+/// Parses the bytes of a `.npy` file; the error says what is wrong.
+pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
+    let header = parse_npy_header(bytes)?;
+    let payload = &bytes[header.data_start..];
+    if payload.len() != header.payload_bytes {
+        return Err(size_mismatch(
+            payload.len(),
+            header.payload_bytes,
+            &format!("{} needs", header.describe()),
+        ));
+    }
+    let mut values = Values::new(&header);
+    values.push(payload);
+    Ok(values.finish())
+}
+
 /// Reorders column-major values of `shape` into row-major order.
-fn fortran_to_c(values: &[f64], shape: &[usize]) -> Vec<f64> {
+fn fortran_to_c(values: &[f32], shape: &[usize]) -> Vec<f32> {
     let mut strides = vec![1usize; shape.len()];
     for d in 1..shape.len() {
         strides[d] = strides[d - 1] * shape[d - 1];
@@ -272,9 +350,29 @@ fn le_u64(b: &[u8], at: usize) -> Result<u64, String> {
         .ok_or_else(|| "truncated zip record".to_string())
 }
 
-/// Parses the bytes of a `.npz` archive into its members, `(name without ".npy", array)`,
-/// in archive order.
-pub fn parse_npz(bytes: &[u8]) -> Result<Vec<(String, NpyArray)>, String> {
+/// One member of a `.npz` archive, as its directory describes it; nothing is inflated yet.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NpzMember {
+    /// The member's name without `.npy`.
+    pub name: String,
+    /// The zip compression method (0 stored, 8 deflated).
+    method: u64,
+    crc: u32,
+    /// The member's bytes in the file.
+    data: std::ops::Range<usize>,
+    /// The bytes it holds once inflated (the `.npy` file).
+    pub size: usize,
+}
+
+/// Deflate's largest possible expansion: 258 output bytes from 2 bits, so no stream inflates
+/// to more than about 1032 times its length. A directory that says otherwise is lying.
+pub const DEFLATE_MAX_RATIO: usize = 1032;
+
+/// Reads the zip directory of a `.npz`: every member's name, method and sizes, checked
+/// against the file (a stored member must be in the file; a deflated one cannot hold more
+/// than [`DEFLATE_MAX_RATIO`] times its bytes). Inflates nothing and allocates nothing in
+/// proportion to a declared size.
+pub fn npz_members(bytes: &[u8]) -> Result<Vec<NpzMember>, String> {
     const EOCD: [u8; 4] = [0x50, 0x4b, 0x05, 0x06];
     if bytes.len() < 22 {
         return Err(format!(
@@ -293,7 +391,7 @@ pub fn parse_npz(bytes: &[u8]) -> Result<Vec<(String, NpyArray)>, String> {
     if (entries == 0xFFFF || dir == 0xFFFF_FFFF) && eocd >= 20 {
         let locator = eocd - 20;
         if le_u32(bytes, locator)? == 0x0706_4b50 {
-            let record = le_u64(bytes, locator + 8)? as usize;
+            let record = offset(le_u64(bytes, locator + 8)?)?;
             if le_u32(bytes, record)? != 0x0606_4b50 {
                 return Err("the zip64 directory record is missing".into());
             }
@@ -301,102 +399,221 @@ pub fn parse_npz(bytes: &[u8]) -> Result<Vec<(String, NpyArray)>, String> {
             dir = le_u64(bytes, record + 48)?;
         }
     }
-    let mut at = usize::try_from(dir).map_err(|_| "the zip directory offset overflows")?;
+    // Each directory entry takes at least 46 bytes, so a count past that is a lie.
+    if entries > (bytes.len() / 46) as u64 {
+        return Err(format!(
+            "the zip directory claims {entries} members, more than the file can hold"
+        ));
+    }
+    let mut at = offset(dir)?;
     let mut members = Vec::new();
     for _ in 0..entries {
-        if le_u32(bytes, at)? != 0x0201_4b50 {
-            return Err(format!("the zip directory is corrupt at byte {at}"));
-        }
-        let method = le_u16(bytes, at + 10)?;
-        let crc = le_u32(bytes, at + 16)? as u32;
-        let mut packed = le_u32(bytes, at + 20)?;
-        let mut size = le_u32(bytes, at + 24)?;
-        let name_len = le_u16(bytes, at + 28)? as usize;
-        let extra_len = le_u16(bytes, at + 30)? as usize;
-        let comment_len = le_u16(bytes, at + 32)? as usize;
-        let mut local = le_u32(bytes, at + 42)?;
-        let name_bytes = bytes
-            .get(at + 46..at + 46 + name_len)
-            .ok_or("truncated zip directory")?;
-        let name = String::from_utf8_lossy(name_bytes).into_owned();
-        // Zip64 extra field (id 1): the saturated sizes and offset, in this order.
-        let extra = bytes
-            .get(at + 46 + name_len..at + 46 + name_len + extra_len)
-            .ok_or("truncated zip directory")?;
-        let mut e = 0;
-        while e + 4 <= extra.len() {
-            let id = le_u16(extra, e)?;
-            let len = le_u16(extra, e + 2)? as usize;
-            if id == 1 {
-                let mut f = e + 4;
-                for field in [&mut size, &mut packed, &mut local] {
-                    if *field == 0xFFFF_FFFF {
-                        *field = le_u64(extra, f)?;
-                        f += 8;
-                    }
-                }
-            }
-            e += 4 + len;
-        }
-        at += 46 + name_len + extra_len + comment_len;
-
-        let local = usize::try_from(local).map_err(|_| "a zip offset overflows")?;
-        if le_u32(bytes, local)? != 0x0403_4b50 {
-            return Err(format!("member {name}: its local header is missing"));
-        }
-        let start =
-            local + 30 + le_u16(bytes, local + 26)? as usize + le_u16(bytes, local + 28)? as usize;
-        let data = usize::try_from(packed)
-            .ok()
-            .and_then(|p| start.checked_add(p))
-            .and_then(|end| bytes.get(start..end))
-            .ok_or_else(|| format!("truncated: member {name} is cut off"))?;
-        let size = usize::try_from(size).map_err(|_| "a zip size overflows")?;
-        let raw = match method {
-            0 => data.to_vec(),
-            8 => inflate(data, size).map_err(|m| format!("member {name}: {m}"))?,
-            m => {
-                return Err(format!(
-                    "member {name}: unsupported zip compression method {m}"
-                ));
-            }
-        };
-        if raw.len() != size {
-            return Err(format!(
-                "member {name}: {} bytes, but the directory says {size}",
-                raw.len()
-            ));
-        }
-        if crc32(&raw) != crc {
-            return Err(format!("member {name}: CRC-32 mismatch (corrupt data)"));
-        }
-        let array = parse_npy(&raw).map_err(|m| format!("member {name}: {m}"))?;
-        let key = name.strip_suffix(".npy").unwrap_or(&name).to_string();
-        members.push((key, array));
+        let (member, next) = directory_entry(bytes, at)?;
+        members.push(member);
+        at = next;
     }
     Ok(members)
 }
 
-/// Inflates a raw deflate stream of known output `size`.
-fn inflate(data: &[u8], size: usize) -> Result<Vec<u8>, String> {
-    use miniz_oxide::inflate::TINFLStatus;
-    use miniz_oxide::inflate::core::{DecompressorOxide, decompress, inflate_flags};
-    let mut out = vec![0u8; size];
-    let mut state = Box::<DecompressorOxide>::default();
-    let (status, _, written) = decompress(
-        &mut state,
-        data,
-        &mut out,
-        0,
-        inflate_flags::TINFL_FLAG_USING_NON_WRAPPING_OUTPUT_BUF,
-    );
-    match status {
-        TINFLStatus::Done if written == size => Ok(out),
-        TINFLStatus::Done | TINFLStatus::HasMoreOutput => Err(format!(
-            "the deflated data does not hold the {size} bytes the directory says"
-        )),
-        other => Err(format!("bad deflate data ({other:?})")),
+/// A `u64` from the file as an offset or size, refused when it cannot be one.
+fn offset(v: u64) -> Result<usize, String> {
+    usize::try_from(v).map_err(|_| format!("a zip offset or size ({v}) overflows"))
+}
+
+/// The directory entry at `at`, and where the next one starts.
+fn directory_entry(bytes: &[u8], at: usize) -> Result<(NpzMember, usize), String> {
+    if le_u32(bytes, at)? != 0x0201_4b50 {
+        return Err(format!("the zip directory is corrupt at byte {at}"));
     }
+    let method = le_u16(bytes, at + 10)?;
+    let crc = le_u32(bytes, at + 16)? as u32;
+    let mut packed = le_u32(bytes, at + 20)?;
+    let mut size = le_u32(bytes, at + 24)?;
+    let name_len = le_u16(bytes, at + 28)? as usize;
+    let extra_len = le_u16(bytes, at + 30)? as usize;
+    let comment_len = le_u16(bytes, at + 32)? as usize;
+    let mut local = le_u32(bytes, at + 42)?;
+    let name_bytes = bytes
+        .get(at + 46..at + 46 + name_len)
+        .ok_or("truncated zip directory")?;
+    let full_name = String::from_utf8_lossy(name_bytes).into_owned();
+    // Zip64 extra field (id 1): the saturated sizes and offset, in this order.
+    let extra = bytes
+        .get(at + 46 + name_len..at + 46 + name_len + extra_len)
+        .ok_or("truncated zip directory")?;
+    let mut e = 0;
+    while e + 4 <= extra.len() {
+        let id = le_u16(extra, e)?;
+        let len = le_u16(extra, e + 2)? as usize;
+        if id == 1 {
+            let mut f = e + 4;
+            for field in [&mut size, &mut packed, &mut local] {
+                if *field == 0xFFFF_FFFF {
+                    *field = le_u64(extra, f)?;
+                    f += 8;
+                }
+            }
+        }
+        e += 4 + len;
+    }
+    let next = at + 46 + name_len + extra_len + comment_len;
+    let name = full_name
+        .strip_suffix(".npy")
+        .unwrap_or(&full_name)
+        .to_string();
+    let err = |m: String| format!("member {name}: {m}");
+    let local = offset(local).map_err(err)?;
+    if le_u32(bytes, local)? != 0x0403_4b50 {
+        return Err(err("its local header is missing".into()));
+    }
+    let start =
+        local + 30 + le_u16(bytes, local + 26)? as usize + le_u16(bytes, local + 28)? as usize;
+    let (packed, size) = (offset(packed).map_err(err)?, offset(size).map_err(err)?);
+    let end = start
+        .checked_add(packed)
+        .filter(|&end| end <= bytes.len())
+        .ok_or_else(|| format!("truncated: member {name} is cut off"))?;
+    match method {
+        0 if packed != size => {
+            return Err(err(format!("stored, yet {packed} bytes hold {size}")));
+        }
+        8 if size
+            > packed
+                .saturating_mul(DEFLATE_MAX_RATIO)
+                .saturating_add(1024) =>
+        {
+            return Err(err(format!(
+                "the directory says {packed} deflated bytes hold {size}, more than deflate can"
+            )));
+        }
+        0 | 8 => {}
+        m => return Err(err(format!("unsupported zip compression method {m}"))),
+    }
+    let member = NpzMember {
+        name,
+        method,
+        crc,
+        data: start..end,
+        size,
+    };
+    Ok((member, next))
+}
+
+/// Inflates `data` piece by piece into `sink`, through a 64 KiB window: never more than
+/// `limit` bytes (the stream is cut off, with an error, as soon as it would exceed them).
+/// `sink` returns whether it wants more. Returns the bytes produced.
+fn inflate_into(
+    data: &[u8],
+    limit: usize,
+    mut sink: impl FnMut(&[u8]) -> bool,
+) -> Result<usize, String> {
+    use miniz_oxide::inflate::TINFLStatus;
+    use miniz_oxide::inflate::core::{DecompressorOxide, decompress};
+    const WINDOW: usize = 1 << 16; // a power of two over deflate's 32 KiB history
+    let mut state = Box::<DecompressorOxide>::default();
+    let mut window = vec![0u8; WINDOW];
+    let (mut read, mut out_pos, mut total) = (0usize, 0usize, 0usize);
+    loop {
+        let (status, consumed, written) =
+            decompress(&mut state, &data[read..], &mut window, out_pos, 0);
+        read += consumed;
+        // Hand over what fits under `limit`, then stop if the stream runs past it.
+        let allowed = written.min(limit - total);
+        total += written;
+        if !sink(&window[out_pos..out_pos + allowed]) {
+            return Ok(total.min(limit));
+        }
+        if total > limit {
+            return Err(format!(
+                "the deflated data holds more than the {limit} bytes said"
+            ));
+        }
+        out_pos = (out_pos + written) & (WINDOW - 1);
+        match status {
+            TINFLStatus::Done => return Ok(total),
+            TINFLStatus::HasMoreOutput => {}
+            TINFLStatus::NeedsMoreInput => return Err("the deflated data is cut off".into()),
+            other => return Err(format!("bad deflate data ({other:?})")),
+        }
+    }
+}
+
+/// The `.npy` header of `member`, from its first bytes alone (for a deflated member, at
+/// most [`MAX_HEADER_BYTES`] are inflated): what its array is, before reading it.
+pub fn npz_member_header(bytes: &[u8], member: &NpzMember) -> Result<NpyHeader, String> {
+    let err = |m: String| format!("member {}: {m}", member.name);
+    let data = &bytes[member.data.clone()];
+    let header = match member.method {
+        0 => parse_npy_header(data),
+        _ => {
+            let want = member.size.min(MAX_HEADER_BYTES + 12);
+            let mut prefix = Vec::with_capacity(want);
+            // Stop early: the rest of the stream is not needed yet.
+            let _ = inflate_into(data, member.size, |piece| {
+                let room = want - prefix.len();
+                prefix.extend_from_slice(&piece[..piece.len().min(room)]);
+                prefix.len() < want
+            });
+            parse_npy_header(&prefix)
+        }
+    }
+    .map_err(err)?;
+    let declared = header.data_start + header.payload_bytes;
+    if declared != member.size {
+        return Err(err(format!(
+            "its .npy header ({}) says {declared} bytes, the zip directory {}",
+            header.describe(),
+            member.size
+        )));
+    }
+    Ok(header)
+}
+
+/// Reads `member` of the archive `bytes`: its header first ([`npz_member_header`]), then its
+/// values, inflated in pieces and converted straight to `f32`, its CRC-32 checked on the
+/// way. The memory it takes is the `f32` array the header declares, which the directory
+/// and deflate's ratio bound (a small multiple of the file's size), plus a 64 KiB window.
+pub fn read_npz_member(bytes: &[u8], member: &NpzMember) -> Result<NpyArray, String> {
+    let header = npz_member_header(bytes, member)?;
+    let err = |m: String| format!("member {}: {m}", member.name);
+    let data = &bytes[member.data.clone()];
+    let mut crc = crate::Crc32::default();
+    let mut values = Values::new(&header);
+    let mut seen = 0usize;
+    let mut take = |piece: &[u8]| {
+        crc.update(piece);
+        // The header was parsed already: values start at `data_start`.
+        let skip = header.data_start.saturating_sub(seen).min(piece.len());
+        values.push(&piece[skip..]);
+        seen += piece.len();
+        true
+    };
+    let produced = match member.method {
+        0 => {
+            take(data);
+            data.len()
+        }
+        _ => inflate_into(data, member.size, &mut take).map_err(err)?,
+    };
+    if produced != member.size {
+        return Err(err(format!(
+            "{produced} bytes, but the directory says {}",
+            member.size
+        )));
+    }
+    if crc.finish() != member.crc {
+        return Err(err("CRC-32 mismatch (corrupt data)".into()));
+    }
+    Ok(values.finish())
+}
+
+/// Parses the bytes of a `.npz` archive into its members, `(name without ".npy", array)`,
+/// in archive order ([`npz_members`], then [`read_npz_member`] for each).
+pub fn parse_npz(bytes: &[u8]) -> Result<Vec<(String, NpyArray)>, String> {
+    npz_members(bytes)?
+        .iter()
+        .map(|m| Ok((m.name.clone(), read_npz_member(bytes, m)?)))
+        .collect()
 }
 
 /// The bytes of a `.npz` archive (stored, like `np.savez`) of `f32` arrays

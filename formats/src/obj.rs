@@ -163,3 +163,69 @@ pub fn stack_frames(meshes: &[TriMesh]) -> Result<Frames, FrameError> {
     }
     Frames::new(meshes.len(), first.vertices.len(), positions).map_err(|r| fail(0, r))
 }
+
+/// Compares file names in natural order: runs of digits by their value, so that `frame_2`
+/// comes before `frame_10` (and `frame_002` before `frame_010`, as plain order has it).
+pub fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
+    use std::cmp::Ordering;
+    let (mut a, mut b) = (a.as_bytes(), b.as_bytes());
+    loop {
+        match (a.first(), b.first()) {
+            (None, None) => return Ordering::Equal,
+            (None, Some(_)) => return Ordering::Less,
+            (Some(_), None) => return Ordering::Greater,
+            (Some(x), Some(y)) if x.is_ascii_digit() && y.is_ascii_digit() => {
+                let run = |s: &[u8]| s.iter().take_while(|c| c.is_ascii_digit()).count();
+                let (na, nb) = (run(a), run(b));
+                // Without leading zeros, a longer run is a larger number; equal lengths
+                // compare digit by digit. No parse, so no overflow.
+                let trim = |s: &[u8]| s.iter().skip_while(|&&c| c == b'0').count();
+                let (ta, tb) = (trim(&a[..na]), trim(&b[..nb]));
+                let order = ta
+                    .cmp(&tb)
+                    .then_with(|| a[na - ta..na].cmp(&b[nb - tb..nb]))
+                    .then_with(|| na.cmp(&nb));
+                if order != Ordering::Equal {
+                    return order;
+                }
+                (a, b) = (&a[na..], &b[nb..]);
+            }
+            (Some(x), Some(y)) => {
+                if x != y {
+                    return x.cmp(y);
+                }
+                (a, b) = (&a[1..], &b[1..]);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod natural_order_tests {
+    use super::natural_cmp;
+
+    #[test]
+    fn digits_compare_by_value() {
+        let mut names = vec![
+            "frame_10.obj",
+            "frame_2.obj",
+            "frame_1.obj",
+            "frame_02b.obj",
+        ];
+        names.sort_by(|a, b| natural_cmp(a, b));
+        assert_eq!(
+            names,
+            vec![
+                "frame_1.obj",
+                "frame_2.obj",
+                "frame_02b.obj",
+                "frame_10.obj"
+            ]
+        );
+        let mut padded = vec!["f_0010", "f_0002", "f_0001"];
+        padded.sort_by(|a, b| natural_cmp(a, b));
+        assert_eq!(padded, vec!["f_0001", "f_0002", "f_0010"]);
+        // A number past u128 still compares.
+        assert!(natural_cmp(&"9".repeat(60), &format!("1{}", "0".repeat(60))).is_lt());
+    }
+}

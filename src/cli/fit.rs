@@ -32,9 +32,9 @@ pub struct FitArgs {
     /// The DOMA variant (also sets the authors' `L_H` sampling for it).
     #[arg(long, value_enum)]
     pub variant: Option<Variant>,
-    /// The compute backend.
-    #[arg(long, value_enum, default_value = "flex")]
-    pub backend: BackendKind,
+    /// The compute backend (default flex; a resumed fit keeps its own).
+    #[arg(long, value_enum)]
+    pub backend: Option<BackendKind>,
     /// How the spatial Jacobian is computed.
     #[arg(long, value_enum)]
     pub jacobian: Option<JacobianKind>,
@@ -100,7 +100,7 @@ impl FitArgs {
         config.mesh = self.clip.mesh.as_deref().map(absolute).transpose()?;
         config.frames = self.clip.frames.clone().map(|r| [r.start, r.end]);
         config.stride = self.clip.stride.map_or(1, |s| s as usize);
-        config.backend = self.backend;
+        config.backend = self.backend.unwrap_or(BackendKind::Flex);
         if let Some(t) = self.test_fraction {
             config.test_fraction = t;
         }
@@ -111,23 +111,34 @@ impl FitArgs {
     }
 }
 
+/// `path` made absolute without resolving symbolic links: a link's own name keeps its
+/// extension (git-annex, DVC and download caches point at extension-less blobs).
 fn absolute(path: &Path) -> Result<PathBuf> {
-    std::fs::canonicalize(path).map_err(|e| DomaError::io(path, e))
+    let abs = std::path::absolute(path).map_err(|e| DomaError::io(path, e))?;
+    // The file must exist now; a fit that starts cannot find it later.
+    std::fs::metadata(&abs).map_err(|e| DomaError::io(path, e))?;
+    Ok(abs)
 }
 
-/// Set by SIGINT; the fit loop polls it after every iteration.
+/// Set by SIGINT or SIGTERM; the fit loop polls it after every iteration.
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+/// Which of the two it was, for the exit status (128 + the signal).
+static SIGNAL: std::sync::atomic::AtomicI32 = std::sync::atomic::AtomicI32::new(0);
 
-extern "C" fn on_sigint(_: libc::c_int) {
+extern "C" fn on_signal(signal: libc::c_int) {
+    SIGNAL.store(signal, Ordering::SeqCst);
     INTERRUPTED.store(true, Ordering::SeqCst);
 }
 
 /// Fits (or resumes) the run; Ctrl-C saves a checkpoint and exits with status 130.
 pub fn run(args: &FitArgs) -> Result<()> {
-    // Ctrl-C finishes the iteration, saves a checkpoint and exits cleanly.
-    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+    // Ctrl-C, and the SIGTERM that schedulers, `timeout` and `docker stop` send, finish
+    // the iteration, save a checkpoint and exit cleanly.
+    // SAFETY: the handler only stores to atomics, which is async-signal-safe.
     unsafe {
-        libc::signal(libc::SIGINT, on_sigint as *const () as libc::sighandler_t);
+        for signal in [libc::SIGINT, libc::SIGTERM] {
+            libc::signal(signal, on_signal as *const () as libc::sighandler_t);
+        }
     }
     let (run, config) = match (&args.resume, &args.data, &args.out) {
         (Some(dir), _, _) => (RunDir::new(dir), None),
@@ -138,10 +149,20 @@ pub fn run(args: &FitArgs) -> Result<()> {
             ));
         }
     };
-    // A folder that is not a run fails here, before anything else.
+    // A folder that is not a run fails here, before anything else. A resumed fit runs on
+    // the backend it was started on (its Adam state and random stream are that device's).
     let backend = match &config {
         Some(c) => c.backend,
-        None => run.load_config()?.backend,
+        None => {
+            let saved = run.load_config()?.backend;
+            if let Some(asked) = args.backend.filter(|&b| b != saved) {
+                return Err(DomaError::Usage(format!(
+                    "--backend {asked}: {} was fitted on {saved}, and resumes there",
+                    run.dir.display()
+                )));
+            }
+            saved
+        }
     };
     let device = backend.device()?;
     match fit_run(&run, config, &device, &INTERRUPTED, None, !args.quiet)? {
@@ -153,11 +174,15 @@ pub fn run(args: &FitArgs) -> Result<()> {
             Ok(())
         }
         FitOutcome::Interrupted { iterations_done } => {
+            let signal = match SIGNAL.load(Ordering::SeqCst) {
+                0 => libc::SIGINT,
+                s => s,
+            };
             eprintln!(
                 "interrupted after {iterations_done} iterations; the checkpoint is saved. Continue with: doma fit --resume {}",
                 run.dir.display()
             );
-            std::process::exit(130);
+            std::process::exit(128 + signal);
         }
     }
 }

@@ -139,18 +139,10 @@ impl ExperimentArgs {
     }
 }
 
-/// Fails early when `path`'s folder does not exist, before minutes of work.
+/// Fails early, before minutes of work, when `path` cannot be written (its folder is
+/// missing or not writable).
 pub fn check_output_folder(path: &Path) -> Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
-    if let Some(dir) = dir
-        && !dir.is_dir()
-    {
-        return Err(DomaError::Usage(format!(
-            "{}: the folder does not exist",
-            dir.display()
-        )));
-    }
-    Ok(())
+    crate::io::check_writable(path)
 }
 
 /// A comma-separated list of a library enum's values, or `all` of them.

@@ -77,7 +77,9 @@ pub fn read_obj_sequence(dir: impl AsRef<Path>) -> Result<(Trajectories, Vec<[u3
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("obj")))
         .collect();
-    files.sort();
+    // Natural order: `frame_2` before `frame_10`.
+    files
+        .sort_by(|a, b| doma_formats::obj::natural_cmp(&a.to_string_lossy(), &b.to_string_lossy()));
     if files.is_empty() {
         return Err(DomaError::Malformed {
             path: dir.to_path_buf(),

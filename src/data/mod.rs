@@ -156,8 +156,9 @@ impl Trajectories {
     /// The sequence moved and scaled so that frame 0's bounding box is centred at the
     /// origin with its longest side spanning `[−1, 1]` (SIREN's `ω₀ = 30` assumes inputs of
     /// about that range). Returns the new sequence, the centre and the scale `s`
-    /// (`x' = (x − c) / s`).
-    pub fn normalized(&self) -> (Self, [f32; 3], f32) {
+    /// (`x' = (x − c) / s`). A point whose normalised coordinate is not finite (a later
+    /// frame ~10³⁸ box sizes away) is refused rather than fitted as zeros or infinities.
+    pub fn normalized(&self) -> Result<(Self, [f32; 3], f32)> {
         let mut lo = [f32::INFINITY; 3];
         let mut hi = [f32::NEG_INFINITY; 3];
         for p in self.frame(0).chunks_exact(3) {
@@ -166,20 +167,32 @@ impl Trajectories {
                 hi[c] = hi[c].max(p[c]);
             }
         }
-        let center: [f32; 3] = std::array::from_fn(|c| 0.5 * (lo[c] + hi[c]));
-        let half = (0..3).map(|c| 0.5 * (hi[c] - lo[c])).fold(0f32, f32::max);
+        // Halved before they are added or subtracted, so that coordinates near f32's limit
+        // (±3·10³⁸) do not overflow; halving is exact, so ordinary data is unchanged.
+        let center: [f32; 3] = std::array::from_fn(|c| 0.5 * lo[c] + 0.5 * hi[c]);
+        let half = (0..3)
+            .map(|c| 0.5 * hi[c] - 0.5 * lo[c])
+            .fold(0f32, f32::max);
         let scale = if half > 0.0 { half } else { 1.0 };
-        let positions = self
+        let positions: Vec<f32> = self
             .positions
             .chunks_exact(3)
             .flat_map(|p| (0..3).map(move |c| (p[c] - center[c]) / scale))
             .collect();
+        if let Some(i) = positions.iter().position(|v| !v.is_finite()) {
+            let (f, p) = (i / (3 * self.points), (i / 3) % self.points);
+            return Err(DomaError::InvalidData(format!(
+                "point {p} of frame {f} is {} frame-0 box sizes away: the coordinates span \
+                 more than f32 can normalise",
+                self.positions[i]
+            )));
+        }
         let out = Trajectories {
             frames: self.frames,
             points: self.points,
             positions,
         };
-        (out, center, scale)
+        Ok((out, center, scale))
     }
 
     /// Splits the points into the first `n_train` and the rest (the authors' split of

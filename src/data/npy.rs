@@ -18,7 +18,10 @@
 
 use std::path::Path;
 
-pub use doma_formats::npy::{NPY_MAGIC, NpyArray, encode_npy, encode_npz, parse_npy, parse_npz};
+pub use doma_formats::npy::{
+    NPY_MAGIC, NpyArray, NpyHeader, NpzMember, encode_npy, encode_npz, npz_member_header,
+    npz_members, parse_npy, parse_npy_header, parse_npz, read_npz_member,
+};
 
 use super::Trajectories;
 use crate::io::write_atomic;
@@ -26,19 +29,21 @@ use crate::{DomaError, Result};
 
 /// An array as trajectories: `[T, N, 3]` gives `T` frames, `[N, 3]` one frame. Refuses
 /// other shapes and non-finite values (the error names the frame and point).
-pub fn to_trajectories(array: &NpyArray) -> std::result::Result<Trajectories, String> {
-    let (frames, points) = match array.shape[..] {
-        [t, n, 3] => (t, n),
-        [n, 3] => (1, n),
-        _ => {
-            return Err(format!(
-                "shape {:?} is not [T, N, 3] or [N, 3] point coordinates",
-                array.shape
-            ));
-        }
-    };
-    let positions = array.data.iter().map(|&v| v as f32).collect();
-    doma_formats::Frames::new(frames, points, positions).map(Trajectories::from)
+pub fn to_trajectories(array: NpyArray) -> std::result::Result<Trajectories, String> {
+    let (frames, points) = trajectory_shape(&array.shape)?;
+    doma_formats::Frames::new(frames, points, array.data).map(Trajectories::from)
+}
+
+/// `(T, N)` of a trajectory array's shape, `[T, N, 3]` or `[N, 3]`; checked from the header
+/// alone, before any value is read.
+pub fn trajectory_shape(shape: &[usize]) -> std::result::Result<(usize, usize), String> {
+    match shape[..] {
+        [t, n, 3] => Ok((t, n)),
+        [n, 3] => Ok((1, n)),
+        _ => Err(format!(
+            "shape {shape:?} is not [T, N, 3] or [N, 3] point coordinates"
+        )),
+    }
 }
 
 fn malformed(path: &Path) -> impl FnOnce(String) -> DomaError + '_ {
@@ -58,7 +63,10 @@ pub fn read_npy(path: impl AsRef<Path>) -> Result<NpyArray> {
 /// Reads point trajectories (`[T, N, 3]` or `[N, 3]`) from a `.npy` file.
 pub fn read_npy_trajectories(path: impl AsRef<Path>) -> Result<Trajectories> {
     let path = path.as_ref();
-    to_trajectories(&read_npy(path)?).map_err(malformed(path))
+    let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
+    let header = parse_npy_header(&bytes).map_err(malformed(path))?;
+    trajectory_shape(&header.shape).map_err(malformed(path))?;
+    to_trajectories(parse_npy(&bytes).map_err(malformed(path))?).map_err(malformed(path))
 }
 
 /// Writes `data` (`f32`, C order, of `shape`) as a `.npy` file, atomically.
@@ -79,20 +87,19 @@ pub fn read_npz(path: impl AsRef<Path>) -> Result<Vec<(String, NpyArray)>> {
 }
 
 /// Reads trajectories from member `key` of a `.npz` archive; with `key = None` the archive
-/// must hold exactly one member.
+/// must hold exactly one member. The member's count, name and `.npy` header (shape
+/// `[T, N, 3]` or `[N, 3]`) are checked before any of its values are inflated, and those
+/// are inflated into no more than the header declares ([`read_npz_member`]).
 pub fn read_npz_trajectories(path: impl AsRef<Path>, key: Option<&str>) -> Result<Trajectories> {
     let path = path.as_ref();
-    let members = read_npz(path)?;
-    let names: Vec<&str> = members.iter().map(|(n, _)| n.as_str()).collect();
-    let array = match key {
-        Some(k) => members
-            .iter()
-            .find(|(n, _)| n == k)
-            .map(|(_, a)| a)
-            .ok_or_else(|| {
-                malformed(path)(format!("no member {k:?}; the archive holds {names:?}"))
-            })?,
-        None if members.len() == 1 => &members[0].1,
+    let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
+    let members = npz_members(&bytes).map_err(malformed(path))?;
+    let names: Vec<&str> = members.iter().map(|m| m.name.as_str()).collect();
+    let member = match key {
+        Some(k) => members.iter().find(|m| m.name == k).ok_or_else(|| {
+            malformed(path)(format!("no member {k:?}; the archive holds {names:?}"))
+        })?,
+        None if members.len() == 1 => &members[0],
         None => {
             return Err(malformed(path)(format!(
                 "{} members {names:?}; name the one to read",
@@ -100,6 +107,10 @@ pub fn read_npz_trajectories(path: impl AsRef<Path>, key: Option<&str>) -> Resul
             )));
         }
     };
+    let header = npz_member_header(&bytes, member).map_err(malformed(path))?;
+    trajectory_shape(&header.shape)
+        .map_err(|m| malformed(path)(format!("member {}: {m}", member.name)))?;
+    let array = read_npz_member(&bytes, member).map_err(malformed(path))?;
     to_trajectories(array).map_err(malformed(path))
 }
 

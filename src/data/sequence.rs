@@ -68,7 +68,13 @@ pub fn load_sequence(
         None => trajectories,
     };
     // Fit and measure in normalised coordinates, so that one ω₀ suits every user's units.
-    let (trajectories, center, scale) = trajectories.normalized();
+    let (trajectories, center, scale) =
+        trajectories
+            .normalized()
+            .map_err(|e| DomaError::Malformed {
+                path: data.to_path_buf(),
+                reason: e.to_string(),
+            })?;
     let name = data
         .file_stem()
         .map_or("data".into(), |s| s.to_string_lossy().into_owned());
@@ -92,6 +98,14 @@ fn extension(data: &Path) -> String {
 /// Reads any supported sequence file (or OBJ folder) by its extension: the trajectories,
 /// and the faces where the format has them.
 pub fn read_any(data: &Path) -> Result<(Trajectories, Option<Vec<[u32; 3]>>)> {
+    let meta = std::fs::metadata(data).map_err(|e| DomaError::io(data, e))?;
+    if !(meta.is_file() || meta.is_dir()) {
+        // A FIFO or a device would block a read forever, or never end.
+        return Err(DomaError::Malformed {
+            path: data.to_path_buf(),
+            reason: "not a regular file or folder (a FIFO, a socket or a device)".into(),
+        });
+    }
     Ok(match extension(data).as_str() {
         _ if data.is_dir() => {
             let (t, f) = super::mesh::read_obj_sequence(data)?;

@@ -15,7 +15,7 @@ use super::baselines::dct::{DctConfig, DctNerf};
 use super::baselines::mlp::{Mlp, MlpConfig};
 use super::dpf::{Dpf, DpfConfig};
 use super::{DomaField, DomaFieldConfig, MotionField, Variant};
-use crate::checkpoint::{Precision, decode_checkpoint, encode_checkpoint};
+use crate::checkpoint::{Precision, decode_checkpoint, encode_stable};
 use crate::dual::Dual;
 use crate::jacobian::{JacobianKind, JacobianMethod};
 use crate::{DomaError, Result};
@@ -229,14 +229,15 @@ pub enum Model {
 
 impl Model {
     /// The burnpack bytes of the model's parameters, as the bare module writes them (so a
-    /// DOMA field's `model.bpk` is the same file whether or not it came through `Model`).
+    /// DOMA field's `model.bpk` is the same file whether or not it came through `Model`),
+    /// with stable parameter ids: the same weights give the same bytes.
     pub fn encode(&self, precision: Precision) -> Result<Vec<u8>> {
         match self {
-            Model::Doma(m) => encode_checkpoint(m.clone(), precision),
-            Model::Dpf(m) => encode_checkpoint(m.clone(), precision),
-            Model::Mlp(m) => encode_checkpoint(m.clone(), precision),
-            Model::DctNerf(m) => encode_checkpoint(m.clone(), precision),
-            Model::BoneCloud(m) => encode_checkpoint(m.clone(), precision),
+            Model::Doma(m) => encode_stable(m.clone(), precision),
+            Model::Dpf(m) => encode_stable(m.clone(), precision),
+            Model::Mlp(m) => encode_stable(m.clone(), precision),
+            Model::DctNerf(m) => encode_stable(m.clone(), precision),
+            Model::BoneCloud(m) => encode_stable(m.clone(), precision),
         }
     }
 

@@ -60,7 +60,12 @@ pub fn eval_run(run: &RunDir, data: Option<&Path>, device: &Device) -> Result<Re
         }
     };
     let bytes = std::fs::metadata(run.model()).map(|m| m.len()).unwrap_or(0);
-    let history: Vec<IterationRecord> = load_json(&run.history()).unwrap_or_default();
+    // No history yet is an empty one; a corrupt one is an error, as for `info` and `plot`.
+    let history: Vec<IterationRecord> = if run.history().is_file() {
+        load_json(&run.history())?
+    } else {
+        Vec::new()
+    };
     let report = evaluate(&field, &truth, &what, device)?;
     Ok(Report {
         checkpoint_bytes: bytes,

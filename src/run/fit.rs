@@ -4,7 +4,7 @@ use std::sync::atomic::AtomicBool;
 
 use burn::tensor::Device;
 
-use super::{Report, RunConfig, RunDir, evaluate};
+use super::{Report, RunConfig, RunDir, RunLock, evaluate};
 use crate::checkpoint::{Precision, save_json};
 use crate::data::Trajectories;
 use crate::field::model::Model;
@@ -37,9 +37,12 @@ pub fn fit_run(
     progress: bool,
 ) -> Result<FitOutcome> {
     let resume = config.is_none();
-    let config = match config {
+    let (config, _lock) = match config {
         Some(c) => start(run, c)?,
-        None => run.load_config()?,
+        None => {
+            let config = run.load_config()?;
+            (config, RunLock::acquire(&run.dir)?)
+        }
     };
     let (train, test) = config.split(&config.load()?.trajectories)?;
     let ad = device.clone().autodiff();
@@ -70,20 +73,28 @@ pub fn fit_run(
     }
 }
 
-/// Makes the run folder of a new fit and writes its config. The data is checked before
-/// the folder is made, so that bad data leaves nothing behind.
-fn start(run: &RunDir, config: RunConfig) -> Result<RunConfig> {
+/// Makes the run folder of a new fit, locks it and writes its config. The data is checked
+/// before the folder is made, so that bad data leaves nothing behind.
+fn start(run: &RunDir, config: RunConfig) -> Result<(RunConfig, RunLock)> {
     config.validate()?;
-    if run.config().exists() {
-        return Err(DomaError::InvalidConfig(format!(
+    let taken = || {
+        DomaError::InvalidConfig(format!(
             "{} already holds a run; resume it with --resume or choose another folder",
             run.dir.display()
-        )));
+        ))
+    };
+    if run.config().exists() {
+        return Err(taken());
     }
     config.split(&config.load()?.trajectories)?;
     std::fs::create_dir_all(&run.dir).map_err(|e| DomaError::io(&run.dir, e))?;
+    let lock = RunLock::acquire(&run.dir)?;
+    // Checked again under the lock: another fit may have started here meanwhile.
+    if run.config().exists() {
+        return Err(taken());
+    }
     save_json(&config, &run.config())?;
-    Ok(config)
+    Ok((config, lock))
 }
 
 /// Writes `model.bpk` and `report.json` (the EPE on the held-out points `test`).

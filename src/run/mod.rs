@@ -8,6 +8,8 @@
 //! | `model.bpk` | the fitted field's parameters (burnpack), once the fit is done |
 //! | `report.json` | [`Report`]: the metrics on the held-out points |
 //!
+//! `.lock` holds the process id of the fit that holds the folder ([`RunLock`]).
+//!
 //! Every file is written atomically. A checkpoint is written every `checkpoint_every`
 //! iterations and on an interrupt; a resumed fit restores the parameters (with the ids
 //! that key Adam's state), Adam's state and the random stream, so it reaches the same
@@ -17,6 +19,7 @@
 mod eval;
 mod fit;
 mod info;
+mod lock;
 mod plot;
 mod resume;
 mod warp;
@@ -24,6 +27,7 @@ mod warp;
 pub use eval::{eval_run, evaluate};
 pub use fit::{FitOutcome, fit_run};
 pub use info::{RunInfo, info};
+pub use lock::RunLock;
 pub use plot::plot_run;
 pub use warp::warp_run;
 

@@ -50,6 +50,17 @@ pub fn warp_run(
             .iter()
             .map(|p| std::array::from_fn(|c| p[c] * own.scale + own.center[c]))
             .collect();
+        if let Some(v) = vertices
+            .iter()
+            .position(|v| v.iter().any(|c| !c.is_finite()))
+        {
+            // A field that moves a vertex past f32's range in the data's units: say so
+            // rather than write `inf` into a mesh.
+            return Err(DomaError::InvalidData(format!(
+                "frame {k}: vertex {v} warps to {:?}, outside f32's range in the data's units",
+                vertices[v]
+            )));
+        }
         let warped = TriMesh {
             vertices,
             faces: canonical.faces.clone(),

@@ -1,0 +1,251 @@
+//! Hostile input and concurrent use of the `doma` binary: each case ends with a non-zero
+//! exit and one line naming the file and the reason, no panic, no half-made output, and no
+//! folder left locked. (The `.npz` bombs are in `npz_bombs.rs`.)
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+const FAERIE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
+
+fn temp(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("doma-rel-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn doma(args: &[&str]) -> (Option<i32>, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_doma"))
+        .args(args)
+        .output()
+        .expect("the binary runs");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// A refusal: exit 1, no panic, and a message holding every `needle`.
+fn refused(args: &[&str], needles: &[&str]) -> String {
+    let (code, _, err) = doma(args);
+    assert_eq!(code, Some(1), "{args:?}:\n{err}");
+    assert!(!err.contains("panicked"), "{args:?} panicked:\n{err}");
+    for n in needles {
+        assert!(err.contains(n), "{args:?}: no `{n}` in:\n{err}");
+    }
+    err
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A short finished run of the faerie clip.
+fn finished_run(tag: &str) -> PathBuf {
+    let run = temp(tag).join("run");
+    let (code, _, err) = doma(&[
+        "fit",
+        FAERIE,
+        "--frames",
+        "112..116",
+        "--iters",
+        "2",
+        "--quiet",
+        "--out",
+        s(&run),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    run
+}
+
+#[test]
+fn a_run_folder_has_one_writer_and_sigterm_checkpoints_like_ctrl_c() {
+    let run = temp("lock").join("run");
+    let child = Command::new(env!("CARGO_BIN_EXE_doma"))
+        .args([
+            "fit", FAERIE, "--frames", "112..118", "--iters", "100000", "--quiet",
+        ])
+        .arg("--out")
+        .arg(&run)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    for _ in 0..400 {
+        if run.join("config.json").exists() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(25));
+    }
+    assert!(run.join("config.json").exists(), "the fit did not start");
+    // A second writer of the same folder is refused, naming the folder and the holder.
+    let pid = child.id().to_string();
+    refused(&["fit", "--resume", s(&run)], &[s(&run), &pid]);
+    refused(
+        &["fit", FAERIE, "--frames", "112..118", "--out", s(&run)],
+        &[s(&run), "already holds a run"],
+    );
+    // SIGTERM (schedulers, `timeout`, `docker stop`): a checkpoint and exit 143.
+    std::thread::sleep(Duration::from_millis(300));
+    // SAFETY: sending a signal to our own child.
+    unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(143), "{err}");
+    assert!(
+        err.contains("--resume") && run.join("resume.ckpt").is_file(),
+        "{err}"
+    );
+    // The lock went with the process: the fit resumes (shortened to end soon).
+    let config = run.join("config.json");
+    let mut c: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&config).unwrap()).unwrap();
+    let done: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(run.join("history.json")).unwrap()).unwrap();
+    c["fit"]["schedule"]["iterations"] = serde_json::json!(done.len() + 1);
+    std::fs::write(&config, c.to_string()).unwrap();
+    // A resumed fit keeps its backend.
+    refused(
+        &["fit", "--resume", s(&run), "--backend", "ndarray"],
+        &["--backend", "flex"],
+    );
+    // A temporary file that a killed writer left behind is cleared by the next writer.
+    let stale = run.join(".history.json.tmp4000000000");
+    std::fs::write(&stale, b"half").unwrap();
+    let (code, _, err) = doma(&["fit", "--resume", s(&run), "--quiet"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(!stale.exists(), "the stale temporary file is still there");
+}
+
+#[test]
+fn oversized_models_are_refused_before_anything_is_allocated_or_written() {
+    refused(
+        &["synthetic", "--hidden", "200000", "--iters", "1"],
+        &["parameters"],
+    );
+    let dir = temp("huge");
+    let config = dir.join("fit.json");
+    for model in [
+        r#"{"model": {"doma": {"variant": "trans", "shape": {"hidden": 200000}}}}"#,
+        r#"{"model": {"doma": {"variant": "trans", "shape": {"n_hidden": 100000}}}}"#,
+    ] {
+        std::fs::write(&config, model).unwrap();
+        let out = dir.join("run");
+        refused(
+            &["fit", FAERIE, "--out", s(&out), "--config", s(&config)],
+            &["fit.json", "parameters"],
+        );
+        assert!(!out.exists(), "a refused fit left {}", out.display());
+    }
+}
+
+#[test]
+fn data_behind_a_symlink_keeps_the_links_extension() {
+    let dir = temp("link");
+    // A download cache or git-annex: the blob has no extension, the link has.
+    let blob = dir.join("SHA256-e3b0c44298fc1c14");
+    std::fs::copy(FAERIE, &blob).unwrap();
+    let link = dir.join("faerie.traj");
+    std::os::unix::fs::symlink(&blob, &link).unwrap();
+    let run = dir.join("run");
+    let (code, _, err) = doma(&[
+        "fit",
+        s(&link),
+        "--frames",
+        "112..114",
+        "--iters",
+        "1",
+        "--quiet",
+        "--out",
+        s(&run),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+}
+
+#[test]
+fn a_fifo_is_refused_instead_of_blocking() {
+    let dir = temp("fifo");
+    let fifo = dir.join("points.traj");
+    let c = std::ffi::CString::new(s(&fifo)).unwrap();
+    // SAFETY: a valid C string and permission bits.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o644) }, 0);
+    let started = std::time::Instant::now();
+    refused(
+        &["fit", s(&fifo), "--out", s(&dir.join("run"))],
+        &["points.traj", "not a regular file"],
+    );
+    assert!(started.elapsed() < Duration::from_secs(30));
+}
+
+#[test]
+fn run_readers_name_the_broken_file() {
+    let run = finished_run("readers");
+    // A corrupt history: eval, like info and plot, refuses it and names it.
+    let history = run.join("history.json");
+    let good = std::fs::read(&history).unwrap();
+    std::fs::write(&history, b"[{ broken").unwrap();
+    for cmd in ["eval", "info", "plot"] {
+        refused(&[cmd, s(&run)], &["history.json"]);
+    }
+    std::fs::write(&history, good).unwrap();
+    // A frame past the end writes no picture at all.
+    refused(&["plot", s(&run), "--frames", "999"], &["999"]);
+    assert!(!run.join("plots").exists(), "plot wrote before it failed");
+}
+
+#[test]
+fn a_garbage_model_in_resume_ckpt_names_the_file() {
+    let dir = temp("ckpt");
+    let run = dir.join("run");
+    let child = Command::new(env!("CARGO_BIN_EXE_doma"))
+        .args([
+            "fit", FAERIE, "--frames", "112..116", "--iters", "100000", "--quiet",
+        ])
+        .args(["--checkpoint-every", "1", "--out", s(&run)])
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    for _ in 0..400 {
+        if run.join("resume.ckpt").exists() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(25));
+    }
+    // SAFETY: sending a signal to our own child.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let _ = child.wait_with_output();
+    // Keep the framing (magic and lengths), scramble the model part.
+    let ckpt = run.join("resume.ckpt");
+    let mut bytes = std::fs::read(&ckpt).unwrap();
+    let meta_len = u64::from_le_bytes(bytes[8..16].try_into().unwrap()) as usize;
+    let model_at = 16 + meta_len + 8;
+    for b in &mut bytes[model_at..model_at + 64] {
+        *b = 0xA5;
+    }
+    std::fs::write(&ckpt, &bytes).unwrap();
+    refused(&["fit", "--resume", s(&run)], &["resume.ckpt"]);
+    refused(&["eval", s(&run)], &["resume.ckpt"]);
+}
+
+#[test]
+fn json_outputs_that_cannot_be_written_fail_before_any_fit() {
+    // Root writes anywhere it may, but nobody creates files in /proc.
+    let started = std::time::Instant::now();
+    for args in [
+        vec![
+            "synthetic",
+            "--iters",
+            "1000",
+            "--json",
+            "/proc/self/runs.json",
+        ],
+        vec!["bench", "--json", "/proc/self/bench.json"],
+    ] {
+        refused(&args, &["/proc/self"]);
+    }
+    assert!(
+        started.elapsed() < Duration::from_secs(20),
+        "it fitted first"
+    );
+}
