@@ -128,22 +128,40 @@ fn bench_prints_the_table_and_writes_exactly_the_record_fields() {
     let rows: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let rows = rows.as_array().unwrap();
-    // flex × {autodiff, analytic} × {fit_step, jacobian at 16 points}.
-    assert_eq!(rows.len(), 4);
+    // flex: the GEMM peak, then {autodiff, analytic} × {fit_step, fit_step_l1, jacobian at
+    // 16 points}.
+    assert_eq!(rows.len(), 7);
     for r in rows {
         let mut keys: Vec<&str> = r.as_object().unwrap().keys().map(|k| k.as_str()).collect();
         keys.sort_unstable();
         assert_eq!(
             keys,
-            ["backend", "gflops", "kind", "method", "ms", "points"]
+            [
+                "backend",
+                "gflops",
+                "kind",
+                "method",
+                "ms",
+                "peak_percent",
+                "points"
+            ]
         );
         assert_eq!(r["backend"], "flex");
         assert!(r["ms"].as_f64().unwrap() > 0.0 && r["gflops"].as_f64().unwrap() > 0.0);
+        // Every row's share of the peak is its GFLOP/s over the peak's.
+        let share = 100.0 * r["gflops"].as_f64().unwrap() / rows[0]["gflops"].as_f64().unwrap();
+        assert!((r["peak_percent"].as_f64().unwrap() - share).abs() < 1e-9);
     }
-    assert_eq!(rows[0]["kind"], "fit_step");
-    assert_eq!(rows[0]["points"], 750);
-    assert_eq!(rows[3]["kind"], "jacobian");
-    assert_eq!(rows[3]["method"], "analytic");
+    assert_eq!(rows[0]["kind"], "gemm");
+    assert!(rows[0]["method"].is_null());
+    assert_eq!(rows[1]["kind"], "fit_step");
+    assert_eq!(rows[1]["points"], 750);
+    assert_eq!(rows[3]["kind"], "fit_step_l1");
+    assert_eq!(rows[6]["kind"], "jacobian");
+    assert_eq!(rows[6]["method"], "analytic");
+    // A missing interpreter for the PyTorch comparison is named, not a panic.
+    let (ok, _, err) = doma(&["bench", "--compare-torch", "/nonexistent/python3"]);
+    assert!(!ok && err.contains("/nonexistent/python3"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

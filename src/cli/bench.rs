@@ -28,9 +28,17 @@ pub struct BenchArgs {
     /// Timed steps per row; the median is reported.
     #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u64).range(1..))]
     pub steps: u64,
-    /// Also write one JSON record per row (kind, backend, method, points, ms, gflops).
+    /// Also write one JSON record per row (kind, backend, method, points, ms, gflops,
+    /// peak_percent); with --compare-torch, one per comparison.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Instead of the table: doma against PyTorch on flex, side by side, alternating
+    /// rounds; PYTHON is an interpreter with torch installed (runs benches/torch_step.py).
+    #[arg(long, value_name = "PYTHON")]
+    pub compare_torch: Option<PathBuf>,
+    /// Rounds of the comparison.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
+    pub rounds: u64,
 }
 
 impl BenchArgs {
@@ -51,15 +59,32 @@ impl BenchArgs {
     }
 }
 
-/// Times every row, then prints the table.
+/// Times every row, then prints the table (or the comparison with PyTorch).
 pub fn run(args: &BenchArgs) -> Result<()> {
     if let Some(path) = &args.json {
         check_output_folder(path)?;
     }
+    if let Some(python) = &args.compare_torch {
+        let rows = speed::compare_torch(
+            python,
+            args.rounds as usize,
+            args.warmup as usize,
+            args.steps as usize,
+            |line| eprintln!("{line}"),
+        )?;
+        println!();
+        print!("{}", speed::comparison_table(&rows));
+        if let Some(path) = &args.json {
+            crate::checkpoint::save_json(&rows, path)?;
+            eprintln!("wrote {}", path.display());
+        }
+        return Ok(());
+    }
     let rows = speed::run(&args.job(), |r| {
+        let method = r.method.map_or("-".into(), |m| m.to_string());
         eprintln!(
-            "{:?} {} {} {} points: {:.2} ms",
-            r.kind, r.backend, r.method, r.points, r.ms
+            "{:?} {} {method} {} points: {:.2} ms ({:.0} % of the GEMM peak)",
+            r.kind, r.backend, r.points, r.ms, r.peak_percent
         )
     })?;
     println!();

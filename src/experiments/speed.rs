@@ -30,6 +30,12 @@ pub enum BenchKind {
     /// One Adam step of the synthetic protocol (750 trajectory points; `L_H` on
     /// min(1,024, 750) = 750 jittered points; Affinity-H with weight 0.1).
     FitStep,
+    /// The same step without a regulariser: the trajectory L1 alone (the value path).
+    FitStepL1,
+    /// The machine's matmul throughput through the backend's own GEMM: f32
+    /// `[3000, 128] × [128, 128]`, the best of the timed runs. The other rows state their
+    /// share of it.
+    Gemm,
 }
 
 /// One row of the table (and one JSON record).
@@ -39,14 +45,18 @@ pub struct BenchRow {
     pub kind: BenchKind,
     /// The backend.
     pub backend: BackendKind,
-    /// The Jacobian method.
-    pub method: JacobianKind,
-    /// Points whose Jacobian is taken (for `fit_step`, the smoothness points).
+    /// The Jacobian method (`null` for the GEMM row).
+    pub method: Option<JacobianKind>,
+    /// Points whose Jacobian is taken (for `fit_step`, the smoothness points; for
+    /// `fit_step_l1`, the trajectory points; for `gemm`, the rows).
     pub points: usize,
-    /// Milliseconds per step, the median after warm-up.
+    /// Milliseconds per step, the median after warm-up (for `gemm`, the best).
     pub ms: f64,
     /// Matmul FLOPs per step / time, in GFLOP/s.
     pub gflops: f64,
+    /// `gflops` as a percentage of the GEMM peak measured on the same backend in the same
+    /// run.
+    pub peak_percent: f64,
 }
 
 /// What to measure.
@@ -146,28 +156,31 @@ pub fn jacobian_row(
     Ok(BenchRow {
         kind: BenchKind::Jacobian,
         backend,
-        method,
+        method: Some(method),
         points,
         ms,
         gflops: siren_flops(4 * points, &widths()) / (ms * 1e6),
+        peak_percent: f64::NAN,
     })
 }
 
-/// The `fit_step` row: one training step of the synthetic protocol, Affinity-H.
+/// The `fit_step` row (one training step of the synthetic protocol, Affinity-H), or with
+/// `smoothness = false` the `fit_step_l1` row (the same step without `L_H`).
 pub fn fit_step_row(
     backend: BackendKind,
     method: JacobianKind,
+    smoothness: bool,
     warmup: usize,
     steps: usize,
 ) -> Result<BenchRow> {
     let device = backend.device()?;
     let seq = benchmark_sequence(Motion::Rotation, 0)?;
     let config = FitConfig::doma(DomaFieldConfig::new(Variant::Affinity))
-        .with_smoothness_weight(0.1)
+        .with_smoothness_weight(if smoothness { 0.1 } else { 0.0 })
         .with_jacobian(method);
     let mut trainer = Trainer::from_config(&config, &seq.train, &device)?;
-    // REFERENCE §4.2: min(1024, N) jittered training points, so 750 here.
     let n = seq.train.points();
+    // REFERENCE §4.2: min(1024, N) jittered training points, so 750 here.
     let h_points = config
         .smoothness_sampling
         .max_points
@@ -176,60 +189,299 @@ pub fn fit_step_row(
     let mut k = 0;
     let ms = median_ms(
         || {
-            let _ = trainer.step(k % frames, config.schedule.learning_rate);
+            trainer.step(k % frames, config.schedule.learning_rate)?;
             k += 1;
             sync(&device)
         },
         warmup,
         steps,
     )?;
-    let flops = siren_flops(seq.train.points(), &widths()) + siren_flops(4 * h_points, &widths());
+    let (kind, points, flops) = if smoothness {
+        let flops = siren_flops(n, &widths()) + siren_flops(4 * h_points, &widths());
+        (BenchKind::FitStep, h_points, flops)
+    } else {
+        (BenchKind::FitStepL1, n, siren_flops(n, &widths()))
+    };
     Ok(BenchRow {
-        kind: BenchKind::FitStep,
+        kind,
         backend,
-        method,
-        points: h_points,
+        method: Some(method),
+        points,
         ms,
         gflops: flops / (ms * 1e6),
+        peak_percent: f64::NAN,
     })
 }
 
-/// Runs every row of `job`, calling `on_row` as each finishes.
+/// The `gemm` row: the best of `steps` f32 `[3000, 128] × [128, 128]` matmuls on
+/// `backend` (after `warmup`), through the GEMM that the backend's training steps use.
+pub fn gemm_row(backend: BackendKind, warmup: usize, steps: usize) -> Result<BenchRow> {
+    let (m, k, n) = (3000, 128, 128);
+    let device = backend.device()?;
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut random =
+        |len: usize| -> Vec<f32> { (0..len).map(|_| rng.random_range(-1.0..1.0)).collect() };
+    let a = Tensor::<2>::from_data(TensorData::new(random(m * k), [m, k]), &device);
+    let b = Tensor::<2>::from_data(TensorData::new(random(k * n), [k, n]), &device);
+    let mut best = f64::INFINITY;
+    for i in 0..warmup + steps.max(1) {
+        let start = Instant::now();
+        let c = a.clone().matmul(b.clone());
+        sync(&device)?;
+        drop(c);
+        if i >= warmup {
+            best = best.min(start.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    Ok(BenchRow {
+        kind: BenchKind::Gemm,
+        backend,
+        method: None,
+        points: m,
+        ms: best,
+        gflops: 2.0 * (m * k * n) as f64 / (best * 1e6),
+        peak_percent: 100.0,
+    })
+}
+
+/// Runs every row of `job`, calling `on_row` as each finishes: per backend, its GEMM peak
+/// first (every other row states its share of it), then the training steps (Affinity-H,
+/// then without a regulariser) and the Jacobian steps.
 pub fn run(job: &BenchJob, mut on_row: impl FnMut(&BenchRow)) -> Result<Vec<BenchRow>> {
     let mut rows = Vec::new();
     for &backend in &job.backends {
-        for &method in &job.methods {
-            let row = fit_step_row(backend, method, job.warmup, job.steps)?;
+        // More runs than a step row: the best of them is the peak.
+        let peak = gemm_row(backend, job.warmup, 4 * job.steps)?;
+        on_row(&peak);
+        let peak_gflops = peak.gflops;
+        rows.push(peak);
+        let mut push = |mut row: BenchRow| {
+            row.peak_percent = 100.0 * row.gflops / peak_gflops;
             on_row(&row);
             rows.push(row);
+        };
+        for smoothness in [true, false] {
+            for &method in &job.methods {
+                push(fit_step_row(
+                    backend, method, smoothness, job.warmup, job.steps,
+                )?);
+            }
         }
         for &points in &job.points {
             for &method in &job.methods {
-                let row = jacobian_row(backend, method, points, job.warmup, job.steps)?;
-                on_row(&row);
-                rows.push(row);
+                push(jacobian_row(
+                    backend, method, points, job.warmup, job.steps,
+                )?);
             }
         }
     }
     Ok(rows)
 }
 
+/// The PyTorch side of a comparison: `benches/torch_step.py` in the crate.
+pub fn torch_script() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/torch_step.py")
+}
+
+/// One line of `benches/torch_step.py`'s output.
+#[derive(Clone, Debug, Serialize, serde::Deserialize)]
+pub struct TorchRow {
+    /// `none`, `jacrev`, `jvp` or `dual`.
+    pub mode: String,
+    /// The torch version.
+    pub torch: String,
+    /// Its intra-op threads.
+    pub threads: usize,
+    /// Median milliseconds per step after warm-up.
+    pub ms_median: f64,
+}
+
+/// Parses the script's output: one JSON object per line; other lines are ignored.
+pub fn parse_torch_rows(stdout: &str) -> Result<Vec<TorchRow>> {
+    stdout
+        .lines()
+        .filter(|l| l.trim_start().starts_with('{'))
+        .map(|l| {
+            serde_json::from_str(l).map_err(|e| {
+                DomaError::InvalidData(format!("the PyTorch script printed {l:?}: {e}"))
+            })
+        })
+        .collect()
+}
+
+/// Runs the PyTorch step script with `python` for `modes` (comma-separated) on `threads`
+/// threads.
+pub fn torch_rows(
+    python: &std::path::Path,
+    modes: &str,
+    warmup: usize,
+    steps: usize,
+    threads: usize,
+) -> Result<Vec<TorchRow>> {
+    let out = std::process::Command::new(python)
+        .arg(torch_script())
+        .args(["--modes", modes])
+        .args([
+            "--warmup",
+            &warmup.to_string(),
+            "--steps",
+            &steps.to_string(),
+        ])
+        .args(["--threads", &threads.to_string()])
+        .output()
+        .map_err(|e| DomaError::io(python, e))?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        let last = err
+            .lines()
+            .rev()
+            .find(|l| !l.trim().is_empty())
+            .unwrap_or("no message");
+        return Err(DomaError::Usage(format!(
+            "--compare-torch {}: the PyTorch script failed: {last}",
+            python.display()
+        )));
+    }
+    parse_torch_rows(&String::from_utf8_lossy(&out.stdout))
+}
+
+/// One line of the side-by-side table: a doma step and its PyTorch counterpart, each
+/// measured once per round, rounds alternating between the two.
+#[derive(Clone, Debug, Serialize)]
+pub struct Comparison {
+    /// The step: `affinity-h` or `no-reg`.
+    pub step: &'static str,
+    /// doma's method.
+    pub doma: JacobianKind,
+    /// doma's median ms per step, one per round.
+    pub doma_ms: Vec<f64>,
+    /// PyTorch's mode (for `fastest`, the fastest of `dual`, `jvp` and `jacrev` in each
+    /// round).
+    pub torch: &'static str,
+    /// PyTorch's median ms per step, one per round.
+    pub torch_ms: Vec<f64>,
+    /// The speed-up the issue asks for: `torch / doma` of the medians over rounds.
+    pub target: f64,
+}
+
+impl Comparison {
+    /// The median over rounds.
+    fn median(v: &[f64]) -> f64 {
+        let mut v = v.to_vec();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    }
+
+    /// `torch / doma`: how many times faster doma is.
+    pub fn ratio(&self) -> f64 {
+        Self::median(&self.torch_ms) / Self::median(&self.doma_ms)
+    }
+}
+
+/// doma against PyTorch on flex, `rounds` times alternating: Affinity-H with Analytic
+/// against PyTorch's fastest mode, with Autodiff against `jvp`, and the no-regulariser step
+/// against `none`.
+pub fn compare_torch(
+    python: &std::path::Path,
+    rounds: usize,
+    warmup: usize,
+    steps: usize,
+    mut progress: impl FnMut(&str),
+) -> Result<Vec<Comparison>> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut rows = vec![
+        (("affinity-h", JacobianKind::Analytic, true), "fastest", 2.5),
+        (("affinity-h", JacobianKind::Autodiff, true), "jvp", 1.0),
+        (("no-reg", JacobianKind::Analytic, false), "none", 2.0),
+    ]
+    .into_iter()
+    .map(|((step, doma, smoothness), torch, target)| {
+        let c = Comparison {
+            step,
+            doma,
+            doma_ms: Vec::new(),
+            torch,
+            torch_ms: Vec::new(),
+            target,
+        };
+        (c, smoothness)
+    })
+    .collect::<Vec<_>>();
+    for round in 0..rounds.max(1) {
+        for (c, smoothness) in rows.iter_mut() {
+            let r = fit_step_row(BackendKind::Flex, c.doma, *smoothness, warmup, steps)?;
+            progress(&format!(
+                "round {round}: doma {} {}: {:.2} ms",
+                c.step, c.doma, r.ms
+            ));
+            c.doma_ms.push(r.ms);
+        }
+        let torch = torch_rows(python, "none,jvp,dual,jacrev", warmup, steps, threads)?;
+        let ms = |mode: &str| torch.iter().find(|t| t.mode == mode).map(|t| t.ms_median);
+        for (c, _) in rows.iter_mut() {
+            let v = match c.torch {
+                "fastest" => ["dual", "jvp", "jacrev"]
+                    .iter()
+                    .filter_map(|m| ms(m))
+                    .fold(f64::INFINITY, f64::min),
+                mode => ms(mode).unwrap_or(f64::NAN),
+            };
+            progress(&format!("round {round}: pytorch {}: {v:.2} ms", c.torch));
+            c.torch_ms.push(v);
+        }
+    }
+    Ok(rows.into_iter().map(|(c, _)| c).collect())
+}
+
+/// The side-by-side table: each line's medians over rounds (min–max), the ratio and the
+/// issue's target.
+pub fn comparison_table(rows: &[Comparison]) -> String {
+    let range = |v: &[f64]| {
+        let (lo, hi) = v
+            .iter()
+            .fold((f64::INFINITY, 0f64), |(a, b), &x| (a.min(x), b.max(x)));
+        format!("{:.2} ({lo:.2}-{hi:.2})", Comparison::median(v))
+    };
+    let mut s = format!(
+        "{:<11} {:<9} {:>22} {:<8} {:>22} {:>8} {:>7}\n",
+        "step", "doma", "ms (min-max)", "pytorch", "ms (min-max)", "speed-up", "target"
+    );
+    s += &"-".repeat(94);
+    s += "\n";
+    for c in rows {
+        s += &format!(
+            "{:<11} {:<9} {:>22} {:<8} {:>22} {:>7.2}x {:>6.1}x\n",
+            c.step,
+            c.doma,
+            range(&c.doma_ms),
+            c.torch,
+            range(&c.torch_ms),
+            c.ratio(),
+            c.target
+        );
+    }
+    s
+}
+
 /// The rows as a fixed-width table.
 pub fn table(rows: &[BenchRow]) -> String {
     let mut s = format!(
-        "{:<9} {:<8} {:<9} {:>7} {:>10} {:>8}\n",
-        "kind", "backend", "method", "points", "ms/step", "GFLOP/s"
+        "{:<11} {:<8} {:<9} {:>7} {:>10} {:>8} {:>7}\n",
+        "kind", "backend", "method", "points", "ms/step", "GFLOP/s", "% peak"
     );
-    s += &"-".repeat(56);
+    s += &"-".repeat(66);
     s += "\n";
     for r in rows {
         let kind = match r.kind {
             BenchKind::Jacobian => "jacobian",
             BenchKind::FitStep => "fit_step",
+            BenchKind::FitStepL1 => "fit_step_l1",
+            BenchKind::Gemm => "gemm",
         };
+        let method = r.method.map_or("-".to_string(), |m| m.to_string());
         s += &format!(
-            "{:<9} {:<8} {:<9} {:>7} {:>10.2} {:>8.1}\n",
-            kind, r.backend, r.method, r.points, r.ms, r.gflops
+            "{:<11} {:<8} {:<9} {:>7} {:>10.2} {:>8.1} {:>7.1}\n",
+            kind, r.backend, method, r.points, r.ms, r.gflops, r.peak_percent
         );
     }
     s
@@ -244,5 +496,24 @@ mod tests {
         // rows 10, widths 2 → 3 → 1: layer 1: 2·10·2·3 = 120, ×2 (forward, g_W) = 240;
         // layer 2: 2·10·3·1 = 60, ×3 = 180.
         assert_eq!(siren_flops(10, &[2, 3, 1]), 420.0);
+    }
+
+    #[test]
+    fn the_pytorch_lines_are_parsed_and_the_ratio_is_of_medians() {
+        let out = "loading torch\n{\"impl\": \"pytorch\", \"torch\": \"2.5\", \"mode\": \"dual\", \"threads\": 2, \"points\": 750, \"ms_median\": 13.5, \"ms_min\": 13, \"ms_max\": 14}\n";
+        let rows = parse_torch_rows(out).unwrap();
+        assert_eq!((rows[0].mode.as_str(), rows[0].ms_median), ("dual", 13.5));
+        assert!(parse_torch_rows("{ not json").is_err());
+        let c = Comparison {
+            step: "affinity-h",
+            doma: JacobianKind::Analytic,
+            doma_ms: vec![5.0, 4.0, 6.0],
+            torch: "fastest",
+            torch_ms: vec![12.0, 15.0, 13.0],
+            target: 2.5,
+        };
+        // Medians 5 and 13: 2.6x.
+        assert!((c.ratio() - 2.6).abs() < 1e-12);
+        assert!(comparison_table(&[c]).contains("2.60x"));
     }
 }
