@@ -482,6 +482,31 @@ fn the_supplement_experiments_refuse_bad_flags() {
         (vec!["image2d", "--widths", "0"], "--widths"),
         (vec!["image2d", "--motion", "twist"], "twist"),
         (vec!["novel-points", "--baselines", "banmo"], "banmo"),
+        (vec!["novel-points", "--reg", "x"], "x"),
+        (vec!["novel-points", "--h-weight", "-1"], "--h-weight"),
+        (vec!["novel-points", "--h-weight", "lots"], "auto"),
+        (
+            vec![
+                "novel-points",
+                "--h-weight",
+                "auto",
+                "--validation-fraction",
+                "1.5",
+            ],
+            "--validation-fraction",
+        ),
+        (
+            vec![
+                "synthetic",
+                "--reg",
+                "h",
+                "--h-weight",
+                "auto",
+                "--weight-grid",
+                "0,-1",
+            ],
+            "--weight-grid",
+        ),
     ] {
         let (ok, _, err) = doma(&args);
         assert!(!ok, "{args:?} was accepted");
@@ -587,4 +612,48 @@ fn fit_reads_a_config_file_and_flags_override_it() {
         config.to_str().unwrap(),
     ]);
     assert!(!ok && err.contains("fit.json"), "{err}");
+}
+
+#[test]
+fn fit_chooses_its_smoothness_weight_by_validation_and_plots_the_grid() {
+    let dir = std::env::temp_dir().join(format!("doma-cli-auto-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = dir.join("run");
+    let faerie = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
+    let (ok, _, err) = doma(&[
+        "fit",
+        faerie,
+        "--frames",
+        "112..116",
+        "--iters",
+        "2",
+        "--h-weight",
+        "auto",
+        "--weight-grid",
+        "0,0.1,10",
+        "--search-iters",
+        "2",
+        "--quiet",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap();
+    let grid = saved["weight_search"]["grid"].as_array().unwrap();
+    assert_eq!(grid.len(), 3);
+    // The chosen weight is the grid's best, and it is the fit's weight.
+    let best = grid
+        .iter()
+        .min_by(|a, b| {
+            let e = |p: &serde_json::Value| p["validation_epe_x1e4"].as_f64().unwrap();
+            e(a).total_cmp(&e(b))
+        })
+        .unwrap();
+    assert_eq!(saved["weight_search"]["weight"], best["weight"]);
+    assert_eq!(saved["fit"]["loss"]["smoothness_weight"], best["weight"]);
+    let (ok, _, err) = doma(&["plot", run.to_str().unwrap()]);
+    assert!(ok && err.contains("weight_search.png"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -4,11 +4,13 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::backend::BackendKind;
-use crate::cli::{ClipArgs, fraction, non_negative};
+use crate::cli::{ClipArgs, WeightSearchArgs, fraction, weight};
+use crate::experiments::meshes::Weight;
 use crate::field::model::ModelConfig;
 use crate::field::{DomaFieldConfig, Variant};
 use crate::jacobian::JacobianKind;
 use crate::run::{FitOutcome, RunConfig, RunDir, fit_run};
+use crate::train::select::{Penalty, choose_weight};
 use crate::train::{FitConfig, SmoothnessSampling};
 use crate::{DomaError, Result};
 
@@ -44,9 +46,14 @@ pub struct FitArgs {
     /// The fraction of points held out for the report.
     #[arg(long, value_parser = fraction)]
     pub test_fraction: Option<f64>,
-    /// The weight of the smoothness loss L_H (0 = off).
-    #[arg(long, value_parser = non_negative, allow_negative_numbers = true)]
-    pub h_weight: Option<f64>,
+    /// The weight of the smoothness loss L_H (0 = off), or `auto`: chosen by validation on
+    /// held-out training points before the fit (the grid goes into config.json and the
+    /// plots).
+    #[arg(long, value_parser = weight, allow_negative_numbers = true)]
+    pub h_weight: Option<Weight>,
+    /// How an `auto` weight is searched.
+    #[command(flatten)]
+    pub search: WeightSearchArgs,
     /// The clip and the faces.
     #[command(flatten)]
     pub clip: ClipArgs,
@@ -84,7 +91,7 @@ impl FitArgs {
         if let Some(i) = self.iters {
             fit.schedule.iterations = i as usize;
         }
-        if let Some(w) = self.h_weight {
+        if let Some(Weight::Fixed(w)) = self.h_weight {
             fit.loss.smoothness_weight = w;
         }
         if let Some(s) = self.seed {
@@ -106,6 +113,28 @@ impl FitArgs {
         }
         if let Some(k) = self.checkpoint_every {
             config.checkpoint_every = k as usize;
+        }
+        if self.h_weight == Some(Weight::Auto) {
+            config.validate()?;
+            let search = self.search.search()?;
+            let (train, _) = config.split(&config.load()?.trajectories)?;
+            let device = config.backend.device()?;
+            let choice = choose_weight(
+                &config.fit,
+                Penalty::Smoothness,
+                &train,
+                &search,
+                &device,
+                |p| {
+                    eprintln!(
+                        "weight {:e}: validation EPE {:.2}e-4",
+                        p.weight, p.validation_epe_x1e4
+                    )
+                },
+            )?;
+            eprintln!("chose the L_H weight {:e}", choice.weight);
+            config.fit.loss.smoothness_weight = choice.weight;
+            config.weight_search = Some(choice);
         }
         Ok(config)
     }

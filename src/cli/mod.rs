@@ -184,6 +184,51 @@ pub fn non_negative(s: &str) -> std::result::Result<f64, String> {
     }
 }
 
+/// A regulariser weight: a finite non-negative number, or `auto` (chosen by validation).
+pub fn weight(s: &str) -> std::result::Result<crate::experiments::meshes::Weight, String> {
+    use crate::experiments::meshes::Weight;
+    if s.trim() == "auto" {
+        return Ok(Weight::Auto);
+    }
+    non_negative(s)
+        .map(Weight::Fixed)
+        .map_err(|e| format!("{e}, or `auto`"))
+}
+
+/// How an `auto` weight is searched: the grid, the validation fraction of the training
+/// points and the short budget (cost: grid × budget iterations per model before its fit).
+#[derive(clap::Args, Debug, Clone)]
+pub struct WeightSearchArgs {
+    /// With a weight of `auto`: the weights tried (comma-separated; include 0, no
+    /// regulariser).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0,1e-4,1e-3,1e-2,1e-1,1",
+        allow_negative_numbers = true
+    )]
+    pub weight_grid: Vec<f64>,
+    /// With `auto`: the fraction of the training points held out to score each weight.
+    #[arg(long, default_value_t = 0.2, allow_negative_numbers = true)]
+    pub validation_fraction: f64,
+    /// With `auto`: iterations of each short fit of the search.
+    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(1..))]
+    pub search_iters: u64,
+}
+
+impl WeightSearchArgs {
+    /// The search these flags describe, checked.
+    pub fn search(&self) -> Result<crate::train::select::WeightSearch> {
+        let search = crate::train::select::WeightSearch {
+            grid: self.weight_grid.clone(),
+            validation_fraction: self.validation_fraction,
+            iterations: self.search_iters as usize,
+        };
+        search.validate()?;
+        Ok(search)
+    }
+}
+
 /// A fraction strictly between 0 and 1.
 pub fn fraction(s: &str) -> std::result::Result<f64, String> {
     let v: f64 = s.parse().map_err(|_| format!("`{s}` is not a number"))?;

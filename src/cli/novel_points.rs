@@ -1,8 +1,9 @@
 //! `doma novel-points`: Tab. 1 (fit 25 % of an animated mesh's vertices, predict the rest).
 
 use crate::Result;
-use crate::cli::{ExperimentArgs, SequenceArgs};
-use crate::experiments::meshes::{self, MeshRecord, NovelPointsJob};
+use crate::cli::{ExperimentArgs, SequenceArgs, WeightSearchArgs, weight};
+use crate::experiments::meshes::{self, MeshRecord, NovelPointsJob, Weight};
+use crate::experiments::synthetic::Regularizer;
 use crate::field::Variant;
 use crate::field::baselines::Baseline;
 use crate::jacobian::JacobianKind;
@@ -28,6 +29,20 @@ pub struct NovelPointsArgs {
     /// Iterations per fit (the paper: 1000).
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..))]
     pub iters: u64,
+    /// The regularisers (comma-separated): none, h (smoothness, Eq. 13), e (elasticity);
+    /// one row per model and regulariser.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "none")]
+    pub reg: Vec<Regularizer>,
+    /// The weight of the smoothness loss in the "-H" rows, or `auto` (chosen by
+    /// validation on held-out training points).
+    #[arg(long, default_value = "0.1", value_parser = weight, allow_negative_numbers = true)]
+    pub h_weight: Weight,
+    /// The weight of the elasticity loss in the "-E" rows, or `auto`.
+    #[arg(long, default_value = "0.01", value_parser = weight, allow_negative_numbers = true)]
+    pub e_weight: Weight,
+    /// How an `auto` weight is searched.
+    #[command(flatten)]
+    pub search: WeightSearchArgs,
     /// Surface samples per mesh and frame for CD/CDN (the paper: 1000000).
     #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1..))]
     pub samples: u64,
@@ -51,6 +66,10 @@ impl NovelPointsArgs {
             jacobian: JacobianKind::Analytic,
             seed: self.common.seed,
             quiet: self.common.quiet,
+            regs: self.reg.clone(),
+            h_weight: self.h_weight,
+            e_weight: self.e_weight,
+            search: self.search.search()?,
         })
     }
 }
@@ -67,9 +86,13 @@ pub fn run(args: &NovelPointsArgs) -> Result<()> {
     let job = args.job()?;
     SequenceArgs::announce("novel_points", &job.sequence, args.iters, job.backend);
     let records = meshes::novel_points(&job, |r| {
+        let weight = r
+            .weight
+            .map_or(String::new(), |w| format!(" (weight {w:e})"));
         eprintln!(
-            "{} EPE {:.2}e-4 in {:.1} s",
+            "{}{}{weight} EPE {:.2}e-4 in {:.1} s",
             r.variant,
+            r.reg.suffix(),
             r.epe_x1e4.unwrap_or(f64::NAN),
             r.seconds
         )

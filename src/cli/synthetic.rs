@@ -1,8 +1,9 @@
 //! `doma synthetic`: the synthetic benchmark of Tab. 2.
 
 use crate::Result;
-use crate::cli::{ExperimentArgs, Selection, non_negative, selection};
+use crate::cli::{ExperimentArgs, Selection, WeightSearchArgs, selection, weight};
 use crate::data::synthetic::Motion;
+use crate::experiments::meshes::Weight;
 use crate::experiments::synthetic::{self, Regularizer, SyntheticJob};
 use crate::field::Variant;
 use crate::jacobian::JacobianKind;
@@ -22,12 +23,16 @@ pub struct SyntheticArgs {
     /// The regulariser: none, the smoothness loss H (Eq. 13) or the elasticity E.
     #[arg(long, value_enum, default_value = "none")]
     pub reg: Regularizer,
-    /// The weight of the smoothness loss with --reg h.
-    #[arg(long, default_value_t = 0.1, value_parser = non_negative, allow_negative_numbers = true)]
-    pub h_weight: f64,
-    /// The weight of the elasticity loss with --reg e.
-    #[arg(long, default_value_t = 0.01, value_parser = non_negative, allow_negative_numbers = true)]
-    pub e_weight: f64,
+    /// The weight of the smoothness loss with --reg h, or `auto` (chosen by validation on
+    /// held-out training points).
+    #[arg(long, default_value = "0.1", value_parser = weight, allow_negative_numbers = true)]
+    pub h_weight: Weight,
+    /// The weight of the elasticity loss with --reg e, or `auto`.
+    #[arg(long, default_value = "0.01", value_parser = weight, allow_negative_numbers = true)]
+    pub e_weight: Weight,
+    /// How an `auto` weight is searched.
+    #[command(flatten)]
+    pub search: WeightSearchArgs,
     /// Iterations (passes over all 20 frames); 1000 is the paper's budget.
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..), allow_negative_numbers = true)]
     pub iters: u64,
@@ -45,32 +50,50 @@ pub struct SyntheticArgs {
 
 impl SyntheticArgs {
     /// The library job these flags describe.
-    pub fn job(&self) -> SyntheticJob {
-        SyntheticJob {
+    pub fn job(&self) -> Result<SyntheticJob> {
+        let fixed = |w: Weight| match w {
+            Weight::Fixed(w) => w,
+            Weight::Auto => 0.0,
+        };
+        let auto = match self.reg {
+            Regularizer::H => self.h_weight == Weight::Auto,
+            Regularizer::E => self.e_weight == Weight::Auto,
+            Regularizer::None => false,
+        };
+        Ok(SyntheticJob {
             motions: self.motion.items.clone(),
             variants: self.variant.items.clone(),
             reg: self.reg,
-            h_weight: self.h_weight,
-            e_weight: self.e_weight,
+            h_weight: fixed(self.h_weight),
+            e_weight: fixed(self.e_weight),
             iterations: self.iters as usize,
             hidden: self.hidden as usize,
             backend: self.common.backend,
             jacobian: self.jacobian,
             seed: self.common.seed,
             quiet: self.common.quiet,
-        }
+            weight_search: if auto {
+                Some(self.search.search()?)
+            } else {
+                None
+            },
+        })
     }
 }
 
 /// Runs the job: one line per fit as it finishes, then the table.
 pub fn run(args: &SyntheticArgs) -> Result<()> {
     args.common.check_json()?;
-    let job = args.job();
+    let job = args.job()?;
     let runs = synthetic::run(&job, |r| {
+        let auto = r
+            .weight_search
+            .as_ref()
+            .map_or(String::new(), |c| format!(" auto {:e}", c.weight));
         eprintln!(
             "{:<11} {:<18} EPE x1e-4 {:>10.2}  ({:.1} s, {:.2} ms/step)",
             r.motion,
-            format!("{}{}", r.variant.paper_name(), r.reg.suffix()),
+            format!("{}{}{auto}", r.variant.paper_name(), r.reg.suffix()),
             r.epe_x1e4,
             r.seconds,
             1e3 * r.seconds / r.steps as f64

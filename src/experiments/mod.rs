@@ -21,3 +21,54 @@ pub enum Experiment {
     /// Supplement Tab. A7: a deforming 2-D pixel grid.
     Image2d,
 }
+
+/// The regulariser of a record's row, spelled as the rows of the paper's tables: `none`,
+/// `h` (`L_H`, Eq. 13), `e` (elasticity), `a` (AIAP), `ah` (both of Tab. 3's).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RowReg {
+    /// None.
+    None,
+    /// The smoothness loss ("-H").
+    H,
+    /// The elasticity loss ("-E").
+    E,
+    /// AIAP ("-A").
+    A,
+    /// AIAP and the smoothness loss ("-AH").
+    Ah,
+}
+
+impl RowReg {
+    /// The suffix of the paper's row names ("", "-H", "-E", "-A", "-AH").
+    pub fn suffix(self) -> &'static str {
+        match self {
+            RowReg::None => "",
+            RowReg::H => "-H",
+            RowReg::E => "-E",
+            RowReg::A => "-A",
+            RowReg::Ah => "-AH",
+        }
+    }
+}
+
+impl From<synthetic::Regularizer> for RowReg {
+    fn from(r: synthetic::Regularizer) -> Self {
+        match r {
+            synthetic::Regularizer::None => RowReg::None,
+            synthetic::Regularizer::H => RowReg::H,
+            synthetic::Regularizer::E => RowReg::E,
+        }
+    }
+}
+
+impl From<meshes::AlignReg> for RowReg {
+    fn from(r: meshes::AlignReg) -> Self {
+        match r {
+            meshes::AlignReg::None => RowReg::None,
+            meshes::AlignReg::A => RowReg::A,
+            meshes::AlignReg::H => RowReg::H,
+            meshes::AlignReg::Ah => RowReg::Ah,
+        }
+    }
+}

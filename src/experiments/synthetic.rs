@@ -10,6 +10,7 @@ use crate::field::{DomaFieldConfig, Variant};
 use crate::jacobian::JacobianKind;
 use crate::metrics::{EPE_SCALE, evaluate_epe};
 use crate::prelude::*;
+use crate::train::select::{Penalty, WeightChoice, WeightSearch, choose_weight};
 use crate::train::{FitConfig, Trainer};
 
 /// The regulariser of a run: the rows "", "-E" and "-H" of Tab. 2.
@@ -61,9 +62,37 @@ pub struct SyntheticJob {
     pub seed: u64,
     /// No progress bars.
     pub quiet: bool,
+    /// When set, the regulariser's weight is chosen by validation on held-out training
+    /// points (`--h-weight auto`) instead of `h_weight` / `e_weight`.
+    pub weight_search: Option<WeightSearch>,
 }
 
 impl SyntheticJob {
+    /// `config` with its regulariser's weight searched on `train` when the job asks
+    /// for it (the test points are not passed).
+    pub fn searched(
+        &self,
+        config: FitConfig,
+        train: &crate::data::Trajectories,
+        device: &burn::tensor::Device,
+    ) -> Result<(FitConfig, Option<WeightChoice>)> {
+        let penalty = match (self.reg, &self.weight_search) {
+            (Regularizer::H, Some(_)) => Penalty::Smoothness,
+            (Regularizer::E, Some(_)) => Penalty::Elasticity,
+            _ => return Ok((config, None)),
+        };
+        let search = self.weight_search.as_ref().expect("matched above");
+        let choice = choose_weight(&config, penalty, train, search, device, |p| {
+            if !self.quiet {
+                eprintln!(
+                    "  weight {:e}: validation EPE {:.2}e-4",
+                    p.weight, p.validation_epe_x1e4
+                );
+            }
+        })?;
+        Ok((penalty.with_weight(&config, choice.weight), Some(choice)))
+    }
+
     /// The fit configuration of one run.
     pub fn fit_config(&self, variant: Variant) -> FitConfig {
         let (w_h, w_e) = match self.reg {
@@ -101,6 +130,9 @@ pub struct SyntheticRun {
     pub seconds: f64,
     /// Optimiser steps.
     pub steps: usize,
+    /// How the regulariser's weight was chosen, when it was searched.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub weight_search: Option<WeightChoice>,
 }
 
 /// Runs every (variant, motion) pair of `job`, calling `on_run` after each fit.
@@ -110,7 +142,7 @@ pub fn run(job: &SyntheticJob, mut on_run: impl FnMut(&SyntheticRun)) -> Result<
     for &motion in &job.motions {
         let seq = benchmark_sequence(motion, 0)?;
         for &variant in &job.variants {
-            let config = job.fit_config(variant);
+            let (config, choice) = job.searched(job.fit_config(variant), &seq.train, &device)?;
             let fitted = Trainer::from_config(&config, &seq.train, &device)?
                 .progress(!job.quiet)
                 .run()?;
@@ -125,6 +157,7 @@ pub fn run(job: &SyntheticJob, mut on_run: impl FnMut(&SyntheticRun)) -> Result<
                 epe_x1e4: epe * EPE_SCALE,
                 seconds: fitted.seconds,
                 steps: fitted.steps,
+                weight_search: choice,
             };
             on_run(&run);
             runs.push(run);

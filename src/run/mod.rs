@@ -63,6 +63,10 @@ pub struct RunConfig {
     pub backend: crate::backend::BackendKind,
     /// The fit (variant, iterations, learning rate, regularisers, seed, …).
     pub fit: FitConfig,
+    /// How the fit's `L_H` weight was chosen by validation (`--h-weight auto`): the grid and
+    /// each weight's validation EPE; the chosen weight is in `fit`.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub weight_search: Option<crate::train::select::WeightChoice>,
 }
 
 fn default_backend() -> crate::backend::BackendKind {
@@ -82,6 +86,7 @@ impl RunConfig {
             checkpoint_every: 50,
             backend: default_backend(),
             fit,
+            weight_search: None,
         }
     }
 

@@ -10,6 +10,7 @@ use crate::data::mesh::as_points;
 use crate::metrics::{EPE_SCALE, epe_per_frame, predict};
 use crate::plot::{Series, line_plot, three_views};
 use crate::train::IterationRecord;
+use crate::train::select::WeightChoice;
 use crate::{DomaError, Result};
 
 /// Writes the run's plots into `RUN_DIR/plots/`: `loss.png` (trajectory and total loss per
@@ -34,6 +35,9 @@ pub fn plot_run(run: &RunDir, frames: Option<&[usize]>, device: &Device) -> Resu
     let predicted = predict(&field, &test, device)?;
     let per_frame = epe_per_frame(&predicted, &test)?;
     let mut written = vec![loss_plot(&history, &dir)?, epe_plot(&per_frame, &dir)?];
+    if let Some(choice) = &config.weight_search {
+        written.push(weight_plot(choice, &dir)?);
+    }
     let canonical = as_points(test.frame(0));
     for &k in chosen {
         let (truth, pred) = (as_points(test.frame(k)), as_points(predicted.frame(k)));
@@ -73,6 +77,41 @@ fn loss_plot(history: &[IterationRecord], dir: &Path) -> Result<PathBuf> {
     ];
     let path = dir.join("loss.png");
     line_plot("LOSS", "ITERATION", "LOSS (LOG)", &series, true).save(&path)?;
+    Ok(path)
+}
+
+/// `weight_search.png`: the validation EPE of each weight tried (`--h-weight auto`), the
+/// weight on a log axis (0 drawn a decade below the smallest other weight).
+fn weight_plot(choice: &WeightChoice, dir: &Path) -> Result<PathBuf> {
+    let smallest = choice
+        .grid
+        .iter()
+        .map(|p| p.weight)
+        .filter(|&w| w > 0.0)
+        .fold(1.0, f64::min);
+    let series = [Series {
+        name: "VALIDATION EPE",
+        color: [120, 40, 170],
+        points: choice
+            .grid
+            .iter()
+            .map(|p| {
+                let w = if p.weight > 0.0 {
+                    p.weight
+                } else {
+                    smallest / 10.0
+                };
+                (w.log10(), p.validation_epe_x1e4)
+            })
+            .collect(),
+    }];
+    let path = dir.join("weight_search.png");
+    let chosen = match choice.weight {
+        0.0 => "0 (NO L_H)".to_string(),
+        w => format!("{w:E}"),
+    };
+    let title = format!("L_H WEIGHT BY VALIDATION: CHOSE {chosen}");
+    line_plot(&title, "LOG10 WEIGHT", "EPE X1E-4", &series, false).save(&path)?;
     Ok(path)
 }
 

@@ -12,6 +12,7 @@ mod config;
 mod hooks;
 mod objective;
 mod record;
+pub mod select;
 mod trainer;
 
 pub use config::{

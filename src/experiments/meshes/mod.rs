@@ -10,7 +10,7 @@ mod alignment;
 mod novel_points;
 
 pub use alignment::{AlignModel, AlignReg, MeshAlignmentJob, mesh_alignment};
-pub use novel_points::{NovelPointsJob, novel_points};
+pub use novel_points::{NovelPointsJob, Weight, novel_points};
 
 use std::path::{Path, PathBuf};
 
@@ -22,7 +22,7 @@ use crate::Result;
 use crate::backend::BackendKind;
 use crate::data::Trajectories;
 use crate::data::mesh::{SurfaceSamples, as_points};
-use crate::experiments::Experiment;
+use crate::experiments::{Experiment, RowReg};
 use crate::field::model::ModelName;
 use crate::metrics::chamfer_with_normals;
 
@@ -40,8 +40,15 @@ pub struct MeshRecord {
     pub sequence: String,
     /// The model: a DOMA variant's or a baseline's paper name.
     pub variant: ModelName,
-    /// The regulariser: `none`, `a`, `h` or `ah`.
-    pub reg: AlignReg,
+    /// The regulariser: `none`, `h`, `e` (Tab. 1) or `a`, `h`, `ah` (Tab. 3).
+    pub reg: RowReg,
+    /// The regulariser's weight, when it has one.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub weight: Option<f64>,
+    /// How the weight was chosen by validation (`--h-weight auto`): the grid and each
+    /// weight's validation EPE.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub weight_search: Option<crate::train::select::WeightChoice>,
     /// Iterations.
     pub iters: usize,
     /// The backend.
@@ -104,8 +111,9 @@ fn fmt_opt(v: Option<f64>, digits: usize) -> String {
 /// The records as a table: one row per run, the metrics that apply as columns.
 pub fn table(records: &[MeshRecord]) -> String {
     let mut out = format!(
-        "{:<22} {:>10} {:>10} {:>8} {:>9} {:>9} {:>10} {:>12} {:>9}\n",
+        "{:<22} {:>10} {:>10} {:>10} {:>8} {:>9} {:>9} {:>10} {:>12} {:>9}\n",
         "model",
+        "weight",
         "EPE x1e-4",
         "CD x1e-4",
         "CDN",
@@ -117,9 +125,16 @@ pub fn table(records: &[MeshRecord]) -> String {
     );
     for r in records {
         let reg = r.reg.suffix();
+        // A searched weight is marked: "1e-2 (auto)" would not fit; "auto:" prefixes it.
+        let weight = match (r.weight, &r.weight_search) {
+            (Some(w), Some(_)) => format!("auto:{w:e}"),
+            (Some(w), None) => format!("{w:e}"),
+            (None, _) => "-".into(),
+        };
         out += &format!(
-            "{:<22} {:>10} {:>10} {:>8} {:>9} {:>9} {:>10} {:>12} {:>9.1}\n",
+            "{:<22} {:>10} {:>10} {:>10} {:>8} {:>9} {:>9} {:>10} {:>12} {:>9.1}\n",
             format!("{}{reg}", r.variant),
+            weight,
             fmt_opt(r.epe_x1e4, 2),
             fmt_opt(r.cd_x1e4, 3),
             fmt_opt(r.cdn, 4),

@@ -7,13 +7,15 @@ use crate::checkpoint::Precision;
 use crate::data::Trajectories;
 use crate::data::mesh::{TriMesh, as_points};
 use crate::data::sequence::{Sequence, split_indices};
-use crate::experiments::Experiment;
+use crate::experiments::synthetic::Regularizer;
+use crate::experiments::{Experiment, RowReg};
 use crate::field::Variant;
 use crate::field::baselines::Baseline;
 use crate::field::model::{Model, ModelConfig, ModelName};
 use crate::jacobian::JacobianKind;
 use crate::metrics::{EPE_SCALE, evaluate_epe};
 use crate::prelude::*;
+use crate::train::select::{Penalty, WeightChoice, WeightSearch, choose_weight};
 use crate::train::{FitConfig, Fitted, Trainer};
 use crate::warp::warp_mesh_sequence;
 use crate::{DomaError, Result};
@@ -41,9 +43,27 @@ pub struct NovelPointsJob {
     pub seed: u64,
     /// No progress bars.
     pub quiet: bool,
+    /// The regularisers: one row per model and regulariser (Tab. 2's "", "-H", "-E").
+    pub regs: Vec<Regularizer>,
+    /// `w_H` of the "-H" rows: a number, or chosen by validation.
+    pub h_weight: Weight,
+    /// `w_E` of the "-E" rows.
+    pub e_weight: Weight,
+    /// How an `auto` weight is searched.
+    pub search: WeightSearch,
 }
 
-/// Runs `novel_points`: one record per variant, `on_run` after each.
+/// A regulariser's weight: given, or chosen by validation on the training points
+/// ([`crate::train::select::choose_weight`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Weight {
+    /// This weight.
+    Fixed(f64),
+    /// The grid's best on held-out training points.
+    Auto,
+}
+
+/// Runs `novel_points`: one record per model and regulariser, `on_run` after each.
 pub fn novel_points(
     job: &NovelPointsJob,
     mut on_run: impl FnMut(&MeshRecord),
@@ -71,18 +91,61 @@ pub fn novel_points(
     };
     let mut records = Vec::new();
     for model in job.models(data.frames()) {
-        let config = job.fit_config(model);
-        let fitted = Trainer::from_config(&config, &train, &device)?
-            .progress(!job.quiet)
-            .run()?;
-        let record = ctx.record(config.model.name(), fitted)?;
-        on_run(&record);
-        records.push(record);
+        for &reg in &job.regs {
+            let (config, search) =
+                job.regularised(job.fit_config(model.clone()), reg, &train, &device)?;
+            let fitted = Trainer::from_config(&config, &train, &device)?
+                .progress(!job.quiet)
+                .run()?;
+            let mut record = ctx.record(config.model.name(), fitted)?;
+            record.reg = reg.into();
+            record.weight = match reg {
+                Regularizer::None => None,
+                Regularizer::H => Some(config.loss.smoothness_weight),
+                Regularizer::E => Some(config.loss.elasticity_weight),
+            };
+            record.weight_search = search;
+            on_run(&record);
+            records.push(record);
+        }
     }
     Ok(records)
 }
 
 impl NovelPointsJob {
+    /// `config` with `reg`'s weight: as given, or searched on the training points
+    /// `train` (the held-out points are not passed, so they cannot be read).
+    pub fn regularised(
+        &self,
+        config: FitConfig,
+        reg: Regularizer,
+        train: &Trajectories,
+        device: &burn::tensor::Device,
+    ) -> Result<(FitConfig, Option<WeightChoice>)> {
+        let (penalty, weight) = match reg {
+            Regularizer::None => return Ok((config, None)),
+            Regularizer::H => (Penalty::Smoothness, self.h_weight),
+            Regularizer::E => (Penalty::Elasticity, self.e_weight),
+        };
+        match weight {
+            Weight::Fixed(w) => Ok((penalty.with_weight(&config, w), None)),
+            Weight::Auto => {
+                let name = config.model.name();
+                let choice = choose_weight(&config, penalty, train, &self.search, device, |p| {
+                    if !self.quiet {
+                        eprintln!(
+                            "  {name}{}: weight {:e}: validation EPE {:.2}e-4",
+                            RowReg::from(reg).suffix(),
+                            p.weight,
+                            p.validation_epe_x1e4
+                        );
+                    }
+                })?;
+                Ok((penalty.with_weight(&config, choice.weight), Some(choice)))
+            }
+        }
+    }
+
     /// The models to fit, in the table's order: the variants, then the baselines for a
     /// `frames`-frame sequence.
     pub fn models(&self, frames: usize) -> Vec<ModelConfig> {
@@ -143,7 +206,9 @@ impl NovelContext<'_> {
             experiment: Experiment::NovelPoints,
             sequence: job.sequence.name.clone(),
             variant: name,
-            reg: super::AlignReg::None,
+            reg: RowReg::None,
+            weight: None,
+            weight_search: None,
             iters: job.iterations,
             backend: job.backend,
             epe_x1e4: Some(epe * EPE_SCALE),
