@@ -195,6 +195,21 @@ pub fn weight(s: &str) -> std::result::Result<crate::experiments::meshes::Weight
         .map_err(|e| format!("{e}, or `auto`"))
 }
 
+/// The weights of the smoothness ("-H") and elasticity ("-E") regularisers: a number, or
+/// `auto` (chosen by validation on held-out training points).
+#[derive(clap::Args, Debug, Clone)]
+pub struct RegWeightArgs {
+    /// The weight of the smoothness loss `L_H` (Eq. 13) with --reg h, or `auto`.
+    #[arg(long, default_value = "0.1", value_parser = weight, allow_negative_numbers = true)]
+    pub h_weight: crate::experiments::meshes::Weight,
+    /// The weight of the elasticity loss with --reg e, or `auto`.
+    #[arg(long, default_value = "0.01", value_parser = weight, allow_negative_numbers = true)]
+    pub e_weight: crate::experiments::meshes::Weight,
+    /// How an `auto` weight is searched.
+    #[command(flatten)]
+    pub search: WeightSearchArgs,
+}
+
 /// How an `auto` weight is searched: the grid, the validation fraction of the training
 /// points and the short budget (cost: grid × budget iterations per model before its fit).
 #[derive(clap::Args, Debug, Clone)]

@@ -1,8 +1,8 @@
 //! `doma novel-points`: Tab. 1 (fit 25 % of an animated mesh's vertices, predict the rest).
 
 use crate::Result;
-use crate::cli::{ExperimentArgs, SequenceArgs, WeightSearchArgs, weight};
-use crate::experiments::meshes::{self, MeshRecord, NovelPointsJob, Weight};
+use crate::cli::{ExperimentArgs, RegWeightArgs, SequenceArgs};
+use crate::experiments::meshes::{self, MeshRecord, NovelPointsJob};
 use crate::experiments::synthetic::Regularizer;
 use crate::field::Variant;
 use crate::field::baselines::Baseline;
@@ -33,16 +33,9 @@ pub struct NovelPointsArgs {
     /// one row per model and regulariser.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "none")]
     pub reg: Vec<Regularizer>,
-    /// The weight of the smoothness loss in the "-H" rows, or `auto` (chosen by
-    /// validation on held-out training points).
-    #[arg(long, default_value = "0.1", value_parser = weight, allow_negative_numbers = true)]
-    pub h_weight: Weight,
-    /// The weight of the elasticity loss in the "-E" rows, or `auto`.
-    #[arg(long, default_value = "0.01", value_parser = weight, allow_negative_numbers = true)]
-    pub e_weight: Weight,
-    /// How an `auto` weight is searched.
+    /// The regularisers' weights, fixed or searched.
     #[command(flatten)]
-    pub search: WeightSearchArgs,
+    pub weights: RegWeightArgs,
     /// Surface samples per mesh and frame for CD/CDN (the paper: 1000000).
     #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1..))]
     pub samples: u64,
@@ -67,9 +60,9 @@ impl NovelPointsArgs {
             seed: self.common.seed,
             quiet: self.common.quiet,
             regs: self.reg.clone(),
-            h_weight: self.h_weight,
-            e_weight: self.e_weight,
-            search: self.search.search()?,
+            h_weight: self.weights.h_weight,
+            e_weight: self.weights.e_weight,
+            search: self.weights.search.search()?,
         })
     }
 }

@@ -1,7 +1,7 @@
 //! `doma synthetic`: the synthetic benchmark of Tab. 2.
 
 use crate::Result;
-use crate::cli::{ExperimentArgs, Selection, WeightSearchArgs, selection, weight};
+use crate::cli::{ExperimentArgs, RegWeightArgs, Selection, selection};
 use crate::data::synthetic::Motion;
 use crate::experiments::meshes::Weight;
 use crate::experiments::synthetic::{self, Regularizer, SyntheticJob};
@@ -23,16 +23,9 @@ pub struct SyntheticArgs {
     /// The regulariser: none, the smoothness loss H (Eq. 13) or the elasticity E.
     #[arg(long, value_enum, default_value = "none")]
     pub reg: Regularizer,
-    /// The weight of the smoothness loss with --reg h, or `auto` (chosen by validation on
-    /// held-out training points).
-    #[arg(long, default_value = "0.1", value_parser = weight, allow_negative_numbers = true)]
-    pub h_weight: Weight,
-    /// The weight of the elasticity loss with --reg e, or `auto`.
-    #[arg(long, default_value = "0.01", value_parser = weight, allow_negative_numbers = true)]
-    pub e_weight: Weight,
-    /// How an `auto` weight is searched.
+    /// The regularisers' weights, fixed or searched.
     #[command(flatten)]
-    pub search: WeightSearchArgs,
+    pub weights: RegWeightArgs,
     /// Iterations (passes over all 20 frames); 1000 is the paper's budget.
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..), allow_negative_numbers = true)]
     pub iters: u64,
@@ -56,16 +49,16 @@ impl SyntheticArgs {
             Weight::Auto => 0.0,
         };
         let auto = match self.reg {
-            Regularizer::H => self.h_weight == Weight::Auto,
-            Regularizer::E => self.e_weight == Weight::Auto,
+            Regularizer::H => self.weights.h_weight == Weight::Auto,
+            Regularizer::E => self.weights.e_weight == Weight::Auto,
             Regularizer::None => false,
         };
         Ok(SyntheticJob {
             motions: self.motion.items.clone(),
             variants: self.variant.items.clone(),
             reg: self.reg,
-            h_weight: fixed(self.h_weight),
-            e_weight: fixed(self.e_weight),
+            h_weight: fixed(self.weights.h_weight),
+            e_weight: fixed(self.weights.e_weight),
             iterations: self.iters as usize,
             hidden: self.hidden as usize,
             backend: self.common.backend,
@@ -73,7 +66,7 @@ impl SyntheticArgs {
             seed: self.common.seed,
             quiet: self.common.quiet,
             weight_search: if auto {
-                Some(self.search.search()?)
+                Some(self.weights.search.search()?)
             } else {
                 None
             },
