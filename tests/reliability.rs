@@ -249,3 +249,50 @@ fn json_outputs_that_cannot_be_written_fail_before_any_fit() {
         "it fitted first"
     );
 }
+
+#[test]
+fn fit_runs_any_model_of_the_config_and_checks_its_frames() {
+    let dir = temp("models");
+    let config = dir.join("fit.json");
+    // A frame-indexed model built for 3 frames, on 4: refused, nothing left behind.
+    std::fs::write(&config, r#"{"model": {"dpf": {"frames": 3}}}"#).unwrap();
+    let out = dir.join("wrong");
+    refused(
+        &[
+            "fit",
+            FAERIE,
+            "--frames",
+            "112..116",
+            "--out",
+            s(&out),
+            "--config",
+            s(&config),
+        ],
+        &["DPF", "3 frames", "4"],
+    );
+    assert!(!out.exists());
+    // The right count fits, and the run folder's tools read it back.
+    std::fs::write(
+        &config,
+        r#"{"model": {"dpf": {"frames": 4, "shape": {"hidden": 16}}}, "schedule": {"iterations": 2}}"#,
+    )
+    .unwrap();
+    let run = dir.join("dpf");
+    let (code, _, err) = doma(&[
+        "fit",
+        FAERIE,
+        "--frames",
+        "112..116",
+        "--quiet",
+        "--out",
+        s(&run),
+        "--config",
+        s(&config),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    let (code, out, err) = doma(&["info", s(&run)]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(out.contains("\"DPF\""), "{out}");
+    let (code, _, err) = doma(&["eval", s(&run)]);
+    assert_eq!(code, Some(0), "{err}");
+}

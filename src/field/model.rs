@@ -151,6 +151,28 @@ impl ModelConfig {
         )))
     }
 
+    /// The frames a frame-indexed model (DPF, DCT-NeRF, BoneCloud) was built for; `None`
+    /// for the DOMA fields and the MLP, which take any time.
+    pub fn frames(&self) -> Option<usize> {
+        match self {
+            ModelConfig::Dpf(c) => Some(c.frames),
+            ModelConfig::DctNerf(c) => Some(c.frames),
+            ModelConfig::BoneCloud(c) => Some(c.frames),
+            ModelConfig::Doma(_) | ModelConfig::Mlp(_) => None,
+        }
+    }
+
+    /// Refuses a frame-indexed model built for another number of frames than `data_frames`.
+    pub fn check_frames(&self, data_frames: usize) -> Result<()> {
+        match self.frames() {
+            Some(t) if t != data_frames => Err(DomaError::InvalidConfig(format!(
+                "{} is built for {t} frames, but the data has {data_frames}",
+                self.paper_name()
+            ))),
+            _ => Ok(()),
+        }
+    }
+
     /// The number of trainable parameters.
     pub fn num_params(&self) -> usize {
         match self {

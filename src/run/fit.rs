@@ -86,7 +86,9 @@ fn start(run: &RunDir, config: RunConfig) -> Result<(RunConfig, RunLock)> {
     if run.config().exists() {
         return Err(taken());
     }
-    config.split(&config.load()?.trajectories)?;
+    let data = config.load()?.trajectories;
+    config.split(&data)?;
+    config.fit.model.check_frames(data.frames())?;
     std::fs::create_dir_all(&run.dir).map_err(|e| DomaError::io(&run.dir, e))?;
     let lock = RunLock::acquire(&run.dir)?;
     // Checked again under the lock: another fit may have started here meanwhile.
