@@ -292,13 +292,7 @@ pub fn register<M: MotionField + Module>(
 ) -> Result<Fitted<M>> {
     config.validate()?;
     task.validate()?;
-    let method = config.jacobian.method();
-    if !field.accepts(method.as_ref()) {
-        return Err(DomaError::InvalidConfig(format!(
-            "the {} Jacobian applies to SIREN layers only, and this model has none: use autodiff",
-            config.jacobian
-        )));
-    }
+    crate::field::check_method(&field, config.jacobian)?;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed.wrapping_add(0x000A_116E));
     let objective = RegistrationObjective::new(task, config, device, &mut rng)?;
     Trainer::with_objective(

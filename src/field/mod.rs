@@ -199,6 +199,20 @@ pub trait MotionField {
     }
 }
 
+/// Refuses a Jacobian method that `field` does not accept ([`MotionField::accepts`]):
+/// the one check behind every fit, so that no method is silently substituted.
+pub fn check_method(
+    field: &dyn MotionField,
+    kind: crate::jacobian::JacobianKind,
+) -> crate::Result<()> {
+    if field.accepts(kind.method().as_ref()) {
+        return Ok(());
+    }
+    Err(crate::DomaError::InvalidConfig(format!(
+        "the {kind} Jacobian applies to SIREN layers only, and this model has none: use autodiff"
+    )))
+}
+
 /// The frame of `frames` nearest normalised time `t` (`t_k = −1 + 2k/(T−1)`), clamped:
 /// how the frame-indexed models (DPF, DCT-NeRF, BoneCloud) read the fit loop's time.
 pub fn frame_of(t: f64, frames: usize) -> usize {

@@ -9,11 +9,11 @@ use rand_chacha::ChaCha8Rng;
 
 use super::config::{FitConfig, LossConfig, SmoothnessSampling};
 use super::record::gaussian;
+use crate::Result;
 use crate::data::Trajectories;
 use crate::field::MotionField;
 use crate::jacobian::JacobianMethod;
 use crate::loss;
-use crate::{DomaError, Result};
 
 /// The losses of one optimiser step.
 pub trait Objective<M> {
@@ -64,13 +64,8 @@ impl<'a> TrajectoryObjective<'a> {
         config.schedule.validate()?;
         config.loss.validate()?;
         config.smoothness_sampling.validate()?;
+        crate::field::check_method(field, config.jacobian)?;
         let method = config.jacobian.method();
-        if !field.accepts(method.as_ref()) {
-            return Err(DomaError::InvalidConfig(format!(
-                "the {} Jacobian applies to SIREN layers only, and this model has none: use autodiff",
-                config.jacobian
-            )));
-        }
         let ad = device.clone().autodiff();
         let sampling = config.smoothness_sampling.clone();
         let w_h = config.loss.smoothness_weight;
