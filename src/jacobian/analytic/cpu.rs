@@ -1,30 +1,22 @@
-//! The flex implementation of the elementwise parts of [`super::SirenBackend`]: one fused
-//! pass over raw buffers per layer and direction, split across threads by rows.
+//! The row kernels of the CPU SIREN op ([`super::net`]): one row of a sine layer's
+//! activation or of its backward, values and tangents in one pass.
 //!
 //! Built from tensor primitives ([`super::forward`]) a layer costs about ten passes over
 //! `[4N, d]` (slices, `sin`, `cos`, products, a concat), each with its own allocation;
 //! at the synthetic protocol's sizes that per-op overhead costs more than the matmuls
-//! (see the README's speed section). Here each direction is one allocation and one pass.
+//! (see the README's speed section). Here each direction is one pass.
 //! In f32 the sine and cosine come from [`sin_cos_f32`], a branch-free polynomial that the
 //! compiler vectorises (error below 1e-7 absolute for |z| < 10⁴); in f64 from `std`.
 
-use burn::backend::Flex;
-use burn::backend::TensorMetadata;
-use burn::backend::flex::FlexTensor;
-use burn::tensor::DType;
-use burn::tensor::TensorData;
-use rayon::prelude::*;
-
-use super::forward;
-
-/// Rows per parallel task: large enough that splitting costs nothing measurable.
-const ROWS_PER_TASK: usize = 64;
+use super::net::Pool;
 
 /// The float types the fused loops serve.
 pub(crate) trait Real:
     Copy
     + Send
     + Sync
+    + std::fmt::Debug
+    + 'static
     + bytemuck::Pod
     + burn::tensor::Element
     + std::ops::Add<Output = Self>
@@ -33,8 +25,14 @@ pub(crate) trait Real:
 {
     fn from_f64(v: f64) -> Self;
     fn zero() -> Self;
+    fn one() -> Self;
     fn sin_cos(self) -> (Self, Self);
+    /// The workspaces of this type.
+    fn pool() -> &'static Pool<Self>;
 }
+
+static POOL_F32: Pool<f32> = Pool::new();
+static POOL_F64: Pool<f64> = Pool::new();
 
 impl Real for f32 {
     fn from_f64(v: f64) -> Self {
@@ -43,9 +41,15 @@ impl Real for f32 {
     fn zero() -> Self {
         0.0
     }
+    fn one() -> Self {
+        1.0
+    }
     #[inline(always)]
     fn sin_cos(self) -> (Self, Self) {
         sin_cos_f32(self)
+    }
+    fn pool() -> &'static Pool<Self> {
+        &POOL_F32
     }
 }
 
@@ -56,9 +60,15 @@ impl Real for f64 {
     fn zero() -> Self {
         0.0
     }
+    fn one() -> Self {
+        1.0
+    }
     #[inline(always)]
     fn sin_cos(self) -> (Self, Self) {
         f64::sin_cos(self)
+    }
+    fn pool() -> &'static Pool<Self> {
+        &POOL_F64
     }
 }
 
@@ -103,7 +113,7 @@ pub fn sin_cos_f32(x: f32) -> (f32, f32) {
 macro_rules! simd_kernel {
     ($name:ident, ($($arg:ident : $ty:ty),* $(,)?), $body:block) => {
         #[allow(clippy::too_many_arguments)] // one slice per block of the stacked matrix
-        mod $name {
+        pub(crate) mod $name {
             #[allow(unused_imports)]
             use super::*;
 
@@ -122,7 +132,7 @@ macro_rules! simd_kernel {
                 portable::<E>($($arg),*)
             }
 
-            pub(super) fn run<E: Real>($($arg: $ty),*) {
+            pub(crate) fn run<E: Real>($($arg: $ty),*) {
                 #[cfg(target_arch = "x86_64")]
                 {
                     if std::arch::is_x86_feature_detected!("avx512f")
@@ -204,166 +214,6 @@ simd_kernel!(plain_backward_row, (w: E, z: &[E], b: &[E], g: &[E], o: &mut [E]),
         o[j] = w * g[j] * (w * (z[j] + b[j])).sin_cos().1;
     }
 });
-
-/// A contiguous view of `t`'s elements (copying only when `t` is strided).
-fn contiguous(t: FlexTensor) -> FlexTensor {
-    if t.layout().contiguous_offsets().is_some() {
-        t
-    } else {
-        FlexTensor::from_data(t.into_data())
-    }
-}
-
-fn slice<E: Real>(t: &FlexTensor) -> &[E] {
-    t.as_slice::<E>()
-        .expect("a contiguous tensor of the matching dtype")
-}
-
-/// `[sin z; cos z ⊙ ż]` with `z = ω(zs[0..N] + b)`, `ż = ω zs[N..4N]`. Other dtypes than
-/// f32 and f64 take the primitive path.
-pub fn activation(zs: FlexTensor, bias: FlexTensor, omega: f64) -> FlexTensor {
-    match zs.dtype() {
-        DType::F32 => activation_typed::<f32>(&zs, &bias, omega),
-        DType::F64 => activation_typed::<f64>(&zs, &bias, omega),
-        _ => forward::activation::<Flex>(zs, bias, omega),
-    }
-}
-
-/// A fresh `[4N, d]` stacked output, filled in parallel: `row(at, [h, ḣ_x, ḣ_y, ḣ_z])` gets
-/// the offset `at` of one row inside a block and that row of each of the four blocks.
-fn stacked_rows<E: Real>(
-    n: usize,
-    d: usize,
-    row: impl Fn(usize, [&mut [E]; 4]) + Sync,
-) -> FlexTensor {
-    let nd = n * d;
-    let mut out = vec![E::zero(); 4 * nd];
-    let (top, tangents) = out.split_at_mut(nd);
-    let (t0, rest) = tangents.split_at_mut(nd);
-    let (t1, t2) = rest.split_at_mut(nd);
-    let chunk = ROWS_PER_TASK * d;
-    top.par_chunks_mut(chunk)
-        .zip(t0.par_chunks_mut(chunk))
-        .zip(t1.par_chunks_mut(chunk))
-        .zip(t2.par_chunks_mut(chunk))
-        .enumerate()
-        .for_each(|(c, (((h, h0), h1), h2))| {
-            for r in 0..h.len() / d {
-                let o = r * d..(r + 1) * d;
-                row(
-                    c * chunk + r * d,
-                    [
-                        &mut h[o.clone()],
-                        &mut h0[o.clone()],
-                        &mut h1[o.clone()],
-                        &mut h2[o],
-                    ],
-                );
-            }
-        });
-    FlexTensor::from_data(TensorData::new(out, [4 * n, d]))
-}
-
-fn activation_typed<E: Real>(zs: &FlexTensor, bias: &FlexTensor, omega: f64) -> FlexTensor {
-    let [r, d] = zs.shape().dims::<2>();
-    let (n, nd) = (r / 4, r / 4 * d);
-    let (zs, bias) = (contiguous(zs.clone()), contiguous(bias.clone()));
-    let (zv, b) = (slice::<E>(&zs), slice::<E>(&bias));
-    let w = E::from_f64(omega);
-    stacked_rows::<E>(n, d, |at, [h, h0, h1, h2]| {
-        let zp = |k: usize| &zv[k * nd + at..k * nd + at + d];
-        dual_forward_row::run::<E>(w, zp(0), b, zp(1), zp(2), zp(3), h, h0, h1, h2);
-    })
-}
-
-/// The gradient with respect to `zs`:
-/// `ω [g_h ⊙ cos z − sin z ⊙ Σ_k g_ḣ,k ⊙ ż_k ; g_ḣ ⊙ cos z]`.
-pub fn activation_backward(
-    zs: FlexTensor,
-    bias: FlexTensor,
-    grad: FlexTensor,
-    omega: f64,
-) -> FlexTensor {
-    match zs.dtype() {
-        DType::F32 => backward_typed::<f32>(&zs, &bias, &grad, omega),
-        DType::F64 => backward_typed::<f64>(&zs, &bias, &grad, omega),
-        _ => forward::activation_backward::<Flex>(zs, bias, grad, omega),
-    }
-}
-
-fn backward_typed<E: Real>(
-    zs: &FlexTensor,
-    bias: &FlexTensor,
-    grad: &FlexTensor,
-    omega: f64,
-) -> FlexTensor {
-    let [r, d] = zs.shape().dims::<2>();
-    let (n, nd) = (r / 4, r / 4 * d);
-    let (zs, bias, grad) = (
-        contiguous(zs.clone()),
-        contiguous(bias.clone()),
-        contiguous(grad.clone()),
-    );
-    let (zv, b, g) = (slice::<E>(&zs), slice::<E>(&bias), slice::<E>(&grad));
-    let w = E::from_f64(omega);
-    stacked_rows::<E>(n, d, |at, [gz, g0, g1, g2]| {
-        let zp = |k: usize| &zv[k * nd + at..k * nd + at + d];
-        let gp = |k: usize| &g[k * nd + at..k * nd + at + d];
-        let (zk, gk) = ([zp(1), zp(2), zp(3)], [gp(1), gp(2), gp(3)]);
-        dual_backward_row::run::<E>(w, zp(0), b, gp(0), zk, gk, gz, g0, g1, g2);
-    })
-}
-
-/// The value-only layer: `sin(ω(zs + b))`.
-pub fn plain_activation(zs: FlexTensor, bias: FlexTensor, omega: f64) -> FlexTensor {
-    match zs.dtype() {
-        DType::F32 => plain_typed::<f32>(&zs, &bias, None, omega),
-        DType::F64 => plain_typed::<f64>(&zs, &bias, None, omega),
-        _ => forward::plain_activation::<Flex>(zs, bias, omega),
-    }
-}
-
-/// Its backward: `ω g ⊙ cos(ω(zs + b))`.
-pub fn plain_activation_backward(
-    zs: FlexTensor,
-    bias: FlexTensor,
-    grad: FlexTensor,
-    omega: f64,
-) -> FlexTensor {
-    match zs.dtype() {
-        DType::F32 => plain_typed::<f32>(&zs, &bias, Some(&grad), omega),
-        DType::F64 => plain_typed::<f64>(&zs, &bias, Some(&grad), omega),
-        _ => forward::plain_activation_backward::<Flex>(zs, bias, grad, omega),
-    }
-}
-
-/// `sin(ω(zs + b))`, or with `grad`, `ω g ⊙ cos(ω(zs + b))`.
-fn plain_typed<E: Real>(
-    zs: &FlexTensor,
-    bias: &FlexTensor,
-    grad: Option<&FlexTensor>,
-    omega: f64,
-) -> FlexTensor {
-    let [r, d] = zs.shape().dims::<2>();
-    let (zs, bias) = (contiguous(zs.clone()), contiguous(bias.clone()));
-    let grad = grad.map(|g| contiguous(g.clone()));
-    let (zv, b) = (slice::<E>(&zs), slice::<E>(&bias));
-    let g = grad.as_ref().map(slice::<E>);
-    let w = E::from_f64(omega);
-    let mut out = vec![E::zero(); r * d];
-    let chunk = ROWS_PER_TASK * d;
-    out.par_chunks_mut(chunk).enumerate().for_each(|(c, o)| {
-        for (row, o) in o.chunks_mut(d).enumerate() {
-            let at = c * chunk + row * d;
-            let z = &zv[at..at + d];
-            match g {
-                None => plain_forward_row::run::<E>(w, z, b, o),
-                Some(g) => plain_backward_row::run::<E>(w, z, b, &g[at..at + d], o),
-            }
-        }
-    });
-    FlexTensor::from_data(TensorData::new(out, [r, d]))
-}
 
 #[cfg(test)]
 mod tests {

@@ -91,3 +91,134 @@ fn plain_pre_activation<B: Backend>(
     let bias = B::float_reshape(bias, Shape::new([1, d]));
     B::float_mul_scalar(B::float_add(zs, bias), Scalar::from(omega))
 }
+
+/// The seeds `e_x, e_y, e_z` of an `[n, c]` input, stacked `[3n, c]`.
+fn seeds<B: Backend>(
+    n: usize,
+    c: usize,
+    device: &B::Device,
+    dtype: burn::tensor::DType,
+) -> FloatTensor<B> {
+    let mut eye = vec![0.0f32; 3 * n * c];
+    for k in 0..3 {
+        for r in 0..n {
+            eye[(k * n + r) * c + k] = 1.0;
+        }
+    }
+    let data = burn::tensor::TensorData::new(eye, [3 * n, c]).convert_dtype(dtype);
+    B::float_from_data(data, device)
+}
+
+/// `[W_0, b_0, …, W_o, b_o]` from the flat parameter tensor (see [`super::SirenOps`]).
+fn unflatten<B: Backend>(params: FloatTensor<B>, shapes: &[[usize; 2]]) -> Vec<FloatTensor<B>> {
+    let mut at = 0;
+    let mut out = Vec::with_capacity(2 * shapes.len());
+    for &[d_in, d_out] in shapes {
+        let w = B::float_slice(params.clone(), &[Slice::from(at..at + d_in * d_out)]);
+        out.push(B::float_reshape(w, Shape::new([d_in, d_out])));
+        at += d_in * d_out;
+        out.push(B::float_slice(
+            params.clone(),
+            &[Slice::from(at..at + d_out)],
+        ));
+        at += d_out;
+    }
+    out
+}
+
+/// The whole SIREN from tensor primitives: [`super::SirenOps::siren_forward`] on wgpu.
+/// `params` is the flat parameter tensor of [`super::SirenOps`];
+/// the output is `[n, O]`, or `[4n, O]` stacked values and tangents when `dual`. The
+/// saved tensors are `[S_0, Z_0, S_1, Z_1, …, S_L]`: each sine layer's input and
+/// pre-activation, and the output layer's input.
+pub fn siren<B: Backend>(
+    input: FloatTensor<B>,
+    params: FloatTensor<B>,
+    shapes: &[[usize; 2]],
+    omega: f64,
+    dual: bool,
+) -> (FloatTensor<B>, Vec<FloatTensor<B>>) {
+    let params = unflatten::<B>(params, shapes);
+    let params = &params[..];
+    let [n, c] = input.shape().dims::<2>();
+    let mut s = if dual {
+        let seed = seeds::<B>(n, c, &input.device(), input.dtype());
+        B::float_cat(vec![input, seed], 0)
+    } else {
+        input
+    };
+    let (sine, out) = params.split_last_chunk::<2>().expect("an output layer");
+    let mut saved = Vec::with_capacity(sine.len() + 1);
+    for layer in sine.chunks_exact(2) {
+        let zs = B::float_matmul(s.clone(), layer[0].clone());
+        let next = if dual {
+            activation::<B>(zs.clone(), layer[1].clone(), omega)
+        } else {
+            plain_activation::<B>(zs.clone(), layer[1].clone(), omega)
+        };
+        saved.push(s);
+        saved.push(zs);
+        s = next;
+    }
+    saved.push(s.clone());
+    let y = B::float_matmul(s, out[0].clone());
+    let [r, o] = y.shape().dims::<2>();
+    let bias = B::float_reshape(out[1].clone(), Shape::new([1, o]));
+    let y = if dual {
+        let value = B::float_add(rows::<B>(y.clone(), 0, n, o), bias);
+        B::float_cat(vec![value, rows::<B>(y, n, r, o)], 0)
+    } else {
+        B::float_add(y, bias)
+    };
+    (y, saved)
+}
+
+/// The backward of [`siren`]: `(g_input, g_params)` from the output's gradient `grad`,
+/// with `g_params` flat like `params`.
+pub fn siren_backward<B: Backend>(
+    saved: Vec<FloatTensor<B>>,
+    params: FloatTensor<B>,
+    shapes: &[[usize; 2]],
+    grad: FloatTensor<B>,
+    omega: f64,
+    dual: bool,
+) -> (FloatTensor<B>, FloatTensor<B>) {
+    let params = unflatten::<B>(params, shapes);
+    let n = saved[0].shape().dims::<2>()[0] / if dual { 4 } else { 1 };
+    let value_sum = |g: FloatTensor<B>| {
+        let d = g.shape().dims::<2>()[1];
+        B::float_reshape(B::float_sum_dim(rows::<B>(g, 0, n, d), 0), Shape::new([d]))
+    };
+    let mut saved = saved;
+    let mut grads = vec![None; params.len()];
+    let s_last = saved.pop().expect("the output layer's input");
+    let out = params.len() - 2;
+    grads[out + 1] = Some(value_sum(grad.clone()));
+    grads[out] = Some(B::float_matmul(B::float_transpose(s_last), grad.clone()));
+    let mut g_s = B::float_matmul(grad, B::float_transpose(params[out].clone()));
+    for l in (0..out / 2).rev() {
+        let zs = saved.pop().expect("a pre-activation");
+        let s = saved.pop().expect("a layer input");
+        let (w, b) = (params[2 * l].clone(), params[2 * l + 1].clone());
+        let g_z = if dual {
+            activation_backward::<B>(zs, b, g_s, omega)
+        } else {
+            plain_activation_backward::<B>(zs, b, g_s, omega)
+        };
+        grads[2 * l + 1] = Some(value_sum(g_z.clone()));
+        grads[2 * l] = Some(B::float_matmul(B::float_transpose(s), g_z.clone()));
+        g_s = B::float_matmul(g_z, B::float_transpose(w));
+    }
+    // The seeds' rows are constants: the input's gradient is the value rows'.
+    let c = g_s.shape().dims::<2>()[1];
+    let g_input = rows::<B>(g_s, 0, n, c);
+    let flat = grads
+        .into_iter()
+        .map(|g| {
+            let g = g.expect("every gradient");
+            let len = g.shape().num_elements();
+            B::float_reshape(g, Shape::new([len]))
+        })
+        .collect();
+    (g_input, B::float_cat(flat, 0))
+}

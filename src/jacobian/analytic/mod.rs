@@ -1,24 +1,29 @@
 //! `Analytic`: the hand-derived SIREN Jacobian (paper Eq. 6; DESIGN §2) as one custom
-//! Burn operation per sine layer, with a hand-written backward.
+//! Burn operation for the whole network, with a hand-written backward.
 //!
-//! A sine layer works on the *stacked* matrix `S = [h; ḣ_x; ḣ_y; ḣ_z]` (`[4N, d_in]`): the
-//! values and their three spatial tangents. One matmul `Z = S W` gives both the
-//! pre-activation `z = ω(Z[0..N] + b)` and its tangents `ż = ω Z[N..4N]`, and the layer
-//! returns `[sin z; cos z ⊙ ż]`. The backward ([`backward`]) is two matmuls and one
-//! elementwise pass, with no autodiff graph over the inside of the layer.
+//! The network works on the *stacked* matrix `S = [h; ḣ_x; ḣ_y; ḣ_z]` (`[4N, d]`): the
+//! values and their three spatial tangents. Per sine layer, one matmul `Z = S W` gives
+//! both the pre-activation `z = ω(Z[0..N] + b)` and its tangents `ż = ω Z[N..4N]`, and the
+//! layer returns `[sin z; cos z ⊙ ż]`. The output layer is one more matmul. The backward
+//! is two matmuls and one elementwise pass per layer, with no autodiff graph inside the
+//! network: the whole SIREN is one node.
 //!
-//! The operation is a Burn backend extension ([`SirenBackend`]), split like Burn's
-//! `custom-cubecl-kernel` example: [`forward`] holds the tensor-primitive implementation
-//! used by ndarray, [`cpu`] the fused raw-buffer loops used by flex, [`backward`] the
-//! `Autodiff` implementation,
-//! and [`kernel`] the CubeCL kernels that fuse the elementwise work on wgpu.
+//! The operation is a Burn backend extension ([`SirenBackend`], one method, [`SirenBackend::siren`]),
+//! split like Burn's `custom-cubecl-kernel` example:
+//! - [`SirenOps`] is the per-backend forward (keeping what the backward needs) and backward;
+//! - [`net`] implements it once on raw CPU buffers, with workspaces reused between steps,
+//!   and [`host`] lends it flex's and ndarray's buffers;
+//! - [`forward`] implements it from tensor primitives (the wgpu path, [`kernel`]);
+//! - [`backward`] records it on the `Autodiff` graph.
 
 #![allow(deprecated)] // `NdArray` stays selectable although Burn deprecates it.
 
 pub mod backward;
 pub mod cpu;
 pub mod forward;
+pub mod host;
 pub mod kernel;
+pub mod net;
 
 use burn::backend::{Dispatch, backend_extension, tensor::FloatTensor};
 use burn::tensor::Tensor;
@@ -26,139 +31,143 @@ use burn::tensor::Tensor;
 use super::{Dual, JacobianMethod};
 use crate::siren::Siren;
 
-/// The backend operations of the analytic SIREN Jacobian.
+/// One backend's implementation of the whole-SIREN operation: the forward, which keeps
+/// what the backward needs, and the hand-written backward (DESIGN §2).
+///
+/// `params` is one flat tensor, `[W_0, b_0, W_1, b_1, …, W_o, b_o]`: the sine layers'
+/// weights (`[d_in, d_out]`, row-major) and biases (`[d_out]`), then the output layer's;
+/// `shapes` gives each layer's `[d_in, d_out]`. (Burn 0.22's backend extensions take no
+/// `Vec` of tensors, and an autodiff node has a fixed number of parents: one flat tensor
+/// serves any depth, for the price of one copy of the ~50k parameters per call.)
+/// The input is `[N, c]`; when
+/// `dual`, its first three columns are seeded with `e_x, e_y, e_z` and the output stacks
+/// the values and the three tangents, `[4N, O]`; otherwise it is `[N, O]`.
+pub trait SirenOps: burn::backend::Backend {
+    /// The activations the backward reads.
+    type Saved: Clone + Send + std::fmt::Debug + 'static;
+
+    /// The SIREN's output (Eq. 1), with its spatial tangents when `dual` (Eq. 6).
+    fn siren_forward(
+        input: FloatTensor<Self>,
+        params: FloatTensor<Self>,
+        shapes: &[[usize; 2]],
+        omega: f64,
+        dual: bool,
+    ) -> (FloatTensor<Self>, Self::Saved);
+
+    /// From the output's gradient `grad`: the input's gradient (when `input_grad`) and
+    /// the parameters' (flat, laid out like `params`).
+    #[allow(clippy::too_many_arguments)]
+    fn siren_backward(
+        saved: Self::Saved,
+        input: FloatTensor<Self>,
+        params: FloatTensor<Self>,
+        shapes: &[[usize; 2]],
+        grad: FloatTensor<Self>,
+        omega: f64,
+        dual: bool,
+        input_grad: bool,
+    ) -> (Option<FloatTensor<Self>>, FloatTensor<Self>);
+}
+
+/// The analytic SIREN as a backend operation, reachable from high-level tensors through
+/// Burn's `Dispatch` ([`fused_siren`]).
 #[backend_extension(Flex, NdArray, Cube, Autodiff)]
 pub trait SirenBackend: burn::backend::Backend {
-    /// The elementwise part of a sine layer: from `zs = S W` (`[4N, d]`) and the bias `[d]`,
-    /// `[sin z; cos z ⊙ ż]` with `z = ω(zs[0..N] + b)` and `ż = ω zs[N..4N]`.
-    fn sine_dual_activation(
-        zs: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        omega: f64,
-    ) -> FloatTensor<Self> {
-        forward::activation::<Self>(zs, bias, omega)
-    }
-
-    /// The elementwise part of the backward: from `zs`, the bias and the upstream
-    /// gradient `G = [g_h; g_ḣ]` (`[4N, d]`), the gradient with respect to `zs`,
-    /// `ω [g_h ⊙ cos z − sin z ⊙ Σ_k g_ḣ,k ⊙ ż_k ; g_ḣ ⊙ cos z]`.
-    fn sine_dual_activation_backward(
-        zs: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        grad: FloatTensor<Self>,
-        omega: f64,
-    ) -> FloatTensor<Self> {
-        forward::activation_backward::<Self>(zs, bias, grad, omega)
-    }
-
-    /// One sine layer on the stacked values and tangents: `S [4N, d_in]`, `W [d_in, d_out]`,
-    /// `b [d_out]` → `[sin z; cos z ⊙ ż]` (`[4N, d_out]`).
-    fn sine_dual_layer(
-        stacked: FloatTensor<Self>,
-        weight: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        omega: f64,
-    ) -> FloatTensor<Self> {
-        let zs = Self::float_matmul(stacked, weight);
-        Self::sine_dual_activation(zs, bias, omega)
-    }
-
-    /// The elementwise part of a value-only sine layer: `sin(ω(zs + b))`.
-    fn sine_activation(
-        zs: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        omega: f64,
-    ) -> FloatTensor<Self> {
-        forward::plain_activation::<Self>(zs, bias, omega)
-    }
-
-    /// Its backward: `ω g ⊙ cos(ω(zs + b))`.
-    fn sine_activation_backward(
-        zs: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        grad: FloatTensor<Self>,
-        omega: f64,
-    ) -> FloatTensor<Self> {
-        forward::plain_activation_backward::<Self>(zs, bias, grad, omega)
-    }
-
-    /// A value-only sine layer (Eq. 1): `sin(ω(X W + b))`, one matmul and one fused pass,
-    /// for evaluations that need no Jacobian.
-    fn sine_layer(
+    /// The whole SIREN (see [`SirenOps`] for the layout of `params` and the output).
+    fn siren(
         input: FloatTensor<Self>,
-        weight: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
+        params: FloatTensor<Self>,
+        shapes: Vec<[usize; 2]>,
         omega: f64,
-    ) -> FloatTensor<Self> {
-        let zs = Self::float_matmul(input, weight);
-        Self::sine_activation(zs, bias, omega)
-    }
+        dual: bool,
+    ) -> FloatTensor<Self>;
 }
 
-/// flex: the elementwise parts as fused raw-buffer loops ([`cpu`]).
-impl SirenBackend for burn::backend::Flex {
-    fn sine_dual_activation(
-        zs: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        omega: f64,
-    ) -> FloatTensor<Self> {
-        cpu::activation(zs, bias, omega)
-    }
-
-    fn sine_dual_activation_backward(
-        zs: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        grad: FloatTensor<Self>,
-        omega: f64,
-    ) -> FloatTensor<Self> {
-        cpu::activation_backward(zs, bias, grad, omega)
-    }
-
-    fn sine_activation(
-        zs: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        omega: f64,
-    ) -> FloatTensor<Self> {
-        cpu::plain_activation(zs, bias, omega)
-    }
-
-    fn sine_activation_backward(
-        zs: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        grad: FloatTensor<Self>,
-        omega: f64,
-    ) -> FloatTensor<Self> {
-        cpu::plain_activation_backward(zs, bias, grad, omega)
-    }
+/// A backend whose tensors do not track gradients runs the forward and drops the saved
+/// activations.
+macro_rules! untracked_siren {
+    ($($backend:ty),*) => {$(
+        impl SirenBackend for $backend {
+            fn siren(
+                input: FloatTensor<Self>,
+                params: FloatTensor<Self>,
+                shapes: Vec<[usize; 2]>,
+                omega: f64,
+                dual: bool,
+            ) -> FloatTensor<Self> {
+                <Self as SirenOps>::siren_forward(input, params, &shapes, omega, dual).0
+            }
+        }
+    )*};
 }
 
-impl SirenBackend for burn::backend::NdArray {}
+untracked_siren!(
+    burn::backend::Flex,
+    burn::backend::NdArray,
+    burn::backend::wgpu::CubeBackend,
+    burn_fusion::Fusion<burn::backend::wgpu::CubeBackend>
+);
 
-/// One sine layer of the analytic method on high-level tensors (see [`SirenBackend::sine_dual_layer`]).
-pub fn sine_dual_layer(
-    stacked: Tensor<2>,
-    weight: Tensor<2>,
-    bias: Tensor<1>,
-    omega: f64,
-) -> Tensor<2> {
-    let out = Dispatch::sine_dual_layer(
-        stacked.into_dispatch(),
-        weight.into_dispatch(),
-        bias.into_dispatch(),
-        omega,
-    );
-    Tensor::from_dispatch(out)
+/// The CPU backends lend their buffers to [`net`].
+macro_rules! cpu_siren_ops {
+    ($($backend:ty),*) => {$(
+        impl SirenOps for $backend {
+            type Saved = host::CpuSaved<FloatTensor<Self>>;
+
+            fn siren_forward(
+                input: FloatTensor<Self>,
+                params: FloatTensor<Self>,
+                shapes: &[[usize; 2]],
+                omega: f64,
+                dual: bool,
+            ) -> (FloatTensor<Self>, Self::Saved) {
+                host::siren_forward::<Self>(input, params, shapes, omega, dual)
+            }
+
+            fn siren_backward(
+                saved: Self::Saved,
+                input: FloatTensor<Self>,
+                params: FloatTensor<Self>,
+                shapes: &[[usize; 2]],
+                grad: FloatTensor<Self>,
+                omega: f64,
+                dual: bool,
+                input_grad: bool,
+            ) -> (Option<FloatTensor<Self>>, FloatTensor<Self>) {
+                host::siren_backward::<Self>(
+                    saved, input, params, shapes, grad, omega, dual, input_grad,
+                )
+            }
+        }
+    )*};
 }
 
-/// One value-only sine layer on high-level tensors (see [`SirenBackend::sine_layer`]).
-pub fn sine_layer(input: Tensor<2>, weight: Tensor<2>, bias: Tensor<1>, omega: f64) -> Tensor<2> {
-    let out = Dispatch::sine_layer(
-        input.into_dispatch(),
-        weight.into_dispatch(),
-        bias.into_dispatch(),
-        omega,
-    );
-    Tensor::from_dispatch(out)
+cpu_siren_ops!(burn::backend::Flex, burn::backend::NdArray);
+
+/// The whole SIREN through the fused operation, on high-level tensors: `[N, O]`, or
+/// `[4N, O]` stacked values and tangents when `dual` (see [`SirenOps`]).
+pub fn fused_siren(siren: &Siren, xt: Tensor<2>, dual: bool) -> Tensor<2> {
+    let mut flat = Vec::with_capacity(2 * (siren.sine.len() + 1));
+    let mut shapes = Vec::with_capacity(siren.sine.len() + 1);
+    for layer in siren.sine.iter().chain(std::iter::once(&siren.output)) {
+        let weight = layer.weight.val();
+        let [d_in, d_out] = weight.dims();
+        let bias = layer.bias.as_ref().expect("SIREN layers have a bias").val();
+        flat.push(weight.reshape([d_in * d_out]));
+        flat.push(bias);
+        shapes.push([d_in, d_out]);
+    }
+    // On the autodiff graph, `cat`'s backward hands each parameter its slice of the
+    // flat gradient.
+    let params = Tensor::cat(flat, 0);
+    Tensor::from_dispatch(Dispatch::siren(
+        xt.into_dispatch(),
+        params.into_dispatch(),
+        shapes,
+        siren.omega,
+        dual,
+    ))
 }
 
 /// The hand-derived Jacobian (Eq. 6): forward-mode tangents through fused sine layers
@@ -172,37 +181,15 @@ impl JacobianMethod for Analytic {
     }
 
     fn forward(&self, siren: &Siren, xt: Tensor<2>) -> Tensor<2> {
-        let mut h = xt;
-        for layer in &siren.sine {
-            let bias = layer.bias.as_ref().expect("SIREN layers have a bias").val();
-            h = sine_layer(h, layer.weight.val(), bias, siren.omega);
-        }
-        siren.output.forward(h)
+        fused_siren(siren, xt, false)
     }
 
     fn forward_dual(&self, siren: &Siren, xt: Tensor<2>) -> Dual {
-        let [n, c] = xt.dims();
-        // The input tangents are e_x, e_y, e_z (the time column has none).
-        let seed = Dual::seed_spatial(xt);
-        let tangent = seed
-            .tangent
-            .expect("a seed has tangents")
-            .reshape([3 * n, c]);
-        let mut stacked = Tensor::cat(vec![seed.value, tangent], 0);
-        for layer in &siren.sine {
-            let bias = layer.bias.as_ref().expect("SIREN layers have a bias").val();
-            stacked = sine_dual_layer(stacked, layer.weight.val(), bias, siren.omega);
-        }
-        let out = stacked.matmul(siren.output.weight.val());
+        let n = xt.dims()[0];
+        let out = fused_siren(siren, xt, true);
         let d_out = out.dims()[1];
-        let bias = siren
-            .output
-            .bias
-            .as_ref()
-            .expect("SIREN layers have a bias")
-            .val();
         Dual {
-            value: out.clone().narrow(0, 0, n) + bias.unsqueeze_dim(0),
+            value: out.clone().narrow(0, 0, n),
             tangent: Some(out.narrow(0, n, 3 * n).reshape([3, n, d_out])),
         }
     }
