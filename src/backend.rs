@@ -93,3 +93,18 @@ pub unsafe fn pin_default_device() {
         unsafe { std::env::set_var("BURN_DEVICE", "flex") };
     }
 }
+
+/// Runs `f` on a thread of rayon's global pool and waits for it.
+///
+/// Why: the CPU backends (flex's ops, its GEMM, the fused SIREN op) split their work with
+/// rayon. Called from outside the pool, every parallel region hands its work to the pool
+/// and parks the caller on a latch: a wake-up and a park per region, dozens per training
+/// step, which measured about a tenth of an `Analytic` step on flex (README, speed
+/// section). Called from a pool thread, a region starts on that thread and the others
+/// join by work stealing. A no-op when already on a pool thread.
+pub fn on_worker<R: Send>(f: impl FnOnce() -> R + Send) -> R {
+    if rayon::current_thread_index().is_some() {
+        return f();
+    }
+    rayon::scope(|_| f())
+}

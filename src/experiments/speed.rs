@@ -143,12 +143,15 @@ pub fn jacobian_row(
     let jac = method.method();
     let ms = median_ms(
         || {
-            let raw = field.raw_dual(x.clone(), 0.5, jac.as_ref());
-            let tangent = raw.tangent.expect("a Jacobian method yields tangents");
-            let l = loss::smoothness(tangent, SmoothnessNorm::Squared) + raw.value.mean();
-            let grads = l.backward();
-            drop(grads);
-            sync(&device)
+            // On a pool thread, as `Trainer::step` runs (see `backend::on_worker`).
+            crate::backend::on_worker(|| {
+                let raw = field.raw_dual(x.clone(), 0.5, jac.as_ref());
+                let tangent = raw.tangent.expect("a Jacobian method yields tangents");
+                let l = loss::smoothness(tangent, SmoothnessNorm::Squared) + raw.value.mean();
+                let grads = l.backward();
+                drop(grads);
+                sync(&device)
+            })
         },
         warmup,
         steps,

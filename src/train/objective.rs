@@ -16,7 +16,7 @@ use crate::jacobian::JacobianMethod;
 use crate::loss;
 
 /// The losses of one optimiser step.
-pub trait Objective<M> {
+pub trait Objective<M>: Send {
     /// What the primary loss is called on the progress bar.
     fn primary_name(&self) -> &'static str {
         "L1"

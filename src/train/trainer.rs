@@ -106,6 +106,10 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
     /// and total loss as a `[2]` tensor; reading it is left to the caller, so that a step
     /// does not force a device sync.
     pub fn step(&mut self, k: usize, lr: f64) -> Result<Tensor<1>> {
+        crate::backend::on_worker(|| self.step_here(k, lr))
+    }
+
+    fn step_here(&mut self, k: usize, lr: f64) -> Result<Tensor<1>> {
         let field = self.field.take().expect("the field is always put back");
         let iteration = self.history.len();
         let losses = self
