@@ -6,7 +6,7 @@ mod common;
 use burn::tensor::Device;
 use common::{backward_lock, rel_err, to_vec};
 use doma::DomaError;
-use doma::backend::{BackendKind, wgpu_available};
+use doma::backend::BackendKind;
 use doma::data::Trajectories;
 use doma::data::synthetic::{Motion, benchmark_sequence};
 use doma::field::{DomaFieldConfig, MotionField, Variant};
@@ -174,8 +174,7 @@ fn ndarray_agrees_with_flex() {
 #[test]
 fn wgpu_agrees_with_flex() {
     let _g = backward_lock();
-    if !wgpu_available() {
-        eprintln!("SKIPPED wgpu_agrees_with_flex: no wgpu adapter on this machine");
+    if common::wgpu_device_or_skip("wgpu_agrees_with_flex").is_none() {
         return;
     }
     let e = rel_err(
