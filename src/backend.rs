@@ -94,6 +94,12 @@ pub unsafe fn pin_default_device() {
     }
 }
 
+/// Whether `device` (with or without autodiff) is one of the CPU backends, flex or ndarray.
+pub fn runs_on_cpu(device: &Device) -> bool {
+    let plain = device.clone().without_autodiff();
+    plain == Device::flex() || plain == Device::ndarray()
+}
+
 /// Runs `f` on a thread of rayon's global pool and waits for it.
 ///
 /// Why: the CPU backends (flex's ops, its GEMM, the fused SIREN op) split their work with
@@ -101,10 +107,36 @@ pub unsafe fn pin_default_device() {
 /// and parks the caller on a latch: a wake-up and a park per region, dozens per training
 /// step, which measured about a tenth of an `Analytic` step on flex (README, speed
 /// section). Called from a pool thread, a region starts on that thread and the others
-/// join by work stealing. A no-op when already on a pool thread.
+/// join by work stealing. A no-op when already on a pool thread. For the CPU backends
+/// only ([`runs_on_cpu`]): wgpu's fusion streams are per thread, and moving a step between
+/// threads would move it between streams.
 pub fn on_worker<R: Send>(f: impl FnOnce() -> R + Send) -> R {
     if rayon::current_thread_index().is_some() {
         return f();
     }
     rayon::scope(|_| f())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    #[allow(deprecated)]
+    fn the_cpu_backends_are_told_apart_from_wgpu_with_and_without_autodiff() {
+        assert!(runs_on_cpu(&Device::flex()));
+        assert!(runs_on_cpu(&Device::flex().autodiff()));
+        assert!(runs_on_cpu(&Device::ndarray().autodiff()));
+        assert!(!runs_on_cpu(&Device::wgpu(DeviceKind::DefaultDevice)));
+        assert!(!runs_on_cpu(
+            &Device::wgpu(DeviceKind::DefaultDevice).autodiff()
+        ));
+    }
+
+    #[test]
+    fn on_worker_runs_the_closure_on_a_pool_thread() {
+        assert_eq!(rayon::current_thread_index(), None);
+        let index = on_worker(rayon::current_thread_index);
+        assert!(index.is_some());
+    }
 }

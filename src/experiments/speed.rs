@@ -143,15 +143,20 @@ pub fn jacobian_row(
     let jac = method.method();
     let ms = median_ms(
         || {
-            // On a pool thread, as `Trainer::step` runs (see `backend::on_worker`).
-            crate::backend::on_worker(|| {
+            // On a pool thread on the CPU, as `Trainer::step` runs (`backend::on_worker`).
+            let step = || {
                 let raw = field.raw_dual(x.clone(), 0.5, jac.as_ref());
                 let tangent = raw.tangent.expect("a Jacobian method yields tangents");
                 let l = loss::smoothness(tangent, SmoothnessNorm::Squared) + raw.value.mean();
                 let grads = l.backward();
                 drop(grads);
                 sync(&device)
-            })
+            };
+            if crate::backend::runs_on_cpu(&device) {
+                crate::backend::on_worker(step)
+            } else {
+                step()
+            }
         },
         warmup,
         steps,

@@ -36,6 +36,8 @@ pub struct Trainer<M, O> {
     progress: bool,
     /// When this session's first iteration started, and the seconds done before it.
     clock: Option<(Instant, f64)>,
+    /// Whether steps run on a rayon pool thread (CPU backends; see `backend::on_worker`).
+    pool_thread: bool,
 }
 
 impl<'a, M: MotionField + Module> Trainer<M, TrajectoryObjective<'a>> {
@@ -84,7 +86,12 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         schedule: ScheduleConfig,
         rng: ChaCha8Rng,
     ) -> Self {
+        let pool_thread = field
+            .devices()
+            .first()
+            .is_some_and(crate::backend::runs_on_cpu);
         Trainer {
+            pool_thread,
             field: Some(field),
             objective,
             schedule,
@@ -106,7 +113,11 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
     /// and total loss as a `[2]` tensor; reading it is left to the caller, so that a step
     /// does not force a device sync.
     pub fn step(&mut self, k: usize, lr: f64) -> Result<Tensor<1>> {
-        crate::backend::on_worker(|| self.step_here(k, lr))
+        if self.pool_thread {
+            crate::backend::on_worker(|| self.step_here(k, lr))
+        } else {
+            self.step_here(k, lr)
+        }
     }
 
     fn step_here(&mut self, k: usize, lr: f64) -> Result<Tensor<1>> {
