@@ -1,10 +1,14 @@
-//! The elementwise parts of the analytic sine layer, from backend tensor primitives.
-//! These are the default bodies of [`super::SirenBackend`], used by the CPU backends.
+//! The analytic SIREN from backend tensor primitives: the network ([`siren`],
+//! [`siren_backward`]) that wgpu runs around its kernels, and the elementwise parts of a
+//! sine layer, which are the default bodies of [`super::SirenBackend`]'s activations and
+//! the reference that the kernels are tested against.
 
 use burn::backend::{Backend, Scalar, Slice, tensor::FloatTensor};
 use burn::tensor::Shape;
 
 use burn::backend::TensorMetadata;
+
+use super::SirenBackend;
 
 /// Rows `[from, to)` of a `[R, d]` primitive.
 fn rows<B: Backend>(t: FloatTensor<B>, from: usize, to: usize, d: usize) -> FloatTensor<B> {
@@ -131,7 +135,7 @@ fn unflatten<B: Backend>(params: FloatTensor<B>, shapes: &[[usize; 2]]) -> Vec<F
 /// the output is `[n, O]`, or `[4n, O]` stacked values and tangents when `dual`. The
 /// saved tensors are `[S_0, Z_0, S_1, Z_1, …, S_L]`: each sine layer's input and
 /// pre-activation, and the output layer's input.
-pub fn siren<B: Backend>(
+pub fn siren<B: SirenBackend>(
     input: FloatTensor<B>,
     params: FloatTensor<B>,
     shapes: &[[usize; 2]],
@@ -152,9 +156,9 @@ pub fn siren<B: Backend>(
     for layer in sine.chunks_exact(2) {
         let zs = B::float_matmul(s.clone(), layer[0].clone());
         let next = if dual {
-            activation::<B>(zs.clone(), layer[1].clone(), omega)
+            B::sine_dual_activation(zs.clone(), layer[1].clone(), omega)
         } else {
-            plain_activation::<B>(zs.clone(), layer[1].clone(), omega)
+            B::sine_activation(zs.clone(), layer[1].clone(), omega)
         };
         saved.push(s);
         saved.push(zs);
@@ -175,7 +179,7 @@ pub fn siren<B: Backend>(
 
 /// The backward of [`siren`]: `(g_input, g_params)` from the output's gradient `grad`,
 /// with `g_params` flat like `params`.
-pub fn siren_backward<B: Backend>(
+pub fn siren_backward<B: SirenBackend>(
     saved: Vec<FloatTensor<B>>,
     params: FloatTensor<B>,
     shapes: &[[usize; 2]],
@@ -201,9 +205,9 @@ pub fn siren_backward<B: Backend>(
         let s = saved.pop().expect("a layer input");
         let (w, b) = (params[2 * l].clone(), params[2 * l + 1].clone());
         let g_z = if dual {
-            activation_backward::<B>(zs, b, g_s, omega)
+            B::sine_dual_activation_backward(zs, b, g_s, omega)
         } else {
-            plain_activation_backward::<B>(zs, b, g_s, omega)
+            B::sine_activation_backward(zs, b, g_s, omega)
         };
         grads[2 * l + 1] = Some(value_sum(g_z.clone()));
         grads[2 * l] = Some(B::float_matmul(B::float_transpose(s), g_z.clone()));

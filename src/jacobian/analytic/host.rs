@@ -9,7 +9,7 @@ use std::sync::Arc;
 
 use burn::backend::flex::FlexTensor;
 use burn::backend::ndarray::NdArrayTensor;
-use burn::backend::{Backend, TensorMetadata, tensor::FloatTensor};
+use burn::backend::{TensorMetadata, tensor::FloatTensor};
 use burn::tensor::{DType, TensorData};
 
 use super::cpu::Real;
@@ -152,7 +152,7 @@ pub(crate) fn siren_forward<B>(
     dual: bool,
 ) -> (FloatTensor<B>, CpuSaved<FloatTensor<B>>)
 where
-    B: Backend,
+    B: super::SirenBackend,
     FloatTensor<B>: HostTensor,
 {
     match input.dtype() {
@@ -184,7 +184,7 @@ pub(crate) fn siren_backward<B>(
     input_grad: bool,
 ) -> (Option<FloatTensor<B>>, FloatTensor<B>)
 where
-    B: Backend,
+    B: super::SirenBackend,
     FloatTensor<B>: HostTensor,
 {
     match saved.0 {

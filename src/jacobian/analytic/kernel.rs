@@ -1,18 +1,328 @@
-//! The wgpu implementation of [`super::SirenOps`].
+//! The wgpu implementation of the analytic op: hand-written CubeCL kernels for the
+//! elementwise part of every sine layer, forward and backward, dual and value-only.
 //!
-//! Burn 0.22 runs wgpu as `Fusion<CubeBackend>`: the primitive ops of [`super::forward`]
-//! are recorded lazily and their elementwise chains (the slices, `sin`, `cos`, the tangent
-//! products and the backward's `g_z`, `g_ż`) are compiled into fused CubeCL kernels by
-//! Burn's fusion engine, around the one matmul per layer and direction.
+//! Each kernel does one layer's elementwise work in one pass over `[N, d]` (dual: four
+//! blocks), one thread per value-row element: `sin z`, and `ω cos z · Z_k` for the three
+//! tangents, in one pass; the backward `g_z = ω (g_h cos z − ω sin z Σ_k g_ḣ,k Z_k)` and
+//! `g_Ż_k = ω cos z g_ḣ,k`; and their value-only forms. The matmuls stay Burn's (CubeCL's
+//! tuned matmul), and the network around them is [`super::forward::siren`].
+//!
+//! **Where they run.** Burn 0.22 runs wgpu as `Fusion<CubeBackend>`. The kernels are
+//! written for `CubeBackend`; for `Fusion<CubeBackend>` each call is registered in the
+//! fusion stream as one custom operation (`OperationIr::Custom`, Burn's own mechanism for
+//! opaque ops, the way `burn-linalg` registers its SVD), which the stream executes lazily
+//! in order, with the inputs it resolves from its handle container. So a kernel call costs
+//! no host sync and no stream drain. The backend extension macro can generate this wrapper
+//! too, but only with Burn's `fusion` feature, which would rebuild the Burn stack here;
+//! the hand-written wrapper is 40 lines.
+//!
+//! The reference is the tensor-primitive composition in [`super::forward`] (the trait's
+//! default bodies); `tests/analytic_kernels.rs` checks each kernel against it on random
+//! inputs.
 
+use burn::backend::TensorMetadata;
+use burn::backend::cubecl::dtype_to_storage_type;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::wgpu::CubeBackend;
-use burn_fusion::Fusion;
+use burn_cubecl::fusion::FusionCubeRuntime;
+use burn_cubecl::kernel::into_contiguous;
+use burn_cubecl::ops::numeric::empty_device_contiguous_dtype;
+use burn_cubecl::tensor::CubeTensor;
+use burn_fusion::custom::{CustomOpIr, HandleContainer, OperationIr, ScalarIr, StreamId, TensorIr};
+use burn_fusion::stream::Operation;
+use burn_fusion::{ExecutionError, Fusion, FusionRuntime, FusionTensor};
+use cubecl::{calculate_cube_count_elemwise, prelude::*};
 
-use super::{SirenOps, forward};
+use super::{SirenBackend, SirenOps, forward};
 
-macro_rules! primitive_siren_ops {
-    ($($backend:ty),*) => {$(
+/// One dual sine layer: `out = [sin z; ω cos z ⊙ Z_1; ω cos z ⊙ Z_2; ω cos z ⊙ Z_3]` with
+/// `z = ω(Z_0 + b)`, for the stacked `zs = [Z_0; Z_1; Z_2; Z_3]` (`[4N, d]`).
+#[cube(launch)]
+fn sine_dual_forward_kernel<F: Float>(
+    zs: &Tensor<F>,
+    bias: &Tensor<F>,
+    out: &mut Tensor<F>,
+    omega: f32,
+    #[define(F)] _dtype: ElemType,
+) {
+    let d = bias.shape(0);
+    let nd = out.shape(0) / 4 * out.shape(1);
+    let i = ABSOLUTE_POS;
+    if i >= nd {
+        terminate!();
+    }
+    let w = F::cast_from(omega);
+    let z = w * (zs[i] + bias[i % d]);
+    let wc = w * F::cos(z);
+    out[i] = F::sin(z);
+    out[i + nd] = wc * zs[i + nd];
+    out[i + 2 * nd] = wc * zs[i + 2 * nd];
+    out[i + 3 * nd] = wc * zs[i + 3 * nd];
+}
+
+/// Its backward, from the upstream gradient `g = [g_h; g_ḣ_1; g_ḣ_2; g_ḣ_3]`:
+/// `[ω (g_h cos z − ω sin z Σ_k g_ḣ_k Z_k); ω cos z ⊙ g_ḣ_k]`.
+#[cube(launch)]
+fn sine_dual_backward_kernel<F: Float>(
+    zs: &Tensor<F>,
+    bias: &Tensor<F>,
+    g: &Tensor<F>,
+    out: &mut Tensor<F>,
+    omega: f32,
+    #[define(F)] _dtype: ElemType,
+) {
+    let d = bias.shape(0);
+    let nd = out.shape(0) / 4 * out.shape(1);
+    let i = ABSOLUTE_POS;
+    if i >= nd {
+        terminate!();
+    }
+    let w = F::cast_from(omega);
+    let z = w * (zs[i] + bias[i % d]);
+    let s = F::sin(z);
+    let wc = w * F::cos(z);
+    let mixed =
+        g[i + nd] * zs[i + nd] + g[i + 2 * nd] * zs[i + 2 * nd] + g[i + 3 * nd] * zs[i + 3 * nd];
+    out[i] = w * (g[i] * F::cos(z) - s * w * mixed);
+    out[i + nd] = wc * g[i + nd];
+    out[i + 2 * nd] = wc * g[i + 2 * nd];
+    out[i + 3 * nd] = wc * g[i + 3 * nd];
+}
+
+/// A value-only sine layer: `sin(ω(Z + b))`.
+#[cube(launch)]
+fn sine_forward_kernel<F: Float>(
+    zs: &Tensor<F>,
+    bias: &Tensor<F>,
+    out: &mut Tensor<F>,
+    omega: f32,
+    #[define(F)] _dtype: ElemType,
+) {
+    let d = bias.shape(0);
+    let i = ABSOLUTE_POS;
+    if i >= out.shape(0) * out.shape(1) {
+        terminate!();
+    }
+    out[i] = F::sin(F::cast_from(omega) * (zs[i] + bias[i % d]));
+}
+
+/// Its backward: `ω g cos(ω(Z + b))`.
+#[cube(launch)]
+fn sine_backward_kernel<F: Float>(
+    zs: &Tensor<F>,
+    bias: &Tensor<F>,
+    g: &Tensor<F>,
+    out: &mut Tensor<F>,
+    omega: f32,
+    #[define(F)] _dtype: ElemType,
+) {
+    let d = bias.shape(0);
+    let i = ABSOLUTE_POS;
+    if i >= out.shape(0) * out.shape(1) {
+        terminate!();
+    }
+    let w = F::cast_from(omega);
+    out[i] = w * g[i] * F::cos(w * (zs[i] + bias[i % d]));
+}
+
+static LAUNCHES: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// How many sine kernels this process has launched, so that a test can tell the kernels
+/// from the reference path (both give the same numbers).
+pub fn launches() -> usize {
+    LAUNCHES.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// The four kernels, as one value the fusion wrapper can carry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum SineKernel {
+    DualForward,
+    DualBackward,
+    Forward,
+    Backward,
+}
+
+impl SineKernel {
+    fn id(self) -> &'static str {
+        match self {
+            SineKernel::DualForward => "doma::sine_dual_forward",
+            SineKernel::DualBackward => "doma::sine_dual_backward",
+            SineKernel::Forward => "doma::sine_forward",
+            SineKernel::Backward => "doma::sine_backward",
+        }
+    }
+
+    /// Launches the kernel on `inputs` (`zs`, `bias`, and for a backward `g`); the
+    /// output has `zs`'s shape.
+    fn launch(self, inputs: Vec<CubeTensor>, omega: f64) -> CubeTensor {
+        let mut inputs = inputs.into_iter().map(into_contiguous);
+        let zs = inputs.next().expect("zs");
+        let bias = inputs.next().expect("the bias");
+        let g = inputs.next();
+        let [rows, d] = zs.shape().dims::<2>();
+        let (client, dtype) = (zs.client.clone(), zs.dtype);
+        let out =
+            empty_device_contiguous_dtype(client.clone(), zs.device.clone(), zs.shape(), dtype);
+        // One thread per element of the value block.
+        let threads = match self {
+            SineKernel::DualForward | SineKernel::DualBackward => rows / 4 * d,
+            SineKernel::Forward | SineKernel::Backward => rows * d,
+        };
+        if threads == 0 {
+            return out;
+        }
+        LAUNCHES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let cube_dim = CubeDim::new(&client, threads);
+        let cube_count = calculate_cube_count_elemwise(&client, threads, cube_dim);
+        let (elem, w) = (dtype_to_storage_type(dtype), omega as f32);
+        let (zs, bias, o) = (
+            zs.into_tensor_arg(),
+            bias.into_tensor_arg(),
+            out.clone().into_tensor_arg(),
+        );
+        let g = || g.expect("a backward kernel takes g").into_tensor_arg();
+        match self {
+            SineKernel::DualForward => sine_dual_forward_kernel::launch(
+                &client, cube_count, cube_dim, zs, bias, o, w, elem,
+            ),
+            SineKernel::DualBackward => sine_dual_backward_kernel::launch(
+                &client,
+                cube_count,
+                cube_dim,
+                zs,
+                bias,
+                g(),
+                o,
+                w,
+                elem,
+            ),
+            SineKernel::Forward => {
+                sine_forward_kernel::launch(&client, cube_count, cube_dim, zs, bias, o, w, elem)
+            }
+            SineKernel::Backward => sine_backward_kernel::launch(
+                &client,
+                cube_count,
+                cube_dim,
+                zs,
+                bias,
+                g(),
+                o,
+                w,
+                elem,
+            ),
+        }
+        out
+    }
+}
+
+/// A kernel call queued in the fusion stream: executed in order with the other
+/// operations, on the inputs that the stream resolves.
+#[derive(Debug)]
+struct SineKernelOp {
+    desc: CustomOpIr,
+    kernel: SineKernel,
+    omega: f64,
+}
+
+impl Operation<FusionCubeRuntime> for SineKernelOp {
+    fn execute(
+        &self,
+        handles: &mut HandleContainer<<FusionCubeRuntime as FusionRuntime>::FusionHandle>,
+    ) -> Result<(), ExecutionError> {
+        let inputs = self
+            .desc
+            .inputs
+            .iter()
+            .map(|t| handles.get_float_tensor::<CubeBackend>(t))
+            .collect();
+        let out = self.kernel.launch(inputs, self.omega);
+        handles.register_float_tensor::<CubeBackend>(&self.desc.outputs[0].id, out);
+        Ok(())
+    }
+}
+
+/// Registers `kernel` on fusion tensors; the output (of `inputs[0]`'s shape and type) is
+/// lazy, like any fusion tensor.
+fn fused_call(
+    kernel: SineKernel,
+    inputs: Vec<FusionTensor<FusionCubeRuntime>>,
+    omega: f64,
+) -> FusionTensor<FusionCubeRuntime> {
+    let client = inputs[0].client.clone();
+    let out = TensorIr::uninit(
+        client.create_empty_handle(),
+        inputs[0].shape.clone(),
+        inputs[0].dtype,
+    );
+    let inputs: Vec<TensorIr> = inputs.into_iter().map(|t| t.into_ir()).collect();
+    let desc = CustomOpIr::with_scalars(
+        kernel.id(),
+        &inputs,
+        std::slice::from_ref(&out),
+        vec![ScalarIr::Float(omega)],
+    );
+    let op = SineKernelOp {
+        desc: desc.clone(),
+        kernel,
+        omega,
+    };
+    client
+        .register(StreamId::current(), OperationIr::Custom(desc), op)
+        .into_iter()
+        .next()
+        .expect("one output")
+}
+
+/// [`SirenBackend`] and [`SirenOps`] for a CubeCL backend: the network from
+/// [`super::forward`], its activations from the kernels; `$call` runs one kernel.
+macro_rules! kernel_backend {
+    ($backend:ty, $call:expr) => {
+        impl SirenBackend for $backend {
+            fn siren(
+                input: FloatTensor<Self>,
+                params: FloatTensor<Self>,
+                shapes: Vec<[usize; 2]>,
+                omega: f64,
+                dual: bool,
+            ) -> FloatTensor<Self> {
+                <Self as SirenOps>::siren_forward(input, params, &shapes, omega, dual).0
+            }
+
+            fn sine_dual_activation(
+                zs: FloatTensor<Self>,
+                bias: FloatTensor<Self>,
+                omega: f64,
+            ) -> FloatTensor<Self> {
+                $call(SineKernel::DualForward, vec![zs, bias], omega)
+            }
+
+            fn sine_dual_activation_backward(
+                zs: FloatTensor<Self>,
+                bias: FloatTensor<Self>,
+                grad: FloatTensor<Self>,
+                omega: f64,
+            ) -> FloatTensor<Self> {
+                $call(SineKernel::DualBackward, vec![zs, bias, grad], omega)
+            }
+
+            fn sine_activation(
+                zs: FloatTensor<Self>,
+                bias: FloatTensor<Self>,
+                omega: f64,
+            ) -> FloatTensor<Self> {
+                $call(SineKernel::Forward, vec![zs, bias], omega)
+            }
+
+            fn sine_activation_backward(
+                zs: FloatTensor<Self>,
+                bias: FloatTensor<Self>,
+                grad: FloatTensor<Self>,
+                omega: f64,
+            ) -> FloatTensor<Self> {
+                $call(SineKernel::Backward, vec![zs, bias, grad], omega)
+            }
+        }
+
         impl SirenOps for $backend {
             type Saved = Vec<FloatTensor<Self>>;
 
@@ -42,7 +352,9 @@ macro_rules! primitive_siren_ops {
                 (input_grad.then_some(g_input), grads)
             }
         }
-    )*};
+    };
 }
 
-primitive_siren_ops!(CubeBackend, Fusion<CubeBackend>);
+kernel_backend!(CubeBackend, |k: SineKernel, inputs, omega| k
+    .launch(inputs, omega));
+kernel_backend!(Fusion<CubeBackend>, fused_call);

@@ -71,7 +71,10 @@ pub trait SirenOps: burn::backend::Backend {
 }
 
 /// The analytic SIREN as a backend operation, reachable from high-level tensors through
-/// Burn's `Dispatch` ([`fused_siren`]).
+/// Burn's `Dispatch` ([`fused_siren`]), and the elementwise part of its sine layers, which
+/// the tensor-primitive network ([`forward::siren`]) calls. The activations' default
+/// bodies compose Burn primitives and are the reference; wgpu overrides them with CubeCL
+/// kernels ([`kernel`]).
 #[backend_extension(Flex, NdArray, Cube, Autodiff)]
 pub trait SirenBackend: burn::backend::Backend {
     /// The whole SIREN (see [`SirenOps`] for the layout of `params` and the output).
@@ -82,10 +85,51 @@ pub trait SirenBackend: burn::backend::Backend {
         omega: f64,
         dual: bool,
     ) -> FloatTensor<Self>;
+
+    /// A dual sine layer's activation (Eq. 6): from `zs = S W` (`[4N, d]`, values then the
+    /// three tangents) and the bias, `[sin z; cos z ⊙ ż]` with `z = ω(zs[0..N] + b)` and
+    /// `ż = ω zs[N..4N]`.
+    fn sine_dual_activation(
+        zs: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        omega: f64,
+    ) -> FloatTensor<Self> {
+        forward::activation::<Self>(zs, bias, omega)
+    }
+
+    /// Its backward: from the upstream gradient `G = [g_h; g_ḣ]`, the gradient with respect
+    /// to `zs`, `ω [g_h ⊙ cos z − sin z ⊙ Σ_k g_ḣ,k ⊙ ż_k ; g_ḣ ⊙ cos z]`.
+    fn sine_dual_activation_backward(
+        zs: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        omega: f64,
+    ) -> FloatTensor<Self> {
+        forward::activation_backward::<Self>(zs, bias, grad, omega)
+    }
+
+    /// A value-only sine layer's activation (Eq. 1): `sin(ω(zs + b))`.
+    fn sine_activation(
+        zs: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        omega: f64,
+    ) -> FloatTensor<Self> {
+        forward::plain_activation::<Self>(zs, bias, omega)
+    }
+
+    /// Its backward: `ω g ⊙ cos(ω(zs + b))`.
+    fn sine_activation_backward(
+        zs: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        omega: f64,
+    ) -> FloatTensor<Self> {
+        forward::plain_activation_backward::<Self>(zs, bias, grad, omega)
+    }
 }
 
-/// A backend whose tensors do not track gradients runs the forward and drops the saved
-/// activations.
+/// A CPU backend (no gradient tracking) runs the forward and drops the saved activations;
+/// its activations keep the reference bodies (the fused op does not call them).
 macro_rules! untracked_siren {
     ($($backend:ty),*) => {$(
         impl SirenBackend for $backend {
@@ -102,12 +146,7 @@ macro_rules! untracked_siren {
     )*};
 }
 
-untracked_siren!(
-    burn::backend::Flex,
-    burn::backend::NdArray,
-    burn::backend::wgpu::CubeBackend,
-    burn_fusion::Fusion<burn::backend::wgpu::CubeBackend>
-);
+untracked_siren!(burn::backend::Flex, burn::backend::NdArray);
 
 /// The CPU backends lend their buffers to [`net`].
 macro_rules! cpu_siren_ops {
@@ -144,6 +183,42 @@ macro_rules! cpu_siren_ops {
 }
 
 cpu_siren_ops!(burn::backend::Flex, burn::backend::NdArray);
+
+/// Which elementwise pass of a sine layer [`activation`] runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Activation {
+    /// [`SirenBackend::sine_dual_activation`] on `zs` (`[4N, d]`).
+    DualForward,
+    /// [`SirenBackend::sine_dual_activation_backward`] on `zs` and `grad` (`[4N, d]`).
+    DualBackward,
+    /// [`SirenBackend::sine_activation`] on `zs` (`[N, d]`).
+    Forward,
+    /// [`SirenBackend::sine_activation_backward`] on `zs` and `grad` (`[N, d]`).
+    Backward,
+}
+
+/// One sine layer's elementwise pass on high-level tensors, on whatever backend `zs` lives
+/// (the CubeCL kernels on wgpu, the primitive reference on the CPU backends); `grad` is
+/// used by the backward passes only.
+pub fn activation(
+    which: Activation,
+    zs: Tensor<2>,
+    bias: Tensor<1>,
+    grad: Tensor<2>,
+    omega: f64,
+) -> Tensor<2> {
+    let (zs, bias) = (zs.into_dispatch(), bias.into_dispatch());
+    Tensor::from_dispatch(match which {
+        Activation::DualForward => Dispatch::sine_dual_activation(zs, bias, omega),
+        Activation::DualBackward => {
+            Dispatch::sine_dual_activation_backward(zs, bias, grad.into_dispatch(), omega)
+        }
+        Activation::Forward => Dispatch::sine_activation(zs, bias, omega),
+        Activation::Backward => {
+            Dispatch::sine_activation_backward(zs, bias, grad.into_dispatch(), omega)
+        }
+    })
+}
 
 /// The whole SIREN through the fused operation, on high-level tensors: `[N, O]`, or
 /// `[4N, O]` stacked values and tangents when `dual` (see [`SirenOps`]).

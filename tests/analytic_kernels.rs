@@ -1,0 +1,79 @@
+//! The CubeCL kernels of the analytic op on wgpu against their reference, the Burn-primitive
+//! composition run on flex, on random inputs in f32 (1e-4 relative): the dual and the
+//! value-only sine activation, each forward and backward. Skipped without a wgpu adapter,
+//! except under CI (`CI` set), where that fails.
+
+mod common;
+
+use burn::tensor::{Device, Tensor, TensorData};
+use common::{random_points, rel_err, to_vec};
+use doma::jacobian::analytic::{Activation, activation, kernel};
+
+fn tensor(values: &[f64], shape: Vec<usize>, device: &Device) -> Tensor<2> {
+    let data = TensorData::new(values.iter().map(|&v| v as f32).collect::<Vec<_>>(), shape);
+    Tensor::<2>::from_data(data, device)
+}
+
+/// The pass `which` on `device`, for `zs` and `g` of `[rows, d]` and the bias `b` (`[d]`).
+fn run(which: Activation, device: &Device, inputs: [&[f64]; 3], rows: usize, d: usize) -> Vec<f64> {
+    let [zs, b, g] = inputs;
+    let bias = tensor(b, vec![1, d], device).reshape([d]);
+    let out = activation(
+        which,
+        tensor(zs, vec![rows, d], device),
+        bias,
+        tensor(g, vec![rows, d], device),
+        30.0,
+    );
+    to_vec(out)
+}
+
+#[test]
+fn every_sine_kernel_matches_the_primitive_reference() {
+    let Some(wgpu) =
+        common::wgpu_device_or_skip("every_sine_kernel_matches_the_primitive_reference")
+    else {
+        return;
+    };
+    let flex = Device::flex();
+    // 4N = 4 · 37 rows, d = 19: neither a multiple of the cube size nor of a row.
+    let (n, d) = (37, 19);
+    for (which, rows) in [
+        (Activation::DualForward, 4 * n),
+        (Activation::DualBackward, 4 * n),
+        (Activation::Forward, n),
+        (Activation::Backward, n),
+    ] {
+        // random_points gives 3 values per point in [-1, 1]; scale zs like a layer's S W.
+        let zs: Vec<f64> = random_points(rows * d, 1)
+            .iter()
+            .take(rows * d)
+            .map(|v| 0.1 * v)
+            .collect();
+        let b: Vec<f64> = random_points(d, 2)
+            .iter()
+            .take(d)
+            .map(|v| 0.05 * v)
+            .collect();
+        let g: Vec<f64> = random_points(rows * d, 3)
+            .into_iter()
+            .take(rows * d)
+            .collect();
+        let before = kernel::launches();
+        let reference = run(which, &flex, [&zs, &b, &g], rows, d);
+        assert_eq!(
+            kernel::launches(),
+            before,
+            "flex runs the reference, not a kernel"
+        );
+        let kernel = run(which, &wgpu, [&zs, &b, &g], rows, d);
+        assert_eq!(
+            kernel::launches(),
+            before + 1,
+            "{which:?}: wgpu launched its CubeCL kernel once"
+        );
+        assert_eq!(kernel.len(), reference.len());
+        let e = rel_err(&kernel, &reference);
+        assert!(e < 1e-4, "{which:?}: kernel vs reference {e:e}");
+    }
+}
