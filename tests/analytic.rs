@@ -125,3 +125,44 @@ fn value_path_matches_the_plain_siren_on_wgpu() {
         check_value_path(&device);
     }
 }
+
+/// The two shapes of the analytic op, the whole network as one node (the CPU path) and one
+/// node per layer (the wgpu path), agree on every backend: outputs with tangents, and the
+/// gradient of every parameter of a loss on them.
+fn check_both_paths(device: &Device) {
+    use burn::tensor::{Tensor, TensorData};
+    use doma::field::time_input;
+    use doma::jacobian::analytic::{fused_siren, layered_siren};
+    let _guard = backward_lock();
+    let ad = device.clone().autodiff();
+    let field = small_field(Variant::Affinity, &ad);
+    let x = random_points(N, 5);
+    let run = |path: fn(&doma::siren::Siren, Tensor<2>, bool) -> Tensor<2>| {
+        let x = Tensor::<2>::from_data(TensorData::new(x.clone(), [N, 3]), &ad);
+        let out = path(&field.siren, time_input(x, 0.75), true);
+        let grads = out.clone().mul(out.clone()).sum().backward();
+        let mut g = common::to_vec(out);
+        for layer in field.siren.sine.iter().chain([&field.siren.output]) {
+            g.extend(common::to_vec(
+                layer.weight.val().grad(&grads).expect("g_W"),
+            ));
+            let b = layer.bias.as_ref().expect("a bias").val();
+            g.extend(common::to_vec(b.grad(&grads).expect("g_b")));
+        }
+        g
+    };
+    let e = rel_err(&run(fused_siren), &run(layered_siren));
+    assert!(e < TOL, "whole-network op vs per-layer ops: {e:e}");
+}
+
+#[test]
+fn both_paths_of_the_op_agree_on_flex() {
+    check_both_paths(&Device::flex());
+}
+
+#[test]
+fn both_paths_of_the_op_agree_on_wgpu() {
+    if let Some(device) = common::wgpu_device_or_skip("both_paths_of_the_op_agree_on_wgpu") {
+        check_both_paths(&device);
+    }
+}

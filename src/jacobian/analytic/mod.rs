@@ -126,6 +126,29 @@ pub trait SirenBackend: burn::backend::Backend {
     ) -> FloatTensor<Self> {
         forward::plain_activation_backward::<Self>(zs, bias, grad, omega)
     }
+
+    /// One dual sine layer (the wgpu path, one autodiff node per layer): `S [4N, d_in]`,
+    /// `W [d_in, d_out]`, `b [d_out]` → `[sin z; cos z ⊙ ż]` (`[4N, d_out]`).
+    fn sine_dual_layer(
+        stacked: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        omega: f64,
+    ) -> FloatTensor<Self> {
+        let zs = Self::float_matmul(stacked, weight);
+        Self::sine_dual_activation(zs, bias, omega)
+    }
+
+    /// One value-only sine layer (Eq. 1): `sin(ω(X W + b))`.
+    fn sine_layer(
+        input: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        omega: f64,
+    ) -> FloatTensor<Self> {
+        let zs = Self::float_matmul(input, weight);
+        Self::sine_activation(zs, bias, omega)
+    }
 }
 
 /// A CPU backend (no gradient tracking) runs the forward and drops the saved activations;
@@ -220,6 +243,87 @@ pub fn activation(
     })
 }
 
+/// One dual sine layer on high-level tensors (see [`SirenBackend::sine_dual_layer`]).
+pub fn sine_dual_layer(
+    stacked: Tensor<2>,
+    weight: Tensor<2>,
+    bias: Tensor<1>,
+    omega: f64,
+) -> Tensor<2> {
+    Tensor::from_dispatch(Dispatch::sine_dual_layer(
+        stacked.into_dispatch(),
+        weight.into_dispatch(),
+        bias.into_dispatch(),
+        omega,
+    ))
+}
+
+/// One value-only sine layer on high-level tensors (see [`SirenBackend::sine_layer`]).
+pub fn sine_layer(input: Tensor<2>, weight: Tensor<2>, bias: Tensor<1>, omega: f64) -> Tensor<2> {
+    Tensor::from_dispatch(Dispatch::sine_layer(
+        input.into_dispatch(),
+        weight.into_dispatch(),
+        bias.into_dispatch(),
+        omega,
+    ))
+}
+
+/// The SIREN layer by layer (the wgpu path): one custom op per sine layer, whose
+/// elementwise parts are CubeCL kernels, and Burn's linear output layer. `[N, O]`, or
+/// `[4N, O]` stacked values and tangents when `dual`.
+pub fn layered_siren(siren: &Siren, xt: Tensor<2>, dual: bool) -> Tensor<2> {
+    let n = xt.dims()[0];
+    let mut h = if dual {
+        let [_, c] = xt.dims();
+        // The input tangents are e_x, e_y, e_z (the time column has none).
+        let seed = Dual::seed_spatial(xt);
+        let tangent = seed
+            .tangent
+            .expect("a seed has tangents")
+            .reshape([3 * n, c]);
+        Tensor::cat(vec![seed.value, tangent], 0)
+    } else {
+        xt
+    };
+    for layer in &siren.sine {
+        let bias = layer.bias.as_ref().expect("SIREN layers have a bias").val();
+        h = if dual {
+            sine_dual_layer(h, layer.weight.val(), bias, siren.omega)
+        } else {
+            sine_layer(h, layer.weight.val(), bias, siren.omega)
+        };
+    }
+    let out = h.matmul(siren.output.weight.val());
+    let bias = siren
+        .output
+        .bias
+        .as_ref()
+        .expect("SIREN layers have a bias")
+        .val()
+        .unsqueeze_dim(0);
+    if !dual {
+        return out + bias;
+    }
+    let d_out = out.dims()[1];
+    Tensor::cat(
+        vec![out.clone().narrow(0, 0, n) + bias, out.narrow(0, n, 3 * n)],
+        0,
+    )
+    .reshape([4 * n, d_out])
+}
+
+/// The SIREN through the analytic op of its device: the whole network as one op on the
+/// CPU backends ([`fused_siren`]), layer by layer on wgpu ([`layered_siren`]), where the
+/// flat parameter vector of the whole-network op would cost a `cat` and eight slices per
+/// call, each a kernel dispatch.
+pub fn analytic_siren(siren: &Siren, xt: Tensor<2>, dual: bool) -> Tensor<2> {
+    if crate::backend::runs_on_cpu(&xt.device()) {
+        fused_siren(siren, xt, dual)
+    } else {
+        layered_siren(siren, xt, dual)
+    }
+}
+
 /// The whole SIREN through the fused operation, on high-level tensors: `[N, O]`, or
 /// `[4N, O]` stacked values and tangents when `dual` (see [`SirenOps`]).
 pub fn fused_siren(siren: &Siren, xt: Tensor<2>, dual: bool) -> Tensor<2> {
@@ -256,12 +360,12 @@ impl JacobianMethod for Analytic {
     }
 
     fn forward(&self, siren: &Siren, xt: Tensor<2>) -> Tensor<2> {
-        fused_siren(siren, xt, false)
+        analytic_siren(siren, xt, false)
     }
 
     fn forward_dual(&self, siren: &Siren, xt: Tensor<2>) -> Dual {
         let n = xt.dims()[0];
-        let out = fused_siren(siren, xt, true);
+        let out = analytic_siren(siren, xt, true);
         let d_out = out.dims()[1];
         Dual {
             value: out.clone().narrow(0, 0, n),
