@@ -25,6 +25,12 @@ pub trait Objective<M>: Send {
     /// Steps per iteration: the frames.
     fn frames(&self) -> usize;
 
+    /// Called by [`super::Trainer::iteration`] before its steps, with the frame order it
+    /// will take: an objective may draw what its steps need here, in the order the steps
+    /// would draw it (so the random stream is unchanged), and move it to the device in one
+    /// transfer. The default draws nothing.
+    fn prepare_iteration(&mut self, _order: &[usize], _rng: &mut ChaCha8Rng) {}
+
     /// The losses of one step on frame `k` during iteration `iteration` (0-based), each
     /// `[1]`: the primary loss (reported) and the total (minimised). `rng` is the loop's
     /// stream, for whatever the step draws.
@@ -50,6 +56,9 @@ pub struct TrajectoryObjective<'a> {
     targets: Vec<Tensor<2>>,
     separate_h: bool,
     warp_needs_jacobian: bool,
+    /// The `L_H` samples of the current iteration, drawn at its start and uploaded at once
+    /// (`[steps · n, 3]`), with `n` and the next step's index into them.
+    prepared: Option<(Tensor<2>, usize, usize)>,
 }
 
 impl<'a> TrajectoryObjective<'a> {
@@ -86,6 +95,7 @@ impl<'a> TrajectoryObjective<'a> {
             ad,
             separate_h,
             warp_needs_jacobian,
+            prepared: None,
         })
     }
 }
@@ -93,6 +103,25 @@ impl<'a> TrajectoryObjective<'a> {
 impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
     fn frames(&self) -> usize {
         self.data.frames()
+    }
+
+    /// Draws every step's `L_H` samples now, in step order, and uploads them in one
+    /// transfer, so that no step moves data to the device.
+    fn prepare_iteration(&mut self, order: &[usize], rng: &mut ChaCha8Rng) {
+        self.prepared = None;
+        if !(self.separate_h && self.loss.smoothness_weight > 0.0) || order.is_empty() {
+            return;
+        }
+        let mut all = Vec::new();
+        let mut n = 0;
+        for _ in order {
+            let (pts, rows) = smoothness_samples(&self.x0_host, &self.sampling, rng);
+            all.extend(pts);
+            n = rows;
+        }
+        let rows = order.len() * n;
+        let pts = Tensor::<2>::from_data(TensorData::new(all, [rows, 3]), &self.ad);
+        self.prepared = Some((pts, n, 0));
     }
 
     fn step_loss(
@@ -114,8 +143,17 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
         let w = &self.loss;
         if w.smoothness_weight > 0.0 {
             let raw = if self.separate_h {
-                let (pts, n) = smoothness_samples(&self.x0_host, &self.sampling, rng);
-                let pts = Tensor::<2>::from_data(TensorData::new(pts, [n, 3]), &self.ad);
+                let pts = match self.prepared.as_mut() {
+                    Some((all, n, next)) if (*next + 1) * *n <= all.dims()[0] => {
+                        *next += 1;
+                        all.clone().narrow(0, (*next - 1) * *n, *n)
+                    }
+                    // A step outside `Trainer::iteration` (benchmarks): drawn here.
+                    _ => {
+                        let (pts, n) = smoothness_samples(&self.x0_host, &self.sampling, rng);
+                        Tensor::<2>::from_data(TensorData::new(pts, [n, 3]), &self.ad)
+                    }
+                };
                 field.raw_dual(pts, t, method)
             } else {
                 out.raw

@@ -149,6 +149,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         let lr = self.schedule.learning_rate_at(iteration);
         let mut order: Vec<usize> = (0..self.objective.frames()).collect();
         order.shuffle(&mut self.rng);
+        self.objective.prepare_iteration(&order, &mut self.rng);
         let mut step_losses = Vec::with_capacity(order.len());
         for &k in &order {
             step_losses.push(self.step(k, lr)?);
