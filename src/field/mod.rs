@@ -304,6 +304,12 @@ impl MotionField for DomaField {
         siren_raw(&self.siren, x, method, |x| time_input(x, t))
     }
 
+    /// The method seeds its own tangents, so `x`'s seed (an upload and a `repeat` per
+    /// call, two kernel dispatches on a GPU) is not built.
+    fn raw_dual(&self, x: Tensor<2>, t: f64, method: &dyn JacobianMethod) -> Dual {
+        method.forward_dual(&self.siren, time_input(x, t))
+    }
+
     fn head(&self) -> Variant {
         self.variant
     }

@@ -7,7 +7,7 @@
 //! one checkpoint format and one evaluation serve them all.
 
 use burn::module::Module;
-use burn::tensor::Device;
+use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
 use super::baselines::bone_cloud::{BoneCloud, BoneCloudConfig};
@@ -290,6 +290,10 @@ impl Model {
 impl MotionField for Model {
     fn raw(&self, x: Dual, t: f64, method: &dyn JacobianMethod) -> Dual {
         self.as_field().raw(x, t, method)
+    }
+
+    fn raw_dual(&self, x: Tensor<2>, t: f64, method: &dyn JacobianMethod) -> Dual {
+        self.as_field().raw_dual(x, t, method)
     }
 
     fn head(&self) -> Variant {

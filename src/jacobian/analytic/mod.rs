@@ -315,12 +315,17 @@ pub fn layered_siren(siren: &Siren, xt: Tensor<2>, dual: bool) -> Tensor<2> {
 /// The SIREN through the analytic op of its device: the whole network as one op on the
 /// CPU backends ([`fused_siren`]), layer by layer on wgpu ([`layered_siren`]), where the
 /// flat parameter vector of the whole-network op would cost a `cat` and eight slices per
-/// call, each a kernel dispatch.
+/// call, each a kernel dispatch. Without tangents on wgpu, Burn's own layers: its fusion
+/// engine folds the bias, the scaling and the sine into the matmul's epilogue, which an
+/// opaque custom op prevents (lavapipe, value-only step: 32 ms against 42 ms through the
+/// kernels; README, Speed).
 pub fn analytic_siren(siren: &Siren, xt: Tensor<2>, dual: bool) -> Tensor<2> {
     if crate::backend::runs_on_cpu(&xt.device()) {
         fused_siren(siren, xt, dual)
+    } else if dual {
+        layered_siren(siren, xt, true)
     } else {
-        layered_siren(siren, xt, dual)
+        siren.forward(xt)
     }
 }
 
