@@ -36,9 +36,12 @@ pub struct BenchArgs {
     /// rounds; PYTHON is an interpreter with torch installed (runs benches/torch_step.py).
     #[arg(long, value_name = "PYTHON")]
     pub compare_torch: Option<PathBuf>,
-    /// Rounds of the comparison.
-    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
-    pub rounds: u64,
+    /// Rounds. The comparison alternates doma and PyTorch this many times (default 3). The
+    /// table runs all its rows this many times, so that the methods alternate, and reports
+    /// each row's median over the rounds (default 1): on a machine whose speed drifts
+    /// (lavapipe, shared hosts), a ratio of rows timed minutes apart is not one run.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub rounds: Option<u64>,
 }
 
 impl BenchArgs {
@@ -55,6 +58,7 @@ impl BenchArgs {
             points: self.points.iter().map(|&p| p as usize).collect(),
             warmup: self.warmup as usize,
             steps: self.steps as usize,
+            rounds: self.rounds.unwrap_or(1) as usize,
         }
     }
 }
@@ -67,7 +71,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     if let Some(python) = &args.compare_torch {
         let rows = speed::compare_torch(
             python,
-            args.rounds as usize,
+            args.rounds.unwrap_or(3) as usize,
             args.warmup as usize,
             args.steps as usize,
             |line| eprintln!("{line}"),

@@ -72,6 +72,9 @@ pub struct BenchJob {
     pub warmup: usize,
     /// Timed steps (the median is reported).
     pub steps: usize,
+    /// Times every row is measured, the rows of a round in turn (so that the methods
+    /// alternate); a row reports its median over the rounds.
+    pub rounds: usize,
 }
 
 impl Default for BenchJob {
@@ -82,6 +85,7 @@ impl Default for BenchJob {
             points: vec![1024, 16384],
             warmup: 5,
             steps: 30,
+            rounds: 1,
         }
     }
 }
@@ -257,30 +261,51 @@ pub fn gemm_row(backend: BackendKind, warmup: usize, steps: usize) -> Result<Ben
 /// then without a regulariser) and the Jacobian steps.
 pub fn run(job: &BenchJob, mut on_row: impl FnMut(&BenchRow)) -> Result<Vec<BenchRow>> {
     let mut rows = Vec::new();
+    let rounds = job.rounds.max(1);
     for &backend in &job.backends {
         // More runs than a step row: the best of them is the peak.
         let peak = gemm_row(backend, job.warmup, 4 * job.steps)?;
         on_row(&peak);
         let peak_gflops = peak.gflops;
         rows.push(peak);
-        let mut push = |mut row: BenchRow| {
+        let mut measured: Vec<Vec<BenchRow>> = Vec::new();
+        for round in 0..rounds {
+            let mut this_round = Vec::new();
+            for smoothness in [true, false] {
+                for &method in &job.methods {
+                    this_round.push(fit_step_row(
+                        backend, method, smoothness, job.warmup, job.steps,
+                    )?);
+                }
+            }
+            for &points in &job.points {
+                for &method in &job.methods {
+                    this_round.push(jacobian_row(
+                        backend, method, points, job.warmup, job.steps,
+                    )?);
+                }
+            }
+            if rounds > 1 {
+                for r in &this_round {
+                    let method = r.method.map_or("-".into(), |m| m.to_string());
+                    eprintln!(
+                        "round {round}: {:?} {} {method} {} points: {:.2} ms",
+                        r.kind, r.backend, r.points, r.ms
+                    );
+                }
+            }
+            measured.push(this_round);
+        }
+        for i in 0..measured[0].len() {
+            let mut times: Vec<f64> = measured.iter().map(|r| r[i].ms).collect();
+            times.sort_by(f64::total_cmp);
+            let mut row = measured[0][i].clone();
+            let median = times[times.len() / 2];
+            row.gflops *= row.ms / median;
+            row.ms = median;
             row.peak_percent = 100.0 * row.gflops / peak_gflops;
             on_row(&row);
             rows.push(row);
-        };
-        for smoothness in [true, false] {
-            for &method in &job.methods {
-                push(fit_step_row(
-                    backend, method, smoothness, job.warmup, job.steps,
-                )?);
-            }
-        }
-        for &points in &job.points {
-            for &method in &job.methods {
-                push(jacobian_row(
-                    backend, method, points, job.warmup, job.steps,
-                )?);
-            }
         }
     }
     Ok(rows)
