@@ -292,7 +292,7 @@ fn block_chunks<E: Send>(
 ) -> impl IndexedParallelIterator<Item = (usize, Vec<&mut [E]>)> {
     let chunk = ROWS_PER_TASK * d;
     let mut per_block: Vec<Vec<&mut [E]>> = buf[..blocks * n * d]
-        .chunks_mut(n * d)
+        .chunks_mut((n * d).max(1))
         .map(|b| b.chunks_mut(chunk.max(1)).collect())
         .collect();
     let n_chunks = n.div_ceil(ROWS_PER_TASK);
@@ -734,6 +734,21 @@ mod tests {
                     .all(|(a, b)| a.to_bits() == b.to_bits()),
                 "the gradients changed between two runs"
             );
+        }
+    }
+
+    #[test]
+    fn no_points_give_empty_outputs_and_zero_gradients() {
+        let shapes = [[4, 8], [8, 8], [8, 3]];
+        let flat = noise(shapes.iter().map(|[i, o]| i * o + o).sum(), 4);
+        let layers = layers_of(&flat, &shapes);
+        for dual in [false, true] {
+            let (out, acts) = forward(&[], 0, &layers, 30.0, dual);
+            assert!(out.is_empty());
+            let mut g = vec![1.0; flat.len()];
+            let g_x = backward(&acts, &[], 0, &layers, 30.0, dual, &[], true, &mut g);
+            assert_eq!(g_x.map(|v| v.len()), Some(0));
+            assert!(g.iter().all(|&v| v == 0.0), "no points, no gradient");
         }
     }
 
