@@ -107,11 +107,11 @@ pub fn runs_on_cpu(device: &Device) -> bool {
 /// and parks the caller on a latch: a wake-up and a park per region, dozens per training
 /// step, which measured about a tenth of an `Analytic` step on flex (README, speed
 /// section). Called from a pool thread, a region starts on that thread and the others
-/// join by work stealing. A no-op when already on a pool thread. For the CPU backends
-/// only ([`runs_on_cpu`]): wgpu's fusion streams are per thread, and moving a step between
-/// threads would move it between streams.
-pub fn on_worker<R: Send>(f: impl FnOnce() -> R + Send) -> R {
-    if rayon::current_thread_index().is_some() {
+/// join by work stealing. Runs `f` here when already on a pool thread, and when `device`
+/// is not a CPU backend ([`runs_on_cpu`]): wgpu's fusion streams are per thread, and moving
+/// a step between threads would move it between streams.
+pub fn on_worker<R: Send>(device: &Device, f: impl FnOnce() -> R + Send) -> R {
+    if rayon::current_thread_index().is_some() || !runs_on_cpu(device) {
         return f();
     }
     rayon::scope(|_| f())
@@ -136,7 +136,12 @@ mod tests {
     #[test]
     fn on_worker_runs_the_closure_on_a_pool_thread() {
         assert_eq!(rayon::current_thread_index(), None);
-        let index = on_worker(rayon::current_thread_index);
+        let index = on_worker(&Device::flex().autodiff(), rayon::current_thread_index);
         assert!(index.is_some());
+        #[allow(deprecated)]
+        let ndarray = Device::ndarray();
+        assert!(on_worker(&ndarray, rayon::current_thread_index).is_some());
+        let wgpu = Device::wgpu(DeviceKind::DefaultDevice);
+        assert_eq!(on_worker(&wgpu, rayon::current_thread_index), None);
     }
 }

@@ -156,11 +156,7 @@ pub fn jacobian_row(
                 drop(grads);
                 sync(&device)
             };
-            if crate::backend::runs_on_cpu(&device) {
-                crate::backend::on_worker(step)
-            } else {
-                step()
-            }
+            crate::backend::on_worker(&device, step)
         },
         warmup,
         steps,

@@ -36,8 +36,8 @@ pub struct Trainer<M, O> {
     progress: bool,
     /// When this session's first iteration started, and the seconds done before it.
     clock: Option<(Instant, f64)>,
-    /// Whether steps run on a rayon pool thread (CPU backends; see `backend::on_worker`).
-    pool_thread: bool,
+    /// The field's device, which decides where steps run (`backend::on_worker`).
+    device: Option<Device>,
 }
 
 impl<'a, M: MotionField + Module> Trainer<M, TrajectoryObjective<'a>> {
@@ -86,12 +86,9 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         schedule: ScheduleConfig,
         rng: ChaCha8Rng,
     ) -> Self {
-        let pool_thread = field
-            .devices()
-            .first()
-            .is_some_and(crate::backend::runs_on_cpu);
+        let device = field.devices().into_iter().next();
         Trainer {
-            pool_thread,
+            device,
             field: Some(field),
             objective,
             schedule,
@@ -113,10 +110,9 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
     /// and total loss as a `[2]` tensor; reading it is left to the caller, so that a step
     /// does not force a device sync.
     pub fn step(&mut self, k: usize, lr: f64) -> Result<Tensor<1>> {
-        if self.pool_thread {
-            crate::backend::on_worker(|| self.step_here(k, lr))
-        } else {
-            self.step_here(k, lr)
+        match self.device.clone() {
+            Some(device) => crate::backend::on_worker(&device, || self.step_here(k, lr)),
+            None => self.step_here(k, lr),
         }
     }
 
