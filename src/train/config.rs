@@ -197,6 +197,10 @@ pub struct FitConfig {
     /// Seeds the initial weights, the frame order and the `L_H` samples.
     #[config(default = 0)]
     pub seed: u64,
+    /// Training points per step: a fresh random subset of this many each step, so that
+    /// a step's memory and time do not grow with the number of tracks (`None`: every
+    /// training point, the paper's protocol).
+    pub points_per_step: Option<usize>,
 }
 
 impl FitConfig {
@@ -225,6 +229,11 @@ impl FitConfig {
         self.schedule.validate()?;
         self.loss.validate()?;
         self.smoothness_sampling.validate()?;
+        if self.points_per_step == Some(0) {
+            return Err(DomaError::InvalidConfig(
+                "points per step must be at least 1".into(),
+            ));
+        }
         self.model.validate()?;
         self.model.check_jacobian(self.jacobian)
     }

@@ -2,7 +2,7 @@
 //! order, the schedule, Adam and the random stream; an [`Objective`] turns the field and
 //! a frame into losses.
 
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Int, Tensor, TensorData};
 use rand::Rng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -59,6 +59,11 @@ pub struct TrajectoryObjective<'a> {
     /// The `L_H` samples of the current iteration, drawn at its start and uploaded at once
     /// (`[steps · n, 3]`), with `n` and the next step's index into them.
     prepared: Option<(Tensor<2>, usize, usize)>,
+    /// Training points per step when fewer than all (`FitConfig::points_per_step`).
+    subset: Option<usize>,
+    /// The rows of each step of the current iteration (`[steps · subset]`), and the next
+    /// step's index into them.
+    prepared_rows: Option<(Tensor<1, Int>, usize)>,
 }
 
 impl<'a> TrajectoryObjective<'a> {
@@ -96,6 +101,8 @@ impl<'a> TrajectoryObjective<'a> {
             separate_h,
             warp_needs_jacobian,
             prepared: None,
+            subset: config.points_per_step.filter(|&k| k < data.points()),
+            prepared_rows: None,
         })
     }
 }
@@ -109,19 +116,34 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
     /// transfer, so that no step moves data to the device.
     fn prepare_iteration(&mut self, order: &[usize], rng: &mut ChaCha8Rng) {
         self.prepared = None;
-        if !(self.separate_h && self.loss.smoothness_weight > 0.0) || order.is_empty() {
+        self.prepared_rows = None;
+        let h = self.separate_h && self.loss.smoothness_weight > 0.0;
+        if !(h || self.subset.is_some()) || order.is_empty() {
             return;
         }
-        let mut all = Vec::new();
+        let (mut all, mut rows_all) = (Vec::new(), Vec::new());
         let mut n = 0;
+        // Per step: its training rows, then its L_H samples, as `step_loss` draws them.
         for _ in order {
-            let (pts, rows) = smoothness_samples(&self.x0_host, &self.sampling, rng);
-            all.extend(pts);
-            n = rows;
+            if let Some(k) = self.subset {
+                rows_all.extend(step_rows(self.data.points(), k, rng));
+            }
+            if h {
+                let (pts, rows) = smoothness_samples(&self.x0_host, &self.sampling, rng);
+                all.extend(pts);
+                n = rows;
+            }
         }
-        let rows = order.len() * n;
-        let pts = Tensor::<2>::from_data(TensorData::new(all, [rows, 3]), &self.ad);
-        self.prepared = Some((pts, n, 0));
+        if h {
+            let rows = order.len() * n;
+            let pts = Tensor::<2>::from_data(TensorData::new(all, [rows, 3]), &self.ad);
+            self.prepared = Some((pts, n, 0));
+        }
+        if self.subset.is_some() {
+            let len = rows_all.len();
+            let rows = Tensor::<1, Int>::from_data(TensorData::new(rows_all, [len]), &self.ad);
+            self.prepared_rows = Some((rows, 0));
+        }
     }
 
     fn step_loss(
@@ -133,12 +155,32 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
     ) -> Result<(Tensor<1>, Tensor<1>)> {
         let method = self.method.as_ref();
         let t = self.data.time(k);
-        let out = if self.warp_needs_jacobian {
-            field.warp_dual(self.x0.clone(), t, method)
-        } else {
-            field.warp_values(self.x0.clone(), t, method)
+        let (x0, target) = match self.subset {
+            None => (self.x0.clone(), self.targets[k].clone()),
+            Some(n) => {
+                let rows = match self.prepared_rows.as_mut() {
+                    Some((all, next)) if (*next + 1) * n <= all.dims()[0] => {
+                        *next += 1;
+                        all.clone().narrow(0, (*next - 1) * n, n)
+                    }
+                    // A step outside `Trainer::iteration` (benchmarks): drawn here.
+                    _ => {
+                        let rows = step_rows(self.data.points(), n, rng);
+                        Tensor::<1, Int>::from_data(TensorData::new(rows, [n]), &self.ad)
+                    }
+                };
+                (
+                    self.x0.clone().select(0, rows.clone()),
+                    self.targets[k].clone().select(0, rows),
+                )
+            }
         };
-        let l1 = loss::trajectory_l1(out.warped.value, self.targets[k].clone());
+        let out = if self.warp_needs_jacobian {
+            field.warp_dual(x0, t, method)
+        } else {
+            field.warp_values(x0, t, method)
+        };
+        let l1 = loss::trajectory_l1(out.warped.value, target);
         let mut total = l1.clone();
         let w = &self.loss;
         if w.smoothness_weight > 0.0 {
@@ -170,6 +212,14 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
     }
 }
 
+/// A step's training rows: `k` distinct rows of `n`, drawn uniformly.
+fn step_rows(n: usize, k: usize, rng: &mut impl Rng) -> Vec<i64> {
+    rand::seq::index::sample(rng, n, k)
+        .into_iter()
+        .map(|i| i as i64)
+        .collect()
+}
+
 /// Draws the `L_H` sample points: a random subset of at most `max_points` rows of `x0`
 /// (`[N, 3]`, host), jittered by Gaussian noise.
 fn smoothness_samples(
@@ -197,4 +247,80 @@ fn smoothness_samples(
         }
     }
     (out, take)
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::module::Module;
+    use rand::SeedableRng;
+
+    use super::*;
+    use crate::field::{DomaFieldConfig, Variant};
+    use crate::jacobian::JacobianKind;
+    use crate::siren::WithSirenShape;
+
+    /// 40 points moving on their own paths over 3 frames.
+    fn data() -> Trajectories {
+        let (t, n) = (3, 40);
+        let pos = (0..t * n * 3)
+            .map(|i| ((i * 7919 % 113) as f32 / 113.0) - 0.5)
+            .collect();
+        Trajectories::new(t, n, pos).unwrap()
+    }
+
+    #[test]
+    fn points_per_step_takes_distinct_rows_and_the_l1_over_them_alone() {
+        let data = data();
+        let device = Device::flex();
+        let config = FitConfig::doma(DomaFieldConfig::new(Variant::Trans).with_hidden(16))
+            .with_jacobian(JacobianKind::Autodiff)
+            .with_points_per_step(Some(7));
+        let field = config
+            .model
+            .init(0, data.frame(0), &device.clone().autodiff());
+        let mut objective = TrajectoryObjective::new(&field, &config, &data, &device).unwrap();
+        let order = [2, 0, 1];
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        Objective::<crate::field::model::Model>::prepare_iteration(
+            &mut objective,
+            &order,
+            &mut rng,
+        );
+        // The rows a step would draw for itself from the same stream: the same rows.
+        let mut replay = ChaCha8Rng::seed_from_u64(5);
+        let drawn: Vec<Vec<i64>> = order
+            .iter()
+            .map(|_| step_rows(40, 7, &mut replay))
+            .collect();
+        let (rows, _) = objective.prepared_rows.clone().unwrap();
+        let rows: Vec<i64> = rows.try_into_vec_as::<i64>().unwrap();
+        assert_eq!(rows, drawn.concat());
+        for step in &drawn {
+            let distinct: std::collections::BTreeSet<_> = step.iter().collect();
+            assert_eq!(distinct.len(), 7);
+            assert!(step.iter().all(|&r| (0..40).contains(&r)));
+        }
+        // Each step's L1 is the mean |y − ŷ| over its 7 rows' 21 coordinates, computed here
+        // on the host from the field's prediction of every point.
+        let inference = field.clone().valid();
+        for (s, &k) in order.iter().enumerate() {
+            let (l1, _) = objective.step_loss(&field, k, 0, &mut rng).unwrap();
+            let l1 = l1.into_scalar::<f64>();
+            let all = inference
+                .warp(data.frame_tensor(0, &device), data.time(k))
+                .try_into_vec_as::<f32>()
+                .unwrap();
+            let target = data.frame(k);
+            let expected = drawn[s]
+                .iter()
+                .flat_map(|&r| (0..3).map(move |c| 3 * r as usize + c))
+                .map(|i| (all[i] - target[i]).abs() as f64)
+                .sum::<f64>()
+                / 21.0;
+            assert!(
+                (l1 - expected).abs() < 1e-6 * expected.max(1.0),
+                "{l1} vs {expected}"
+            );
+        }
+    }
 }
