@@ -55,6 +55,19 @@ pub enum DomaError {
     /// the flag.
     #[error("{0}")]
     Usage(String),
+    /// A run folder is held by another process's fit (its `.lock`, [`crate::run::RunLock`]).
+    #[error(
+        "{path}: the run is being fitted by {holder} (it holds {path}/.lock); wait for it, or stop it"
+    )]
+    Busy {
+        /// The run folder.
+        path: PathBuf,
+        /// Who holds it: "process 1234", or "another process".
+        holder: String,
+    },
+    /// A new fit was asked into a folder that already holds a run.
+    #[error("{0} already holds a run; resume it with --resume or choose another folder")]
+    RunExists(PathBuf),
     /// A tensor could not be read back from the device.
     #[error("device error: {0}")]
     Device(String),

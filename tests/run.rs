@@ -96,7 +96,7 @@ fn a_resumed_fit_equals_an_uninterrupted_one_bit_exactly() {
     // A finished run cannot be started again in the same folder.
     assert!(matches!(
         fit_run(&whole, Some(config()), &device, &never, None, false),
-        Err(DomaError::InvalidConfig(_))
+        Err(DomaError::RunExists(_))
     ));
 }
 

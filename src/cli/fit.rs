@@ -1,17 +1,14 @@
 //! `doma fit`: fit a motion field to a user's data into a resumable run folder.
 
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::path::PathBuf;
 
 use crate::backend::BackendKind;
 use crate::cli::{ClipArgs, WeightSearchArgs, fraction, weight};
 use crate::experiments::meshes::Weight;
-use crate::field::model::ModelConfig;
-use crate::field::{DomaFieldConfig, Variant};
+use crate::field::Variant;
 use crate::jacobian::JacobianKind;
-use crate::run::{FitOutcome, RunConfig, RunDir, fit_run};
-use crate::train::select::{Penalty, choose_weight};
-use crate::train::{FitConfig, SmoothnessSampling};
+use crate::run::{FitOutcome, ModelChoice, RunConfig, RunDir, RunSpec, fit_run};
+use crate::train::FitConfig;
 use crate::{DomaError, Result};
 
 /// The flags of `doma fit`.
@@ -25,7 +22,7 @@ pub struct FitArgs {
     #[arg(long, required_unless_present = "resume", conflicts_with = "resume")]
     pub out: Option<PathBuf>,
     /// Continue the interrupted run in this folder from its last checkpoint.
-    #[arg(long, conflicts_with_all = ["data", "config", "variant", "iters", "test_fraction", "mesh", "frames", "stride", "jacobian", "h_weight", "seed", "checkpoint_every"])]
+    #[arg(long, conflicts_with_all = ["data", "config", "variant", "iters", "test_fraction", "mesh", "frames", "stride", "jacobian", "h_weight", "seed", "checkpoint_every", "points_per_step"])]
     pub resume: Option<PathBuf>,
     /// A fit config (JSON, the `fit` part of a run's config.json; missing fields take
     /// their defaults); flags override it.
@@ -63,115 +60,69 @@ pub struct FitArgs {
     /// Seed of the weights, the split and the frame order.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Training points per step: a fresh random subset of K each step (default: all of
+    /// them, the paper's protocol), so that a step's memory does not grow with the tracks.
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub points_per_step: Option<u64>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
 }
 
 impl FitArgs {
+    /// What the flags ask for, as a [`RunSpec`] (the same that a batch manifest's entry
+    /// deserialises into).
+    pub fn spec(&self) -> RunSpec {
+        RunSpec {
+            data: self.data.clone(),
+            config: self.config.clone(),
+            model: self.variant.map(ModelChoice::from),
+            backend: self.backend,
+            jacobian: self.jacobian,
+            iterations: self.iters.map(|i| i as usize),
+            h_weight: self.h_weight,
+            seed: self.seed,
+            mesh: self.clip.mesh.clone(),
+            frames: self.clip.frames.clone().map(|r| [r.start, r.end]),
+            stride: self.clip.stride.map(|s| s as usize),
+            test_fraction: self.test_fraction,
+            checkpoint_every: self.checkpoint_every.map(|k| k as usize),
+            points_per_step: self.points_per_step.map(|k| k as usize),
+        }
+    }
+
     /// The fit recipe: the `--config` file (or the defaults: DOMA-Affinity, analytic
     /// Jacobian), then the flags over it.
     pub fn fit_config(&self) -> Result<FitConfig> {
-        let mut fit = match &self.config {
-            Some(path) => FitConfig::load_partial(path)?,
-            None => FitConfig::doma(DomaFieldConfig::new(Variant::Affinity))
-                .with_jacobian(JacobianKind::Analytic),
-        };
-        if let Some(v) = self.variant {
-            let shape = match &fit.model {
-                ModelConfig::Doma(c) => c.shape.clone(),
-                _ => crate::siren::SirenShape::new(),
-            };
-            fit.model = ModelConfig::Doma(DomaFieldConfig::new(v).with_shape(shape));
-            fit.smoothness_sampling = SmoothnessSampling::authors(v);
-        }
-        if let Some(j) = self.jacobian {
-            fit.jacobian = j;
-        }
-        if let Some(i) = self.iters {
-            fit.schedule.iterations = i as usize;
-        }
-        if let Some(Weight::Fixed(w)) = self.h_weight {
-            fit.loss.smoothness_weight = w;
-        }
-        if let Some(s) = self.seed {
-            fit.seed = s;
-        }
-        Ok(fit)
+        self.spec().fit_config(|| {
+            Err(DomaError::Usage(
+                "a DPF fit is asked for with --config".into(),
+            ))
+        })
     }
 
-    /// The run config of a new fit of `data`.
-    fn run_config(&self, data: &Path) -> Result<RunConfig> {
-        let data = absolute(data)?;
-        let mut config = RunConfig::new(data, self.fit_config()?);
-        config.mesh = self.clip.mesh.as_deref().map(absolute).transpose()?;
-        config.frames = self.clip.frames.clone().map(|r| [r.start, r.end]);
-        config.stride = self.clip.stride.map_or(1, |s| s as usize);
-        config.backend = self.backend.unwrap_or(BackendKind::Flex);
-        if let Some(t) = self.test_fraction {
-            config.test_fraction = t;
-        }
-        if let Some(k) = self.checkpoint_every {
-            config.checkpoint_every = k as usize;
-        }
-        if self.h_weight == Some(Weight::Auto) {
-            config.validate()?;
-            let search = self.search.search()?;
-            let (train, _) = config.split(&config.load()?.trajectories)?;
-            let device = config.backend.device()?;
-            let choice = choose_weight(
-                &config.fit,
-                Penalty::Smoothness,
-                &train,
-                &search,
-                &device,
-                |p| {
-                    eprintln!(
-                        "weight {:e}: validation EPE {:.2}e-4",
-                        p.weight, p.validation_epe_x1e4
-                    )
-                },
-            )?;
+    /// The run config of a new fit (after the weight search, with `--h-weight auto`).
+    fn run_config(&self) -> Result<RunConfig> {
+        let search = self.search.search()?;
+        let config = self.spec().run_config(&search, |p| {
+            eprintln!(
+                "weight {:e}: validation EPE {:.2}e-4",
+                p.weight, p.validation_epe_x1e4
+            )
+        })?;
+        if let Some(choice) = &config.weight_search {
             eprintln!("chose the L_H weight {:e}", choice.weight);
-            config.fit.loss.smoothness_weight = choice.weight;
-            config.weight_search = Some(choice);
         }
         Ok(config)
     }
 }
 
-/// `path` made absolute without resolving symbolic links: a link's own name keeps its
-/// extension (git-annex, DVC and download caches point at extension-less blobs).
-fn absolute(path: &Path) -> Result<PathBuf> {
-    let abs = std::path::absolute(path).map_err(|e| DomaError::io(path, e))?;
-    // The file must exist now; a fit that starts cannot find it later.
-    std::fs::metadata(&abs).map_err(|e| DomaError::io(path, e))?;
-    Ok(abs)
-}
-
-/// Set by SIGINT or SIGTERM; the fit loop polls it after every iteration.
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-/// Which of the two it was, for the exit status (128 + the signal).
-static SIGNAL: std::sync::atomic::AtomicI32 = std::sync::atomic::AtomicI32::new(0);
-
-extern "C" fn on_signal(signal: libc::c_int) {
-    SIGNAL.store(signal, Ordering::SeqCst);
-    INTERRUPTED.store(true, Ordering::SeqCst);
-}
-
 /// Fits (or resumes) the run; Ctrl-C saves a checkpoint and exits with status 130.
 pub fn run(args: &FitArgs) -> Result<()> {
-    // Ctrl-C, and the SIGTERM that schedulers, `timeout` and `docker stop` send, finish
-    // the iteration, save a checkpoint and exit cleanly.
-    // SAFETY: the handler only stores to atomics, which is async-signal-safe.
-    unsafe {
-        for signal in [libc::SIGINT, libc::SIGTERM] {
-            libc::signal(signal, on_signal as *const () as libc::sighandler_t);
-        }
-    }
+    let interrupt = crate::cli::interrupt::install();
     let (run, config) = match (&args.resume, &args.data, &args.out) {
         (Some(dir), _, _) => (RunDir::new(dir), None),
-        (None, Some(data), Some(out)) => (RunDir::new(out), Some(args.run_config(data)?)),
+        (None, Some(_), Some(out)) => (RunDir::new(out), Some(args.run_config()?)),
         _ => {
             return Err(DomaError::Usage(
                 "give DATA and --out, or --resume RUN".into(),
@@ -194,7 +145,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         }
     };
     let device = backend.device()?;
-    match fit_run(&run, config, &device, &INTERRUPTED, None, !args.quiet)? {
+    match fit_run(&run, config, &device, interrupt, None, !args.quiet)? {
         FitOutcome::Finished(report) => {
             let text = serde_json::to_string_pretty(&report)
                 .map_err(|e| DomaError::InvalidData(e.to_string()))?;
@@ -203,15 +154,11 @@ pub fn run(args: &FitArgs) -> Result<()> {
             Ok(())
         }
         FitOutcome::Interrupted { iterations_done } => {
-            let signal = match SIGNAL.load(Ordering::SeqCst) {
-                0 => libc::SIGINT,
-                s => s,
-            };
             eprintln!(
                 "interrupted after {iterations_done} iterations; the checkpoint is saved. Continue with: doma fit --resume {}",
                 run.dir.display()
             );
-            std::process::exit(128 + signal);
+            crate::cli::interrupt::exit();
         }
     }
 }

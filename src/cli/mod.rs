@@ -10,6 +10,7 @@ pub mod fit;
 pub mod fluid;
 pub mod image2d;
 pub mod info;
+pub mod interrupt;
 pub mod mesh_alignment;
 pub mod novel_points;
 pub mod plot;

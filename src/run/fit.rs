@@ -77,12 +77,7 @@ pub fn fit_run(
 /// before the folder is made, so that bad data leaves nothing behind.
 fn start(run: &RunDir, config: RunConfig) -> Result<(RunConfig, RunLock)> {
     config.validate()?;
-    let taken = || {
-        DomaError::InvalidConfig(format!(
-            "{} already holds a run; resume it with --resume or choose another folder",
-            run.dir.display()
-        ))
-    };
+    let taken = || DomaError::RunExists(run.dir.clone());
     if run.config().exists() {
         return Err(taken());
     }

@@ -40,12 +40,9 @@ impl RunLock {
             } else {
                 format!("process {holder}")
             };
-            return Err(DomaError::Malformed {
+            return Err(DomaError::Busy {
                 path: dir.to_path_buf(),
-                reason: format!(
-                    "the run is being fitted by {who} (it holds {}); wait for it, or stop it",
-                    path.display()
-                ),
+                holder: who,
             });
         }
         let pid = std::process::id().to_string();

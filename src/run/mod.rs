@@ -22,6 +22,7 @@ mod info;
 mod lock;
 mod plot;
 mod resume;
+mod spec;
 mod warp;
 
 pub use eval::{eval_run, evaluate};
@@ -29,6 +30,7 @@ pub use fit::{FitOutcome, fit_run};
 pub use info::{RunInfo, info};
 pub use lock::RunLock;
 pub use plot::plot_run;
+pub use spec::{ModelChoice, RunSpec};
 pub use warp::warp_run;
 
 use std::path::PathBuf;
