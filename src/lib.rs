@@ -49,6 +49,7 @@
 #![warn(missing_docs)]
 
 pub mod backend;
+pub mod batch;
 pub mod checkpoint;
 pub mod cli;
 pub mod data;

@@ -4,6 +4,7 @@
 //! flags to a library job, and the printing; the work is in [`crate::experiments`] and
 //! [`crate::run`].
 
+pub mod batch;
 pub mod bench;
 pub mod eval;
 pub mod fit;
@@ -50,6 +51,8 @@ pub enum Command {
     Image2d(image2d::Image2dArgs),
     /// Fit a motion field to your own data into a run folder (resumable).
     Fit(fit::FitArgs),
+    /// Fit every sequence of a manifest (or one shard of them) into run folders.
+    Batch(batch::BatchArgs),
     /// Print the metrics of a fitted run, on its held-out points or on new data.
     Eval(eval::EvalArgs),
     /// Warp a canonical mesh through a fitted run and write an OBJ sequence.
@@ -71,6 +74,7 @@ impl Command {
             Command::Fluid(a) => fluid::run(&a),
             Command::Image2d(a) => image2d::run(&a),
             Command::Fit(a) => fit::run(&a),
+            Command::Batch(a) => batch::run(&a),
             Command::Eval(a) => eval::run(&a),
             Command::Warp(a) => warp::run(&a),
             Command::Info(a) => info::run(&a),

@@ -1,0 +1,197 @@
+//! The batch manifest: a JSON file that lists the sequences of a dataset, each with its
+//! overrides of the fit recipe.
+//!
+//! ```json
+//! {
+//!   "defaults": { "model": "affinity", "iterations": 1000, "h_weight": 0.1 },
+//!   "sequences": [
+//!     { "name": "faerie", "data": "md2_faerie.traj", "frames": [112, 132] },
+//!     { "data": "cdp_male_wave.traj", "stride": 4, "model": "trans", "seed": 1 },
+//!     { "name": "fluid-dpf", "data": "taichi_mpm3d_fluid.traj", "model": "dpf",
+//!       "frames": [0, 10], "h_weight": "auto" }
+//!   ]
+//! }
+//! ```
+//!
+//! Every field of an entry, and of `defaults`, is a [`RunSpec`] field: `data`, `config`,
+//! `model` (`trans`, `se3`, `scaled-se3`, `affinity`, `dpf`), `backend`, `jacobian`,
+//! `iterations`, `h_weight` (a number or `"auto"`), `seed`, `mesh`, `frames` (`[start,
+//! end)`), `stride`, `test_fraction`, `checkpoint_every`, `points_per_step`; an entry also
+//! has a `name`, its run folder's name (default: the data file's stem). Relative paths are
+//! relative to the manifest's folder. Unknown fields are refused.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use crate::run::RunSpec;
+use crate::{DomaError, Result};
+
+/// A parsed manifest, its entries resolved (defaults filled in, paths absolute).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// The entries, in the file's order; shard `I/N` runs entries `I, I + N, …`.
+    pub items: Vec<BatchItem>,
+}
+
+/// One sequence of a batch.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BatchItem {
+    /// Its run folder's name under the batch folder.
+    pub name: String,
+    /// What to fit.
+    pub spec: RunSpec,
+}
+
+/// The file as written: defaults and entries.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct File {
+    #[serde(default)]
+    defaults: RunSpec,
+    sequences: Vec<Value>,
+}
+
+impl Manifest {
+    /// Reads and checks the manifest at `path`. Errors name the file and the entry.
+    pub fn load(path: &Path) -> Result<Manifest> {
+        let text = std::fs::read_to_string(path).map_err(|e| DomaError::io(path, e))?;
+        let base = std::path::absolute(path)
+            .map_err(|e| DomaError::io(path, e))?
+            .parent()
+            .map_or_else(|| PathBuf::from("/"), Path::to_path_buf);
+        Manifest::parse(&text, &base).map_err(|reason| DomaError::Malformed {
+            path: path.to_path_buf(),
+            reason,
+        })
+    }
+
+    /// Parses a manifest's text; relative paths are taken relative to `base`.
+    pub fn parse(text: &str, base: &Path) -> std::result::Result<Manifest, String> {
+        let file: File = serde_json::from_str(text).map_err(|e| format!("not a manifest: {e}"))?;
+        if file.sequences.is_empty() {
+            return Err("`sequences` lists no sequence".into());
+        }
+        if file.defaults.data.is_some() {
+            return Err("`defaults` cannot name the data; each sequence names its own".into());
+        }
+        let mut names = BTreeSet::new();
+        let mut items = Vec::with_capacity(file.sequences.len());
+        for (i, entry) in file.sequences.into_iter().enumerate() {
+            let at = |e: String| format!("sequence {i}: {e}");
+            let Value::Object(mut fields) = entry else {
+                return Err(at("an entry is a JSON object".into()));
+            };
+            let name = match fields.remove("name") {
+                None => None,
+                Some(Value::String(s)) => Some(s),
+                Some(other) => return Err(at(format!("`name` {other} is not a string"))),
+            };
+            let spec: RunSpec =
+                serde_json::from_value(Value::Object(fields)).map_err(|e| at(e.to_string()))?;
+            let spec = spec.or(&file.defaults).relative_to(base);
+            let data = spec.data.as_deref().ok_or_else(|| at("no `data`".into()))?;
+            let name = match name {
+                Some(n) => n,
+                None => data
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .ok_or_else(|| at("`data` has no file name; give a `name`".into()))?,
+            };
+            check_name(&name).map_err(at)?;
+            if !names.insert(name.clone()) {
+                return Err(at(format!(
+                    "the name `{name}` is taken by an earlier sequence; give each a distinct `name`"
+                )));
+            }
+            items.push(BatchItem { name, spec });
+        }
+        Ok(Manifest { items })
+    }
+}
+
+/// A run folder's name: letters, digits, `.`, `_`, `-`, `+`, `=`; not starting with `.`.
+fn check_name(name: &str) -> std::result::Result<(), String> {
+    let ok = !name.is_empty()
+        && !name.starts_with('.')
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "._-+=".contains(c));
+    if ok {
+        Ok(())
+    } else {
+        Err(format!(
+            "the name `{name}` is not a folder name (use letters, digits, `.`, `_`, `-`, `+`, `=`; no leading `.`)"
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiments::meshes::Weight;
+    use crate::run::ModelChoice;
+
+    #[test]
+    fn the_documented_example_parses() {
+        let doc = include_str!("manifest.rs");
+        let start = doc.find("```json").unwrap() + 7;
+        let end = start + doc[start..].find("```").unwrap();
+        let text: String = doc[start..end]
+            .lines()
+            .map(|l| l.trim_start().trim_start_matches("//!"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let m = Manifest::parse(&text, Path::new("/d")).unwrap();
+        let names: Vec<&str> = m.items.iter().map(|i| i.name.as_str()).collect();
+        assert_eq!(names, ["faerie", "cdp_male_wave", "fluid-dpf"]);
+        let male = &m.items[1].spec;
+        assert_eq!(male.model, Some(ModelChoice::Trans));
+        assert_eq!(
+            (male.iterations, male.stride, male.seed),
+            (Some(1000), Some(4), Some(1))
+        );
+        assert_eq!(male.h_weight, Some(Weight::Fixed(0.1)));
+        assert_eq!(
+            male.data.as_deref(),
+            Some(Path::new("/d/cdp_male_wave.traj"))
+        );
+        assert_eq!(m.items[2].spec.h_weight, Some(Weight::Auto));
+    }
+
+    #[test]
+    fn bad_manifests_say_which_entry_and_why() {
+        let cases = [
+            (r#"{"sequences": []}"#, "no sequence"),
+            (r#"{"sequences": [{"name": "a"}]}"#, "sequence 0: no `data`"),
+            (
+                r#"{"sequences": [{"data": "a.traj", "iters": 3}]}"#,
+                "iters",
+            ),
+            (
+                r#"{"sequences": [{"data": "x/a.traj"}, {"data": "y/a.traj"}]}"#,
+                "sequence 1: the name `a` is taken",
+            ),
+            (
+                r#"{"sequences": [{"data": "a.traj", "name": "../up"}]}"#,
+                "not a folder name",
+            ),
+            (
+                r#"{"sequences": [{"data": "a.traj", "model": "bones"}]}"#,
+                "bones",
+            ),
+            (
+                r#"{"defaults": {"data": "a"}, "sequences": [{"data": "a.traj"}]}"#,
+                "defaults",
+            ),
+            (r#"{"sequence": []}"#, "sequence"),
+            ("[1, 2", "not a manifest"),
+        ];
+        for (text, needle) in cases {
+            let err = Manifest::parse(text, Path::new("/")).unwrap_err();
+            assert!(err.contains(needle), "{text}: {err}");
+        }
+    }
+}

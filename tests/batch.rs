@@ -1,0 +1,391 @@
+//! `doma batch` as a cluster runs it: shards as separate processes at once, a shard killed
+//! and rerun, failures recorded without stopping the shard, `--collect`, and the Slurm and
+//! Kubernetes recipes in docs/batch/ checked against the binary.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+const ROOT: &str = env!("CARGO_MANIFEST_DIR");
+const FAERIE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
+
+fn temp(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("doma-batch-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn doma() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_doma"));
+    // The recipes' environment must not leak in from a test machine that is itself a
+    // Slurm or Kubernetes task.
+    for v in [
+        "SLURM_ARRAY_TASK_ID",
+        "SLURM_ARRAY_TASK_COUNT",
+        "SLURM_ARRAY_TASK_MIN",
+        "SLURM_ARRAY_TASK_STEP",
+        "JOB_COMPLETION_INDEX",
+    ] {
+        c.env_remove(v);
+    }
+    c
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// Writes a manifest of faerie clips; `extra` entries are appended verbatim.
+fn manifest(dir: &Path, entries: &[Value]) -> PathBuf {
+    let path = dir.join("manifest.json");
+    let m = serde_json::json!({
+        "defaults": { "frames": [112, 116], "iterations": 40, "checkpoint_every": 5 },
+        "sequences": entries,
+    });
+    std::fs::write(&path, m.to_string()).unwrap();
+    path
+}
+
+fn faerie(name: &str, seed: u64) -> Value {
+    serde_json::json!({ "name": name, "data": FAERIE, "seed": seed })
+}
+
+/// The names of a shard report's entries with the given status.
+fn with_status(report: &Value, status: &str) -> Vec<String> {
+    report["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|i| i["status"] == status)
+        .map(|i| i["name"].as_str().unwrap().to_string())
+        .collect()
+}
+
+fn report(out: &Output) -> Value {
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "{e}: stdout {}\nstderr {}",
+            text(&out.stdout),
+            text(&out.stderr)
+        )
+    })
+}
+
+fn collect(dir: &Path) -> Vec<Value> {
+    let out = doma()
+        .arg("batch")
+        .arg("--collect")
+        .arg(dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let rows: Vec<Value> =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    let csv = std::fs::read_to_string(dir.join("summary.csv")).unwrap();
+    assert_eq!(csv.lines().count(), rows.len() + 1, "{csv}");
+    rows
+}
+
+#[test]
+fn two_shards_at_once_fit_every_entry_exactly_once() {
+    let dir = temp("two");
+    let names = ["s0", "s1", "s2", "s3", "s4"];
+    let entries: Vec<Value> = names.iter().zip(0..).map(|(n, s)| faerie(n, s)).collect();
+    let m = manifest(&dir, &entries);
+    let out = dir.join("out");
+    let shard = |i: usize| {
+        doma()
+            .arg("batch")
+            .arg(&m)
+            .arg("--out")
+            .arg(&out)
+            .args(["--shard", &format!("{i}/2"), "--quiet"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (a, b) = (shard(0), shard(1));
+    let (a, b) = (a.wait_with_output().unwrap(), b.wait_with_output().unwrap());
+    assert!(a.status.success(), "{}", text(&a.stderr));
+    assert!(b.status.success(), "{}", text(&b.stderr));
+    let (fa, fb) = (
+        with_status(&report(&a), "fitted"),
+        with_status(&report(&b), "fitted"),
+    );
+    assert_eq!(fa, ["s0", "s2", "s4"]);
+    assert_eq!(fb, ["s1", "s3"]);
+    let rows = collect(&out);
+    let listed: Vec<&str> = rows.iter().map(|r| r["name"].as_str().unwrap()).collect();
+    assert_eq!(listed, names);
+    for r in &rows {
+        assert_eq!(r["status"], "done", "{r}");
+        assert_eq!(r["iterations"], 40, "{r}");
+        assert!(r["epe_x1e4"].as_f64().unwrap() > 0.0, "{r}");
+        assert!(r["seconds"].as_f64().unwrap() > 0.0, "{r}");
+    }
+    // Rerunning the whole batch in one process now fits nothing.
+    let again = doma()
+        .arg("batch")
+        .arg(&m)
+        .arg("--out")
+        .arg(&out)
+        .arg("--quiet")
+        .output()
+        .unwrap();
+    assert!(again.status.success(), "{}", text(&again.stderr));
+    assert_eq!(with_status(&report(&again), "done"), names);
+}
+
+#[test]
+fn a_killed_shard_reruns_to_finish_the_rest() {
+    let dir = temp("kill");
+    let mut long = faerie("long", 1);
+    long["iterations"] = serde_json::json!(2000);
+    let m = manifest(&dir, &[faerie("first", 0), long, faerie("last", 2)]);
+    let out = dir.join("out");
+    let run = || {
+        let mut c = doma();
+        c.arg("batch")
+            .arg(&m)
+            .arg("--out")
+            .arg(&out)
+            .arg("--quiet")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
+        c
+    };
+    let mut child = run().spawn().unwrap();
+    // Wait until `long` has saved a checkpoint, then kill the shard outright.
+    let ckpt = out.join("long/resume.ckpt");
+    let start = Instant::now();
+    while !ckpt.is_file() {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no checkpoint of `long`"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(out.join("first/report.json").is_file());
+    assert!(
+        !out.join("long/report.json").is_file(),
+        "`long` finished before the kill"
+    );
+    let statuses: Vec<Value> = collect(&out).iter().map(|r| r["status"].clone()).collect();
+    assert_eq!(statuses, ["done", "unfinished", "pending"]);
+    // The rerun skips `first`, resumes `long` from its checkpoint and fits `last`.
+    let again = run().output().unwrap();
+    assert!(again.status.success(), "{}", text(&again.stderr));
+    let r = report(&again);
+    assert_eq!(with_status(&r, "done"), ["first"]);
+    assert_eq!(with_status(&r, "resumed"), ["long"]);
+    assert_eq!(with_status(&r, "fitted"), ["last"]);
+    let rows = collect(&out);
+    assert!(rows.iter().all(|r| r["status"] == "done"), "{rows:?}");
+    assert_eq!(rows[1]["iterations"], 2000);
+}
+
+#[test]
+fn a_failed_entry_is_recorded_and_the_shard_goes_on() {
+    let dir = temp("fail");
+    let truncated = dir.join("truncated.traj");
+    let bytes = std::fs::read(FAERIE).unwrap();
+    std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
+    let mut bad = faerie("truncated", 0);
+    bad["data"] = Value::String(truncated.to_string_lossy().into_owned());
+    let mut missing = faerie("missing", 0);
+    missing["data"] = Value::String("no/such.traj".into());
+    let mut good = faerie("good", 0);
+    good["iterations"] = serde_json::json!(3);
+    let m = manifest(&dir, &[bad, missing, good]);
+    let out = dir.join("out");
+    let run = doma()
+        .arg("batch")
+        .arg(&m)
+        .arg("--out")
+        .arg(&out)
+        .arg("--quiet")
+        .output()
+        .unwrap();
+    let err = text(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    let r = report(&run);
+    assert_eq!(with_status(&r, "failed"), ["truncated", "missing"]);
+    assert_eq!(with_status(&r, "fitted"), ["good"]);
+    let rows = collect(&out);
+    assert_eq!(rows[0]["status"], "failed");
+    let e0 = rows[0]["error"].as_str().unwrap();
+    assert!(e0.contains("truncated.traj"), "{e0}");
+    let e1 = rows[1]["error"].as_str().unwrap();
+    assert!(e1.contains("no/such.traj"), "{e1}");
+    assert_eq!(rows[2]["status"], "done");
+    // Nothing half-made: a failed entry's folder holds its error record alone.
+    let left: Vec<String> = std::fs::read_dir(out.join("missing"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(left, ["error.json"]);
+}
+
+#[test]
+fn bad_manifests_and_flags_are_refused_with_the_file_named() {
+    let dir = temp("bad");
+    let m = dir.join("m.json");
+    std::fs::write(&m, r#"{"sequences": [{"data": "a.traj", "iteratons": 5}]}"#).unwrap();
+    let out = doma()
+        .arg("batch")
+        .arg(&m)
+        .args(["--out", "x"])
+        .output()
+        .unwrap();
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("m.json") && err.contains("iteratons"), "{err}");
+    let ok = manifest(&dir, &[faerie("a", 0)]);
+    for (args, needle) in [
+        (vec!["--shard", "2/2"], "below the count"),
+        (vec!["--shard", "1"], "I/N"),
+    ] {
+        let out = doma()
+            .arg("batch")
+            .arg(&ok)
+            .args(["--out", "x"])
+            .args(&args)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(text(&out.stderr).contains(needle), "{}", text(&out.stderr));
+    }
+    let out = doma()
+        .arg("batch")
+        .arg(&ok)
+        .args(["--out", "x", "--list"])
+        .env("JOB_COMPLETION_INDEX", "1")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        text(&out.stderr).contains("--shard-count"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = doma()
+        .arg("batch")
+        .arg("--collect")
+        .arg(dir.join("nope"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(text(&out.stderr).contains("nope"), "{}", text(&out.stderr));
+}
+
+/// The `doma …` command of a recipe, split into words (double quotes group; the recipes
+/// use no other shell syntax on that line).
+fn words(line: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut cur = String::new();
+    let mut quoted = false;
+    for c in line.chars() {
+        match c {
+            '"' => quoted = !quoted,
+            c if c.is_whitespace() && !quoted => {
+                if !cur.is_empty() {
+                    out.push(std::mem::take(&mut cur));
+                }
+            }
+            c => cur.push(c),
+        }
+    }
+    out.extend((!cur.is_empty()).then_some(cur));
+    out
+}
+
+/// Runs the recipe's `doma` command with `--list` in the repository root under `env`,
+/// for each array index: every manifest entry must be listed by exactly one index.
+fn check_recipe(args: &[String], envs: &[Vec<(&str, String)>]) {
+    assert_eq!(args[0], "doma", "{args:?}");
+    let manifest: Value =
+        serde_json::from_str(&std::fs::read_to_string(Path::new(ROOT).join(&args[2])).unwrap())
+            .unwrap();
+    let all: BTreeSet<String> = manifest["sequences"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["name"].as_str().unwrap().to_string())
+        .collect();
+    let mut seen = Vec::new();
+    for env in envs {
+        let mut c = doma();
+        c.current_dir(ROOT).args(&args[1..]).arg("--list");
+        for (k, v) in env {
+            c.env(k, v);
+        }
+        let out = c.output().unwrap();
+        assert!(out.status.success(), "{env:?}: {}", text(&out.stderr));
+        seen.extend(text(&out.stdout).lines().map(str::to_string));
+    }
+    assert_eq!(seen.len(), all.len(), "{seen:?}");
+    assert_eq!(seen.into_iter().collect::<BTreeSet<_>>(), all);
+}
+
+#[test]
+fn the_slurm_recipe_runs_every_entry_once_across_its_array() {
+    let script = std::fs::read_to_string(Path::new(ROOT).join("docs/batch/slurm.sbatch")).unwrap();
+    let array = script
+        .lines()
+        .find_map(|l| l.strip_prefix("#SBATCH --array="))
+        .expect("an --array line");
+    let (lo, hi) = array.split_once('-').unwrap();
+    let (lo, hi): (usize, usize) = (lo.parse().unwrap(), hi.parse().unwrap());
+    let command: Vec<&str> = script.lines().filter(|l| l.starts_with("doma ")).collect();
+    assert_eq!(command.len(), 1, "one doma command");
+    let args = words(command[0]);
+    assert!(
+        !args.contains(&"--shard".to_string()),
+        "Slurm's variables name the shard"
+    );
+    let count = hi - lo + 1;
+    let envs: Vec<Vec<(&str, String)>> = (lo..=hi)
+        .map(|id| {
+            vec![
+                ("SLURM_ARRAY_TASK_ID", id.to_string()),
+                ("SLURM_ARRAY_TASK_MIN", lo.to_string()),
+                ("SLURM_ARRAY_TASK_COUNT", count.to_string()),
+            ]
+        })
+        .collect();
+    check_recipe(&args, &envs);
+}
+
+#[test]
+fn the_kubernetes_recipe_runs_every_entry_once_across_its_completions() {
+    let yaml =
+        std::fs::read_to_string(Path::new(ROOT).join("docs/batch/k8s-indexed-job.yaml")).unwrap();
+    let field = |key: &str| {
+        yaml.lines()
+            .find_map(|l| l.trim().strip_prefix(key))
+            .unwrap_or_else(|| panic!("no {key}"))
+            .trim()
+            .to_string()
+    };
+    assert_eq!(field("completionMode:"), "Indexed");
+    let completions: usize = field("completions:").parse().unwrap();
+    // The command is a YAML flow sequence, which is JSON.
+    let args: Vec<String> = serde_json::from_str(&field("command:")).unwrap();
+    let at = args
+        .iter()
+        .position(|a| a == "--shard-count")
+        .expect("--shard-count");
+    assert_eq!(args[at + 1].parse::<usize>().unwrap(), completions);
+    let envs: Vec<Vec<(&str, String)>> = (0..completions)
+        .map(|i| vec![("JOB_COMPLETION_INDEX", i.to_string())])
+        .collect();
+    check_recipe(&args, &envs);
+}
