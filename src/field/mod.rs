@@ -193,9 +193,16 @@ pub trait MotionField {
         self.head().local_affine(raw).matrices()
     }
 
-    /// The warped positions `y(x, t)`, `[N, 3]`, by Burn's plain ops (evaluation).
+    /// The warped positions `y(x, t)`, `[N, 3]` (evaluation): through the fused SIREN op
+    /// of [`crate::jacobian::Analytic`] where the model accepts it (on the CPU backends 4×
+    /// faster than Burn's ops, whose `sin` is scalar libm), else by Burn's plain ops.
     fn warp(&self, x: Tensor<2>, t: f64) -> Tensor<2> {
-        self.warp_values(x, t, &Autodiff).warped.value
+        let fused = crate::jacobian::Analytic;
+        if self.accepts(&fused) {
+            self.warp_values(x, t, &fused).warped.value
+        } else {
+            self.warp_values(x, t, &Autodiff).warped.value
+        }
     }
 }
 
