@@ -3,6 +3,7 @@
 use burn::tensor::Device;
 
 use crate::data::Trajectories;
+use crate::data::mesh::as_points;
 use crate::field::MotionField;
 use crate::{DomaError, Result};
 
@@ -42,27 +43,63 @@ pub fn epe(predicted: &Trajectories, truth: &Trajectories) -> Result<f64> {
     Ok(per_frame.iter().sum::<f64>() / per_frame.len() as f64)
 }
 
-/// Warps the canonical points of `truth` (its frame 0) to every frame with `field`.
+/// Warps the canonical points of `truth` (its frame 0) to every frame with `field`, in
+/// chunks of points ([`crate::warp::WARP_CHUNK`]); the result holds every frame.
 pub fn predict(
     field: &dyn MotionField,
     truth: &Trajectories,
     device: &Device,
 ) -> Result<Trajectories> {
-    let x0 = truth.frame_tensor(0, device);
+    let x0 = as_points(truth.frame(0));
     let mut positions = Vec::with_capacity(truth.positions().len());
-    for k in 0..truth.frames() {
-        let y = field.warp(x0.clone(), truth.time(k));
-        let values = y
-            .try_into_vec_as::<f32>()
-            .map_err(|e| DomaError::Device(format!("{e:?}")))?;
-        positions.extend(values);
-    }
+    crate::warp::warp_frames(
+        field,
+        &x0,
+        0..truth.frames(),
+        truth.frames(),
+        device,
+        |_, y| {
+            positions.extend_from_slice(y.as_flattened());
+            Ok(())
+        },
+    )?;
     Trajectories::new(truth.frames(), truth.points(), positions)
 }
 
-/// The EPE of `field` on the held-out trajectories `truth`.
+/// [`epe_per_frame`] of `field`'s prediction of `truth`, computed frame by frame and chunk
+/// by chunk: beside `truth`, memory holds one frame's prediction, not all of them.
+pub fn field_epe_per_frame(
+    field: &dyn MotionField,
+    truth: &Trajectories,
+    device: &Device,
+) -> Result<Vec<f64>> {
+    let x0 = as_points(truth.frame(0));
+    let mut per_frame = Vec::with_capacity(truth.frames());
+    crate::warp::warp_frames(
+        field,
+        &x0,
+        0..truth.frames(),
+        truth.frames(),
+        device,
+        |k, y| {
+            let total: f64 = y
+                .as_flattened()
+                .iter()
+                .zip(truth.frame(k))
+                .map(|(a, b)| (*a as f64 - *b as f64).abs())
+                .sum();
+            per_frame.push(total / truth.points() as f64);
+            Ok(())
+        },
+    )?;
+    Ok(per_frame)
+}
+
+/// The EPE of `field` on the held-out trajectories `truth` (in bounded memory,
+/// [`field_epe_per_frame`]).
 pub fn evaluate_epe(field: &dyn MotionField, truth: &Trajectories, device: &Device) -> Result<f64> {
-    epe(&predict(field, truth, device)?, truth)
+    let per_frame = field_epe_per_frame(field, truth, device)?;
+    Ok(per_frame.iter().sum::<f64>() / per_frame.len() as f64)
 }
 
 /// A k-d tree over a point cloud, for nearest-neighbour queries on the host.

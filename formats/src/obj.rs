@@ -110,25 +110,36 @@ pub fn encode_obj(
     faces: &[[u32; 3]],
     normals: Option<&[[f32; 3]]>,
 ) -> String {
-    use std::fmt::Write;
-    let mut s = String::with_capacity(40 * vertices.len() + 30 * faces.len());
-    s.push_str("# written by doma\n");
+    let mut bytes = Vec::with_capacity(40 * vertices.len() + 30 * faces.len());
+    write_obj_to(&mut bytes, vertices, faces, normals).expect("writing to a Vec cannot fail");
+    String::from_utf8(bytes).expect("the writer writes ASCII")
+}
+
+/// [`encode_obj`] streamed into `w`, so that a mesh of millions of vertices is written
+/// without holding its text in memory.
+pub fn write_obj_to<W: std::io::Write>(
+    mut w: W,
+    vertices: &[[f32; 3]],
+    faces: &[[u32; 3]],
+    normals: Option<&[[f32; 3]]>,
+) -> std::io::Result<()> {
+    w.write_all(b"# written by doma\n")?;
     for v in vertices {
-        let _ = writeln!(s, "v {} {} {}", v[0], v[1], v[2]);
+        writeln!(w, "v {} {} {}", v[0], v[1], v[2])?;
     }
     if let Some(ns) = normals {
         for n in ns {
-            let _ = writeln!(s, "vn {} {} {}", n[0], n[1], n[2]);
+            writeln!(w, "vn {} {} {}", n[0], n[1], n[2])?;
         }
     }
     for f in faces {
         let [a, b, c] = f.map(|i| i + 1);
-        let _ = match normals {
-            Some(_) => writeln!(s, "f {a}//{a} {b}//{b} {c}//{c}"),
-            None => writeln!(s, "f {a} {b} {c}"),
-        };
+        match normals {
+            Some(_) => writeln!(w, "f {a}//{a} {b}//{b} {c}//{c}")?,
+            None => writeln!(w, "f {a} {b} {c}")?,
+        }
     }
-    s
+    Ok(())
 }
 
 /// Why [`stack_frames`] refused a sequence: the 0-based frame at fault and the reason.

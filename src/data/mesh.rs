@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-pub use doma_formats::obj::{TriMesh, check_faces, encode_obj, parse_obj};
+pub use doma_formats::obj::{TriMesh, check_faces, encode_obj, parse_obj, write_obj_to};
 
 use super::Trajectories;
 use crate::io::write_atomic;

@@ -10,7 +10,7 @@ use crate::checkpoint::load_json;
 use crate::data::Trajectories;
 use crate::data::sequence::load_sequence;
 use crate::field::MotionField;
-use crate::metrics::{EPE_SCALE, epe_per_frame, predict};
+use crate::metrics::{EPE_SCALE, field_epe_per_frame};
 use crate::train::IterationRecord;
 
 /// The EPE report of `field` on `truth` (normalised coordinates).
@@ -20,8 +20,7 @@ pub fn evaluate(
     what: &str,
     device: &Device,
 ) -> Result<Report> {
-    let predicted = predict(field, truth, device)?;
-    let per_frame: Vec<f64> = epe_per_frame(&predicted, truth)?
+    let per_frame: Vec<f64> = field_epe_per_frame(field, truth, device)?
         .into_iter()
         .map(|e| e * EPE_SCALE)
         .collect();

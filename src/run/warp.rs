@@ -5,9 +5,9 @@ use std::path::{Path, PathBuf};
 use burn::tensor::Device;
 
 use super::RunDir;
-use crate::data::mesh::{TriMesh, as_points, encode_obj, read_obj, vertex_normals};
+use crate::data::mesh::{TriMesh, as_points, read_obj, vertex_normals, write_obj_to};
 use crate::data::sequence::Sequence;
-use crate::io::write_atomic;
+use crate::io::write_atomic_with;
 use crate::{DomaError, Result};
 
 /// Warps the canonical mesh `mesh` (in the data's own units; default: the run data's own
@@ -43,36 +43,28 @@ pub fn warp_run(
         .collect();
     std::fs::create_dir_all(out).map_err(|e| DomaError::io(out, e))?;
     let mut paths = Vec::new();
-    for k in range {
-        let t = crate::data::normalized_time(k, total);
-        let y = crate::warp::warp_points(&field, &norm, t, device)?;
-        let vertices: Vec<[f32; 3]> = y
-            .iter()
-            .map(|p| std::array::from_fn(|c| p[c] * own.scale + own.center[c]))
-            .collect();
-        if let Some(v) = vertices
-            .iter()
-            .position(|v| v.iter().any(|c| !c.is_finite()))
-        {
+    // One frame at a time, each streamed to its file: memory holds the mesh, one warped
+    // frame and its normals, whatever the number of frames.
+    crate::warp::warp_frames(&field, &norm, range, total, device, |k, mut y| {
+        for p in &mut y {
+            *p = std::array::from_fn(|c| p[c] * own.scale + own.center[c]);
+        }
+        if let Some(v) = y.iter().position(|v| v.iter().any(|c| !c.is_finite())) {
             // A field that moves a vertex past f32's range in the data's units: say so
             // rather than write `inf` into a mesh.
             return Err(DomaError::InvalidData(format!(
                 "frame {k}: vertex {v} warps to {:?}, outside f32's range in the data's units",
-                vertices[v]
+                y[v]
             )));
         }
-        let warped = TriMesh {
-            vertices,
-            faces: canonical.faces.clone(),
-        };
-        let normals = vertex_normals(&warped.vertices, &warped.faces);
+        let normals = vertex_normals(&y, &canonical.faces);
         let path = out.join(format!("frame_{k:04}.obj"));
-        write_atomic(
-            &path,
-            encode_obj(&warped.vertices, &warped.faces, Some(&normals)).as_bytes(),
-        )?;
+        write_atomic_with(&path, |w| {
+            write_obj_to(w, &y, &canonical.faces, Some(&normals))
+        })?;
         paths.push(path);
-    }
+        Ok(())
+    })?;
     Ok(paths)
 }
 

@@ -85,10 +85,29 @@ pub fn mesh_chamfer(
     samples: usize,
     seed: u64,
 ) -> Result<(f64, f64)> {
+    mesh_chamfer_with(
+        |k| Ok(as_points(predicted.frame(k))),
+        truth,
+        faces,
+        samples,
+        seed,
+    )
+}
+
+/// [`mesh_chamfer`] with the predicted mesh of frame `k` made on demand by `predicted(k)`
+/// (e.g. warped through a field), so that one frame is in memory at a time. The samples
+/// are drawn in the same order, so the result is the same.
+pub fn mesh_chamfer_with(
+    mut predicted: impl FnMut(usize) -> Result<Vec<[f32; 3]>>,
+    truth: &Trajectories,
+    faces: &[[u32; 3]],
+    samples: usize,
+    seed: u64,
+) -> Result<(f64, f64)> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (mut cd, mut cdn) = (0.0, 0.0);
     for k in 0..truth.frames() {
-        let (p, t) = (as_points(predicted.frame(k)), as_points(truth.frame(k)));
+        let (p, t) = (predicted(k)?, as_points(truth.frame(k)));
         let sp = SurfaceSamples::draw(&p, faces, samples, &mut rng)?;
         let st = SurfaceSamples::draw(&t, faces, samples, &mut rng)?;
         let (d, n) = chamfer_with_normals(

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{CD_SCALE, MeshRecord, mesh_chamfer};
+use super::{CD_SCALE, MeshRecord, mesh_chamfer_with};
 use crate::backend::BackendKind;
 use crate::checkpoint::Precision;
 use crate::data::Trajectories;
@@ -19,7 +19,7 @@ use crate::metrics::{EPE_SCALE, evaluate_epe};
 use crate::prelude::*;
 use crate::train::select::{Penalty, WeightChoice, WeightSearch, choose_weight};
 use crate::train::{FitConfig, Fitted, Trainer};
-use crate::warp::warp_mesh_sequence;
+use crate::warp::warp_points;
 use crate::{DomaError, Result};
 
 /// The settings of `novel_points`.
@@ -231,9 +231,13 @@ impl NovelContext<'_> {
         let epe = evaluate_epe(&fitted.field, self.test, device)?;
         let (cd, cdn) = match self.canonical {
             Some(mesh) => {
-                let warped = warp_mesh_sequence(&fitted.field, mesh, self.full.frames(), device)?;
+                let frames = self.full.frames();
+                let warp = |k| {
+                    let t = crate::data::normalized_time(k, frames);
+                    warp_points(&fitted.field, &mesh.vertices, t, device)
+                };
                 let (cd, cdn) =
-                    mesh_chamfer(&warped, self.full, &mesh.faces, job.samples, job.seed)?;
+                    mesh_chamfer_with(warp, self.full, &mesh.faces, job.samples, job.seed)?;
                 (Some(cd * CD_SCALE), Some(cdn))
             }
             None => (None, None),
