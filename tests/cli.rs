@@ -33,6 +33,10 @@ fn bad_flags_are_refused_with_a_message() {
         (vec!["bench", "--points", "0"], "--points"),
         (vec!["bench", "--jacobian", "numeric"], "numeric"),
         (vec!["bench", "--backend", "tpu"], "tpu"),
+        (vec!["bench", "--scaling-cell", "10"], "N,T"),
+        (vec!["bench", "--scaling-cell", "10,x"], "N,T"),
+        (vec!["bench", "--plot", "out"], "--scaling"),
+        (vec!["fit", "x.traj", "--out", "r", "--points-per-step", "0"], "--points-per-step"),
     ] {
         let (ok, _, err) = doma(&args);
         assert!(!ok, "{args:?} was accepted");
@@ -656,4 +660,24 @@ fn fit_chooses_its_smoothness_weight_by_validation_and_plots_the_grid() {
     let (ok, _, err) = doma(&["plot", run.to_str().unwrap()]);
     assert!(ok && err.contains("weight_search.png"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
+}
+#[test]
+fn a_scaling_cell_reports_its_step_time_and_peak_memory() {
+    let (ok, out, err) = doma(&[
+        "bench",
+        "--scaling-cell",
+        "300,4,100",
+        "--warmup",
+        "1",
+        "--steps",
+        "2",
+    ]);
+    assert!(ok, "{err}");
+    let cell: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(cell["points"], 300);
+    assert_eq!(cell["frames"], 4);
+    assert_eq!(cell["points_per_step"], 100);
+    assert!(cell["step_ms"].as_f64().unwrap() > 0.0, "{cell}");
+    // A fit of a few hundred points still loads the binary and Burn: some MiB.
+    assert!(cell["peak_mib"].as_f64().unwrap() > 1.0, "{cell}");
 }

@@ -2,11 +2,12 @@
 
 use std::path::PathBuf;
 
-use crate::Result;
 use crate::backend::{BackendKind, wgpu_available};
 use crate::cli::{Selection, check_output_folder, selection};
+use crate::experiments::scaling;
 use crate::experiments::speed::{self, BenchJob};
 use crate::jacobian::JacobianKind;
+use crate::{DomaError, Result};
 
 /// The flags of `doma bench` (and `cargo run --example jacobian_speed`).
 #[derive(clap::Parser, Debug, Clone)]
@@ -42,6 +43,19 @@ pub struct BenchArgs {
     /// (lavapipe, shared hosts), a ratio of rows timed minutes apart is not one run.
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub rounds: Option<u64>,
+    /// Instead of the table: time per training step and peak memory for N ∈ {10³, 10⁴,
+    /// 10⁵} training points and T ∈ {20, 100} frames (each cell in a fresh process, on
+    /// flex), and checkpoint bytes against T for DOMA and DPF.
+    #[arg(long, conflicts_with = "compare_torch")]
+    pub scaling: bool,
+    /// With --scaling: write scaling_step.png, scaling_memory.png and scaling_checkpoint.png
+    /// into this folder.
+    #[arg(long, requires = "scaling", value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+    /// One scaling cell, `N,T` or `N,T,K` (K points per step), measured in this process
+    /// and printed as JSON; --scaling runs each cell so.
+    #[arg(long, hide = true, value_name = "N,T[,K]")]
+    pub scaling_cell: Option<String>,
 }
 
 impl BenchArgs {
@@ -67,6 +81,12 @@ impl BenchArgs {
 pub fn run(args: &BenchArgs) -> Result<()> {
     if let Some(path) = &args.json {
         check_output_folder(path)?;
+    }
+    if let Some(cell) = &args.scaling_cell {
+        return scaling_cell(cell, args);
+    }
+    if args.scaling {
+        return scaling(args);
     }
     if let Some(python) = &args.compare_torch {
         let rows = speed::compare_torch(
@@ -98,4 +118,182 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         eprintln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// The cells of `--scaling`: every (N, T), and N = 10⁵ again with 10⁴ points per step.
+const SCALING_CELLS: [(usize, usize, Option<usize>); 8] = [
+    (1_000, 20, None),
+    (10_000, 20, None),
+    (100_000, 20, None),
+    (100_000, 20, Some(10_000)),
+    (1_000, 100, None),
+    (10_000, 100, None),
+    (100_000, 100, None),
+    (100_000, 100, Some(10_000)),
+];
+
+/// Frames at which the checkpoint sizes are reported.
+const CHECKPOINT_FRAMES: [usize; 5] = [1, 10, 30, 100, 300];
+
+fn scaling_cell(spec: &str, args: &BenchArgs) -> Result<()> {
+    let bad = || DomaError::Usage(format!("--scaling-cell `{spec}`: expected N,T or N,T,K"));
+    let parts: Vec<usize> = spec
+        .split(',')
+        .map(|p| p.trim().parse().map_err(|_| bad()))
+        .collect::<Result<_>>()?;
+    let (n, t, k) = match parts[..] {
+        [n, t] => (n, t, None),
+        [n, t, k] => (n, t, Some(k)),
+        _ => return Err(bad()),
+    };
+    let cell = scaling::measure_cell(
+        n,
+        t,
+        k,
+        args.warmup as usize,
+        args.steps as usize,
+        &burn::tensor::Device::flex(),
+    )?;
+    let text = serde_json::to_string(&cell).map_err(|e| DomaError::InvalidData(e.to_string()))?;
+    println!("{text}");
+    Ok(())
+}
+
+/// Runs every cell in a child process (its own peak memory), then the checkpoint sizes.
+fn scaling(args: &BenchArgs) -> Result<()> {
+    if let Some(dir) = &args.plot {
+        check_output_folder(&dir.join("scaling_step.png"))?;
+    }
+    let exe = std::env::current_exe().map_err(|e| DomaError::io("the doma binary", e))?;
+    let mut cells = Vec::new();
+    for (n, t, k) in SCALING_CELLS {
+        let spec = match k {
+            Some(k) => format!("{n},{t},{k}"),
+            None => format!("{n},{t}"),
+        };
+        let out = std::process::Command::new(&exe)
+            .args(["bench", "--scaling-cell", &spec])
+            .args(["--warmup", &args.warmup.to_string()])
+            .args(["--steps", &args.steps.to_string()])
+            .output()
+            .map_err(|e| DomaError::io(&exe, e))?;
+        if !out.status.success() {
+            return Err(DomaError::Device(format!(
+                "the scaling cell {spec} failed: {}",
+                String::from_utf8_lossy(&out.stderr).trim()
+            )));
+        }
+        let cell: scaling::ScalingCell = serde_json::from_slice(&out.stdout).map_err(|e| {
+            DomaError::InvalidData(format!("the scaling cell {spec} printed no record: {e}"))
+        })?;
+        eprintln!(
+            "N {n} T {t} per step {}: {:.2} ms, peak {} MiB",
+            k.map_or("all".into(), |k| k.to_string()),
+            cell.step_ms,
+            cell.peak_mib.map_or("-".into(), |m| format!("{m:.0}"))
+        );
+        cells.push(cell);
+    }
+    let sizes = scaling::checkpoint_sizes(&CHECKPOINT_FRAMES)?;
+    println!();
+    print!("{}", scaling::scaling_table(&cells, &sizes));
+    if let Some(path) = &args.json {
+        let record = serde_json::json!({ "cells": cells, "checkpoints": sizes });
+        crate::checkpoint::save_json(&record, path)?;
+        eprintln!("wrote {}", path.display());
+    }
+    if let Some(dir) = &args.plot {
+        for (name, canvas) in scaling_plots(&cells, &sizes) {
+            let path = dir.join(name);
+            canvas.save(&path)?;
+            eprintln!("wrote {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+fn scaling_plots(
+    cells: &[scaling::ScalingCell],
+    sizes: &[scaling::CheckpointSize],
+) -> Vec<(&'static str, crate::plot::Canvas)> {
+    use crate::plot::{Series, line_plot};
+    let curve = |t: usize, k: bool| -> Vec<(f64, f64)> {
+        cells
+            .iter()
+            .filter(|c| c.frames == t && c.points_per_step.is_some() == k)
+            .map(|c| ((c.points as f64).log10(), c.step_ms))
+            .collect()
+    };
+    let step = line_plot(
+        "Time per training step (flex, Affinity, analytic)",
+        "training points N (log10)",
+        "ms per step",
+        &[
+            Series {
+                name: "T = 20",
+                color: [31, 119, 180],
+                points: curve(20, false),
+            },
+            Series {
+                name: "T = 100",
+                color: [214, 39, 40],
+                points: curve(100, false),
+            },
+        ],
+        true,
+    );
+    let memory = |t: usize, k: bool| -> Vec<(f64, f64)> {
+        cells
+            .iter()
+            .filter(|c| c.frames == t && c.points_per_step.is_some() == k)
+            .filter_map(|c| Some(((c.points as f64).log10(), c.peak_mib?)))
+            .collect()
+    };
+    let peak = line_plot(
+        "Peak memory of a fit (flex, Affinity, analytic)",
+        "training points N (log10)",
+        "peak MiB",
+        &[
+            Series {
+                name: "T = 20",
+                color: [31, 119, 180],
+                points: memory(20, false),
+            },
+            Series {
+                name: "T = 100",
+                color: [214, 39, 40],
+                points: memory(100, false),
+            },
+        ],
+        true,
+    );
+    let bytes = |f: fn(&scaling::CheckpointSize) -> usize| -> Vec<(f64, f64)> {
+        sizes
+            .iter()
+            .map(|s| ((s.frames as f64).log10(), f(s) as f64 / 1e6))
+            .collect()
+    };
+    let ckpt = line_plot(
+        "Checkpoint size against frames",
+        "frames T (log10)",
+        "MB",
+        &[
+            Series {
+                name: "DOMA",
+                color: [31, 119, 180],
+                points: bytes(|s| s.doma_bytes),
+            },
+            Series {
+                name: "DPF",
+                color: [214, 39, 40],
+                points: bytes(|s| s.dpf_bytes),
+            },
+        ],
+        true,
+    );
+    vec![
+        ("scaling_step.png", step),
+        ("scaling_memory.png", peak),
+        ("scaling_checkpoint.png", ckpt),
+    ]
 }

@@ -3,6 +3,7 @@
 pub mod fluid;
 pub mod image2d;
 pub mod meshes;
+pub mod scaling;
 pub mod speed;
 pub mod synthetic;
 
