@@ -36,7 +36,10 @@ fn bad_flags_are_refused_with_a_message() {
         (vec!["bench", "--scaling-cell", "10"], "N,T"),
         (vec!["bench", "--scaling-cell", "10,x"], "N,T"),
         (vec!["bench", "--plot", "out"], "--scaling"),
-        (vec!["fit", "x.traj", "--out", "r", "--points-per-step", "0"], "--points-per-step"),
+        (
+            vec!["fit", "x.traj", "--out", "r", "--points-per-step", "0"],
+            "--points-per-step",
+        ),
     ] {
         let (ok, _, err) = doma(&args);
         assert!(!ok, "{args:?} was accepted");
@@ -133,8 +136,8 @@ fn bench_prints_the_table_and_writes_exactly_the_record_fields() {
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let rows = rows.as_array().unwrap();
     // flex: the GEMM peak, then {autodiff, analytic} × {fit_step, fit_step_l1, jacobian at
-    // 16 points}.
-    assert_eq!(rows.len(), 7);
+    // 16 points, warp}.
+    assert_eq!(rows.len(), 9);
     for r in rows {
         let mut keys: Vec<&str> = r.as_object().unwrap().keys().map(|k| k.as_str()).collect();
         keys.sort_unstable();
@@ -163,6 +166,8 @@ fn bench_prints_the_table_and_writes_exactly_the_record_fields() {
     assert_eq!(rows[3]["kind"], "fit_step_l1");
     assert_eq!(rows[6]["kind"], "jacobian");
     assert_eq!(rows[6]["method"], "analytic");
+    assert_eq!(rows[8]["kind"], "warp");
+    assert_eq!(rows[8]["points"], 16384);
     // A missing interpreter for the PyTorch comparison is named, not a panic.
     let (ok, _, err) = doma(&["bench", "--compare-torch", "/nonexistent/python3"]);
     assert!(!ok && err.contains("/nonexistent/python3"), "{err}");
@@ -661,6 +666,7 @@ fn fit_chooses_its_smoothness_weight_by_validation_and_plots_the_grid() {
     assert!(ok && err.contains("weight_search.png"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
 #[test]
 fn a_scaling_cell_reports_its_step_time_and_peak_memory() {
     let (ok, out, err) = doma(&[

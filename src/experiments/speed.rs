@@ -32,6 +32,10 @@ pub enum BenchKind {
     FitStep,
     /// The same step without a regulariser: the trajectory L1 alone (the value path).
     FitStepL1,
+    /// Evaluation: the warp `y = A x + u` of [`crate::warp::WARP_CHUNK`] points through
+    /// the method's value path without autodiff (`autodiff`: Burn's plain ops;
+    /// `analytic`: the fused SIREN op), what `doma eval` and `doma warp` run per chunk.
+    Warp,
     /// The machine's matmul throughput through the backend's own GEMM: f32
     /// `[3000, 128] × [128, 128]`, the best of the timed runs. The other rows state their
     /// share of it.
@@ -221,6 +225,49 @@ pub fn fit_step_row(
     })
 }
 
+/// The `warp` row: one chunk of evaluation (Affinity, d = 128, n = 2) through `method`'s
+/// value path, on the backend's plain (non-autodiff) device.
+pub fn warp_row(
+    backend: BackendKind,
+    method: JacobianKind,
+    warmup: usize,
+    steps: usize,
+) -> Result<BenchRow> {
+    let points = crate::warp::WARP_CHUNK;
+    let device = backend.device()?;
+    let field = DomaFieldConfig::new(Variant::Affinity).init(0, &device);
+    let mut rng = ChaCha8Rng::seed_from_u64(13);
+    let x: Vec<f32> = (0..3 * points)
+        .map(|_| rng.random_range(-1.0..1.0))
+        .collect();
+    let x = Tensor::<2>::from_data(TensorData::new(x, [points, 3]), &device);
+    let jac = method.method();
+    let ms = median_ms(
+        || {
+            let y = field.warp_values(x.clone(), 0.5, jac.as_ref()).warped.value;
+            sync(&device)?;
+            drop(y);
+            Ok(())
+        },
+        warmup,
+        steps,
+    )?;
+    // The forward alone: one multiply per weight and row.
+    let forward: f64 = widths()
+        .windows(2)
+        .map(|w| 2.0 * points as f64 * w[0] as f64 * w[1] as f64)
+        .sum();
+    Ok(BenchRow {
+        kind: BenchKind::Warp,
+        backend,
+        method: Some(method),
+        points,
+        ms,
+        gflops: forward / (ms * 1e6),
+        peak_percent: f64::NAN,
+    })
+}
+
 /// The `gemm` row: the best of `steps` f32 `[3000, 128] × [128, 128]` matmuls on
 /// `backend` (after `warmup`), through the GEMM that the backend's training steps use.
 pub fn gemm_row(backend: BackendKind, warmup: usize, steps: usize) -> Result<BenchRow> {
@@ -280,6 +327,9 @@ pub fn run(job: &BenchJob, mut on_row: impl FnMut(&BenchRow)) -> Result<Vec<Benc
                         backend, method, points, job.warmup, job.steps,
                     )?);
                 }
+            }
+            for &method in &job.methods {
+                this_round.push(warp_row(backend, method, job.warmup, job.steps)?);
             }
             if rounds > 1 {
                 for r in &this_round {
@@ -505,6 +555,7 @@ pub fn table(rows: &[BenchRow]) -> String {
             BenchKind::Jacobian => "jacobian",
             BenchKind::FitStep => "fit_step",
             BenchKind::FitStepL1 => "fit_step_l1",
+            BenchKind::Warp => "warp",
             BenchKind::Gemm => "gemm",
         };
         let method = r.method.map_or("-".to_string(), |m| m.to_string());
