@@ -18,6 +18,7 @@ use crate::field::dpf::DpfConfig;
 use crate::field::model::ModelConfig;
 use crate::field::{DomaFieldConfig, Variant};
 use crate::jacobian::JacobianKind;
+use crate::siren::SirenShape;
 use crate::train::{FitConfig, Trainer};
 use crate::{DomaError, Result};
 
@@ -41,7 +42,7 @@ pub struct ScalingCell {
 pub struct CheckpointSize {
     /// Frames T.
     pub frames: usize,
-    /// DOMA-Affinity's `model.bpk` bytes (f32, the paper's SIREN).
+    /// DOMA-Affinity's `model.bpk` bytes (f32; 128 wide, 3 hidden layers).
     pub doma_bytes: usize,
     /// DPF's (one such SIREN per frame).
     pub dpf_bytes: usize,
@@ -115,14 +116,20 @@ pub fn measure_cell(
     })
 }
 
-/// The checkpoint sizes of DOMA-Affinity and DPF at each of `frames`.
+/// The checkpoint sizes of DOMA-Affinity and DPF at each of `frames`, with the SIREN of
+/// the paper's size table (Tab. A-size, the Resynth alignment: 128 wide, 3 hidden layers).
 pub fn checkpoint_sizes(frames: &[usize]) -> Result<Vec<CheckpointSize>> {
     let device = Device::flex();
+    let shape = SirenShape::new().with_n_hidden(3);
     frames
         .iter()
         .map(|&t| {
-            let doma = ModelConfig::doma(Variant::Affinity).init(0, &[], &device);
-            let dpf = ModelConfig::Dpf(DpfConfig::new(t)).init(0, &[], &device);
+            let doma = ModelConfig::Doma(
+                DomaFieldConfig::new(Variant::Affinity).with_shape(shape.clone()),
+            )
+            .init(0, &[], &device);
+            let dpf =
+                ModelConfig::Dpf(DpfConfig::new(t).with_shape(shape.clone())).init(0, &[], &device);
             Ok(CheckpointSize {
                 frames: t,
                 doma_bytes: doma.encode(Precision::F32)?.len(),
