@@ -56,6 +56,7 @@ pub mod data;
 pub mod dual;
 pub mod error;
 pub mod experiments;
+pub mod export;
 pub mod field;
 pub mod io;
 pub mod jacobian;

@@ -7,6 +7,7 @@
 pub mod batch;
 pub mod bench;
 pub mod eval;
+pub mod export;
 pub mod fit;
 pub mod fluid;
 pub mod image2d;
@@ -57,6 +58,8 @@ pub enum Command {
     Eval(eval::EvalArgs),
     /// Warp a canonical mesh through a fitted run and write an OBJ sequence.
     Warp(warp::WarpArgs),
+    /// Export a fitted run's motion as an animated binary glTF (.glb).
+    Export(export::ExportArgs),
     /// Print a run's model, parameter count, checkpoint size and data shape.
     Info(info::InfoArgs),
     /// Write PNG plots of a run (loss, per-frame EPE, 3-view error scatters) to RUN/plots/.
@@ -77,6 +80,7 @@ impl Command {
             Command::Batch(a) => batch::run(&a),
             Command::Eval(a) => eval::run(&a),
             Command::Warp(a) => warp::run(&a),
+            Command::Export(a) => export::run(&a),
             Command::Info(a) => info::run(&a),
             Command::Plot(a) => plot::run(&a),
         }

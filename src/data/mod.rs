@@ -5,6 +5,7 @@ pub mod mesh;
 pub mod npy;
 pub mod sequence;
 pub mod synthetic;
+pub mod textured;
 pub mod traj;
 
 use burn::tensor::{Device, Tensor, TensorData};

@@ -5,13 +5,14 @@ use std::path::{Path, PathBuf};
 use burn::tensor::Device;
 
 use super::RunDir;
-use crate::data::mesh::{TriMesh, as_points, read_obj, vertex_normals, write_obj_to};
+use crate::data::mesh::{TriMesh, as_points, vertex_normals, write_obj_to};
 use crate::data::sequence::Sequence;
+use crate::data::textured::TexturedMesh;
 use crate::io::write_atomic_with;
 use crate::{DomaError, Result};
 
-/// Warps the canonical mesh `mesh` (in the data's own units; default: the run data's own
-/// canonical frame with its faces) through the run's field to frames `frames` (default:
+/// Warps the canonical mesh `mesh` (any OBJ in the data's own units, read with its UVs and
+/// materials by [`TexturedMesh`]; default: the run data's own canonical frame with its faces) through the run's field to frames `frames` (default:
 /// all of the run's frames) and writes `out/frame_0000.obj`, … with recomputed normals, each
 /// atomically. Returns the paths written.
 pub fn warp_run(
@@ -32,39 +33,56 @@ pub fn warp_run(
             range.start, range.end
         )));
     }
-    let canonical = match mesh {
-        Some(path) => read_obj(path)?,
-        None => own_canonical_mesh(&own, &config.data)?,
-    };
-    let norm: Vec<[f32; 3]> = canonical
-        .vertices
-        .iter()
-        .map(|v| std::array::from_fn(|c| (v[c] - own.center[c]) / own.scale))
-        .collect();
     std::fs::create_dir_all(out).map_err(|e| DomaError::io(out, e))?;
-    let mut paths = Vec::new();
-    // One frame at a time, each streamed to its file: memory holds the mesh, one warped
-    // frame and its normals, whatever the number of frames.
-    crate::warp::warp_frames(&field, &norm, range, total, device, |k, mut y| {
-        for p in &mut y {
+    let to_norm =
+        |v: &[f32; 3]| -> [f32; 3] { std::array::from_fn(|c| (v[c] - own.center[c]) / own.scale) };
+    let to_data = |y: &mut Vec<[f32; 3]>, k: usize| -> Result<()> {
+        for p in y.iter_mut() {
             *p = std::array::from_fn(|c| p[c] * own.scale + own.center[c]);
         }
-        if let Some(v) = y.iter().position(|v| v.iter().any(|c| !c.is_finite())) {
+        match y.iter().position(|v| v.iter().any(|c| !c.is_finite())) {
             // A field that moves a vertex past f32's range in the data's units: say so
             // rather than write `inf` into a mesh.
-            return Err(DomaError::InvalidData(format!(
+            Some(v) => Err(DomaError::InvalidData(format!(
                 "frame {k}: vertex {v} warps to {:?}, outside f32's range in the data's units",
                 y[v]
-            )));
+            ))),
+            None => Ok(()),
         }
-        let normals = vertex_normals(&y, &canonical.faces);
-        let path = out.join(format!("frame_{k:04}.obj"));
-        write_atomic_with(&path, |w| {
-            write_obj_to(w, &y, &canonical.faces, Some(&normals))
-        })?;
-        paths.push(path);
-        Ok(())
-    })?;
+    };
+    let mut paths = Vec::new();
+    let frame_path = |k: usize| out.join(format!("frame_{k:04}.obj"));
+    // One frame at a time, each streamed to its file: memory holds the mesh, one warped
+    // frame and its normals, whatever the number of frames.
+    match mesh {
+        // A user's mesh: any OBJ, its UVs and materials kept (`data::textured`).
+        Some(path) => {
+            let textured = TexturedMesh::read(path)?;
+            let norm: Vec<[f32; 3]> = textured.positions().iter().map(to_norm).collect();
+            textured.copy_materials(out)?;
+            crate::warp::warp_frames(&field, &norm, range, total, device, |k, mut y| {
+                to_data(&mut y, k)?;
+                let path = frame_path(k);
+                write_atomic_with(&path, |w| textured.write_obj(w, &y))?;
+                paths.push(path);
+                Ok(())
+            })?;
+        }
+        None => {
+            let canonical = own_canonical_mesh(&own, &config.data)?;
+            let norm: Vec<[f32; 3]> = canonical.vertices.iter().map(to_norm).collect();
+            crate::warp::warp_frames(&field, &norm, range, total, device, |k, mut y| {
+                to_data(&mut y, k)?;
+                let normals = vertex_normals(&y, &canonical.faces);
+                let path = frame_path(k);
+                write_atomic_with(&path, |w| {
+                    write_obj_to(w, &y, &canonical.faces, Some(&normals))
+                })?;
+                paths.push(path);
+                Ok(())
+            })?;
+        }
+    }
     Ok(paths)
 }
 

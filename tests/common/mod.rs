@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub mod oracle;
+pub mod png;
 
 use std::sync::{Mutex, MutexGuard, OnceLock};
 
@@ -73,4 +74,20 @@ pub fn wgpu_device_or_skip(test: &str) -> Option<Device> {
     );
     eprintln!("SKIPPED {test}: no wgpu adapter on this machine (install mesa-vulkan-drivers)");
     None
+}
+
+/// Whether an external tool that a test needs is here. Without it the test is skipped
+/// (says so and passes), except under CI (`CI` set), where `.ci/run` installs it: there
+/// a missing tool fails the test.
+pub fn tool_or_skip(test: &str, tool: &str, present: bool) -> bool {
+    if present {
+        return true;
+    }
+    let ci = std::env::var("CI").is_ok_and(|v| !matches!(v.as_str(), "" | "false" | "0"));
+    assert!(
+        !ci,
+        "{test}: {tool} is missing under CI (CI is set); .ci/run installs it"
+    );
+    eprintln!("SKIPPED {test}: {tool} is not installed (see .ci/run)");
+    false
 }
