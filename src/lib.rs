@@ -69,6 +69,7 @@ pub mod register;
 pub mod run;
 pub mod siren;
 pub mod train;
+pub mod view;
 pub mod warp;
 
 pub use error::{DomaError, Result};

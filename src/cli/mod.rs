@@ -17,6 +17,7 @@ pub mod mesh_alignment;
 pub mod novel_points;
 pub mod plot;
 pub mod synthetic;
+pub mod view;
 pub mod warp;
 
 use std::path::{Path, PathBuf};
@@ -60,6 +61,8 @@ pub enum Command {
     Warp(warp::WarpArgs),
     /// Export a fitted run's motion as an animated binary glTF (.glb).
     Export(export::ExportArgs),
+    /// Write a self-contained HTML page that plays a fitted run in WebGL.
+    View(view::ViewArgs),
     /// Print a run's model, parameter count, checkpoint size and data shape.
     Info(info::InfoArgs),
     /// Write PNG plots of a run (loss, per-frame EPE, 3-view error scatters) to RUN/plots/.
@@ -81,6 +84,7 @@ impl Command {
             Command::Eval(a) => eval::run(&a),
             Command::Warp(a) => warp::run(&a),
             Command::Export(a) => export::run(&a),
+            Command::View(a) => view::run(&a),
             Command::Info(a) => info::run(&a),
             Command::Plot(a) => plot::run(&a),
         }

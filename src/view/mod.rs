@@ -1,0 +1,193 @@
+//! `doma view`: one self-contained HTML file with a WebGL viewer of a fitted run: play and
+//! pause, a frame slider, an orbit camera (drag to turn, wheel to zoom), the predicted and
+//! the true points (or the warped mesh) coloured by each point's end-point error, with a
+//! legend. The page loads nothing from the network: the frames are embedded in it as
+//! base64 arrays, and the viewer is plain WebGL (`viewer.html`, no library).
+
+use std::path::Path;
+
+use base64::Engine;
+use burn::tensor::Device;
+use serde::Serialize;
+
+use crate::data::mesh::as_points;
+use crate::data::textured::TexturedMesh;
+use crate::metrics::EPE_SCALE;
+use crate::run::RunDir;
+use crate::{DomaError, Result};
+
+const TEMPLATE: &str = include_str!("viewer.html");
+const SLOT: &str = "/*DOMA_DATA*/null";
+
+/// What the page embeds (`DATA` in `viewer.html`).
+#[derive(Serialize)]
+struct ViewData {
+    name: String,
+    frames: usize,
+    vertices: usize,
+    first_frame: usize,
+    fps: f32,
+    /// `[T, V, 3]` float32, the data's units.
+    pred: String,
+    /// `[T, V, 3]` float32, or null with a user's mesh.
+    truth: Option<String>,
+    /// `[F, 3]` uint32, or null for a point cloud.
+    triangles: Option<String>,
+    /// `[T, V]` float32: each point's EPE in the legend's units, or null.
+    error: Option<String>,
+    /// The ramp's top: the 95th percentile of the errors (larger ones saturate).
+    error_max: f64,
+    error_units: String,
+    /// The vertical axis, 0..3: the longest side of the box when it is clearly the longest
+    /// (Z-up characters), else y.
+    up: usize,
+}
+
+fn b64<T: bytemuck::Pod>(values: &[T]) -> String {
+    base64::engine::general_purpose::STANDARD.encode(bytemuck::cast_slice(values))
+}
+
+/// The viewer page of the run in `run`: its own points (with its faces, if any) against
+/// the truth, or the user's `mesh` (any OBJ in the data's units) warped; `frames` (default
+/// all of the run's).
+pub fn view_html(
+    run: &RunDir,
+    mesh: Option<&Path>,
+    frames: Option<std::ops::Range<usize>>,
+    device: &Device,
+) -> Result<String> {
+    let config = run.load_config()?;
+    let field = run.load_field(&config, device)?;
+    let own = config.load()?;
+    let total = own.trajectories.frames();
+    let range = frames.unwrap_or(0..total);
+    if range.start >= range.end || range.end > total {
+        return Err(DomaError::InvalidConfig(format!(
+            "frames {}..{} are not within the run's {total} frames",
+            range.start, range.end
+        )));
+    }
+    let to_data =
+        |p: &[f32; 3]| -> [f32; 3] { std::array::from_fn(|c| p[c] * own.scale + own.center[c]) };
+    let (canonical, triangles, with_truth) = match mesh {
+        Some(path) => {
+            let textured = TexturedMesh::read(path)?;
+            let mut tris = Vec::new();
+            let mut offset = 0u32;
+            for part in &textured.parts {
+                tris.extend(part.triangles.iter().map(|t| t.map(|i| i + offset)));
+                offset += part.positions.len() as u32;
+            }
+            let norm: Vec<[f32; 3]> = textured
+                .positions()
+                .iter()
+                .map(|v| std::array::from_fn(|c| (v[c] - own.center[c]) / own.scale))
+                .collect();
+            (norm, Some(tris).filter(|t| !t.is_empty()), false)
+        }
+        None => (
+            as_points(own.trajectories.frame(0)),
+            own.faces.clone(),
+            true,
+        ),
+    };
+    let v = canonical.len();
+    let mut pred = Vec::with_capacity(range.len() * v * 3);
+    let mut truth = Vec::new();
+    let mut error = Vec::new();
+    crate::warp::warp_frames(&field, &canonical, range.clone(), total, device, |k, y| {
+        if with_truth {
+            let t = own.trajectories.frame(k);
+            for (i, p) in y.iter().enumerate() {
+                let e: f64 = (0..3)
+                    .map(|c| (p[c] as f64 - t[3 * i + c] as f64).abs())
+                    .sum();
+                error.push((e * EPE_SCALE) as f32);
+            }
+            truth.extend(as_points(t).iter().flat_map(to_data));
+        }
+        pred.extend(y.iter().flat_map(to_data));
+        Ok(())
+    })?;
+    if let Some(i) = pred.iter().position(|c| !c.is_finite()) {
+        return Err(DomaError::InvalidData(format!(
+            "frame {}: vertex {} warps to a non-finite position",
+            range.start + i / (3 * v),
+            (i / 3) % v
+        )));
+    }
+    let error_max = {
+        let mut sorted = error.clone();
+        sorted.sort_by(f32::total_cmp);
+        sorted
+            .get(sorted.len() * 95 / 100)
+            .copied()
+            .unwrap_or(0.0)
+            .max(1e-6) as f64
+    };
+    let up = {
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        for p in pred.chunks_exact(3) {
+            for c in 0..3 {
+                lo[c] = lo[c].min(p[c]);
+                hi[c] = hi[c].max(p[c]);
+            }
+        }
+        let ext: Vec<f32> = (0..3).map(|c| hi[c] - lo[c]).collect();
+        let longest = (0..3)
+            .max_by(|&a, &b| ext[a].total_cmp(&ext[b]))
+            .unwrap_or(1);
+        let clearly = (0..3)
+            .filter(|&c| c != longest)
+            .all(|c| ext[longest] > 1.3 * ext[c]);
+        if clearly { longest } else { 1 }
+    };
+    let name = format!(
+        "{} — {}",
+        run.dir
+            .file_name()
+            .map_or("run".into(), |n| n.to_string_lossy().into_owned()),
+        config.fit.model.paper_name()
+    );
+    let data = ViewData {
+        name,
+        frames: range.len(),
+        vertices: v,
+        first_frame: range.start,
+        fps: 12.0,
+        pred: b64(&pred),
+        truth: with_truth.then(|| b64(&truth)),
+        triangles: triangles.map(|t| b64(t.as_flattened())),
+        error: with_truth.then(|| b64(&error)),
+        error_max,
+        error_units: "×1e-4, normalised units".into(),
+        up,
+    };
+    let json = serde_json::to_string(&data)
+        .map_err(|e| DomaError::InvalidData(format!("cannot serialise the view: {e}")))?;
+    // `</` cannot appear inside the script: JSON strings may hold a `/`, escaped here.
+    let json = json.replace("</", "<\\/");
+    Ok(TEMPLATE.replacen(SLOT, &json, 1))
+}
+
+/// Writes [`view_html`] to `out`, atomically.
+pub fn write_view(
+    run: &RunDir,
+    mesh: Option<&Path>,
+    frames: Option<std::ops::Range<usize>>,
+    out: &Path,
+    device: &Device,
+) -> Result<usize> {
+    crate::io::check_writable(out)?;
+    let html = view_html(run, mesh, frames, device)?;
+    crate::io::write_atomic(out, html.as_bytes())?;
+    Ok(html.len())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_template_has_one_data_slot() {
+        assert_eq!(super::TEMPLATE.matches(super::SLOT).count(), 1);
+    }
+}
