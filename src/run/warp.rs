@@ -5,14 +5,16 @@ use std::path::{Path, PathBuf};
 use burn::tensor::Device;
 
 use super::RunDir;
-use crate::data::mesh::{TriMesh, as_points, vertex_normals, write_obj_to};
+use crate::data::mesh::{TriMesh, as_points, read_obj, vertex_normals, write_obj_to};
 use crate::data::sequence::Sequence;
 use crate::data::textured::TexturedMesh;
 use crate::io::write_atomic_with;
 use crate::{DomaError, Result};
 
-/// Warps the canonical mesh `mesh` (any OBJ in the data's own units, read with its UVs and
-/// materials by [`TexturedMesh`]; default: the run data's own canonical frame with its faces) through the run's field to frames `frames` (default:
+/// Warps the canonical mesh `mesh` (an OBJ in the data's own units: a plain triangle mesh
+/// keeps its vertex order; one with UVs or materials, or polygons, is read by
+/// [`TexturedMesh`] and written back with them; default: the run data's own canonical
+/// frame with its faces) through the run's field to frames `frames` (default:
 /// all of the run's frames) and writes `out/frame_0000.obj`, … with recomputed normals, each
 /// atomically. Returns the paths written.
 pub fn warp_run(
@@ -54,10 +56,9 @@ pub fn warp_run(
     let frame_path = |k: usize| out.join(format!("frame_{k:04}.obj"));
     // One frame at a time, each streamed to its file: memory holds the mesh, one warped
     // frame and its normals, whatever the number of frames.
-    match mesh {
-        // A user's mesh: any OBJ, its UVs and materials kept (`data::textured`).
-        Some(path) => {
-            let textured = TexturedMesh::read(path)?;
+    match canonical_mesh(mesh)? {
+        // A user's textured mesh: any OBJ, its UVs and materials kept (`data::textured`).
+        Canonical::Textured(textured) => {
             let norm: Vec<[f32; 3]> = textured.positions().iter().map(to_norm).collect();
             textured.copy_materials(out)?;
             crate::warp::warp_frames(&field, &norm, range, total, device, |k, mut y| {
@@ -68,8 +69,11 @@ pub fn warp_run(
                 Ok(())
             })?;
         }
-        None => {
-            let canonical = own_canonical_mesh(&own, &config.data)?;
+        plain => {
+            let canonical = match plain {
+                Canonical::Plain(m) => m,
+                _ => own_canonical_mesh(&own, &config.data)?,
+            };
             let norm: Vec<[f32; 3]> = canonical.vertices.iter().map(to_norm).collect();
             crate::warp::warp_frames(&field, &norm, range, total, device, |k, mut y| {
                 to_data(&mut y, k)?;
@@ -84,6 +88,40 @@ pub fn warp_run(
         }
     }
     Ok(paths)
+}
+
+/// The mesh to warp, by how it is read.
+enum Canonical {
+    /// No mesh given: the run's own.
+    Own,
+    /// A triangle OBJ without UVs or materials, read strictly: its vertex order is kept,
+    /// so frame `k`'s vertex `i` is the input's vertex `i`.
+    Plain(TriMesh),
+    /// Any other OBJ, through `tobj` (`data::textured`).
+    Textured(TexturedMesh),
+}
+
+/// Reads `mesh`: strictly when it has no `vt` or `mtllib` line and the strict reader takes
+/// it; else as a textured mesh. When both readers refuse it, the strict reader's reason is
+/// reported.
+fn canonical_mesh(mesh: Option<&Path>) -> Result<Canonical> {
+    let Some(path) = mesh else {
+        return Ok(Canonical::Own);
+    };
+    let text = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
+    let textured = text.split(|&b| b == b'\n').any(|line| {
+        let line = line.trim_ascii_start();
+        line.starts_with(b"vt ") || line.starts_with(b"vt\t") || line.starts_with(b"mtllib")
+    });
+    if textured {
+        return TexturedMesh::read(path).map(Canonical::Textured);
+    }
+    match read_obj(path) {
+        Ok(m) => Ok(Canonical::Plain(m)),
+        Err(strict) => TexturedMesh::read(path)
+            .map(Canonical::Textured)
+            .map_err(|_| strict),
+    }
 }
 
 /// The run data's own canonical mesh, in the data's units: frame 0 with the sequence's faces.
