@@ -95,5 +95,3 @@ pub fn check_writable(path: &Path) -> Result<()> {
     let _ = std::fs::remove_file(&probe);
     Ok(())
 }
-
-pub(crate) use doma_formats::crc32;

@@ -48,8 +48,8 @@ pub struct BenchArgs {
     /// flex), and checkpoint bytes against T for DOMA and DPF.
     #[arg(long, conflicts_with = "compare_torch")]
     pub scaling: bool,
-    /// With --scaling: write scaling_step.png, scaling_memory.png and scaling_checkpoint.png
-    /// into this folder.
+    /// With --scaling: write scaling_step, scaling_memory and scaling_checkpoint (.png and
+    /// .svg) into this folder.
     #[arg(long, requires = "scaling", value_name = "DIR")]
     pub plot: Option<PathBuf>,
     /// One scaling cell, `N,T` or `N,T,K` (K points per step), measured in this process
@@ -205,7 +205,7 @@ fn scaling(args: &BenchArgs) -> Result<()> {
     if let Some(dir) = &args.plot {
         for (name, canvas) in scaling_plots(&cells, &sizes) {
             let path = dir.join(name);
-            canvas.save(&path)?;
+            canvas.save_png_and_svg(&path)?;
             eprintln!("wrote {}", path.display());
         }
     }
@@ -215,18 +215,18 @@ fn scaling(args: &BenchArgs) -> Result<()> {
 fn scaling_plots(
     cells: &[scaling::ScalingCell],
     sizes: &[scaling::CheckpointSize],
-) -> Vec<(&'static str, crate::plot::Canvas)> {
+) -> Vec<(&'static str, crate::plot::Figure)> {
     use crate::plot::{Series, line_plot};
     let curve = |t: usize, k: bool| -> Vec<(f64, f64)> {
         cells
             .iter()
             .filter(|c| c.frames == t && c.points_per_step.is_some() == k)
-            .map(|c| ((c.points as f64).log10(), c.step_ms))
+            .map(|c| (c.points as f64, c.step_ms))
             .collect()
     };
     let step = line_plot(
         "Time per training step (flex, Affinity, analytic)",
-        "training points N (log10)",
+        "training points N",
         "ms per step",
         &[
             Series {
@@ -241,17 +241,18 @@ fn scaling_plots(
             },
         ],
         true,
-    );
+    )
+    .log_x();
     let memory = |t: usize, k: bool| -> Vec<(f64, f64)> {
         cells
             .iter()
             .filter(|c| c.frames == t && c.points_per_step.is_some() == k)
-            .filter_map(|c| Some(((c.points as f64).log10(), c.peak_mib?)))
+            .filter_map(|c| Some((c.points as f64, c.peak_mib?)))
             .collect()
     };
     let peak = line_plot(
         "Peak memory of a fit (flex, Affinity, analytic)",
-        "training points N (log10)",
+        "training points N",
         "peak MiB",
         &[
             Series {
@@ -266,16 +267,17 @@ fn scaling_plots(
             },
         ],
         true,
-    );
+    )
+    .log_x();
     let bytes = |f: fn(&scaling::CheckpointSize) -> usize| -> Vec<(f64, f64)> {
         sizes
             .iter()
-            .map(|s| ((s.frames as f64).log10(), f(s) as f64 / 1e6))
+            .map(|s| (s.frames as f64, f(s) as f64 / 1e6))
             .collect()
     };
     let ckpt = line_plot(
         "Checkpoint size against frames",
-        "frames T (log10)",
+        "frames T",
         "MB",
         &[
             Series {
@@ -290,7 +292,8 @@ fn scaling_plots(
             },
         ],
         true,
-    );
+    )
+    .log_x();
     vec![
         ("scaling_step.png", step),
         ("scaling_memory.png", peak),

@@ -1,4 +1,4 @@
-//! `doma plot`: PNG plots of a run.
+//! `doma plot`: plots of a run, as PNG and SVG.
 
 use std::path::PathBuf;
 
@@ -8,7 +8,7 @@ use crate::run::{RunDir, plot_run};
 
 /// The flags of `doma plot`.
 #[derive(clap::Parser, Debug, Clone)]
-#[command(about = "Write PNG plots of a run (loss, per-frame EPE, 3-view error scatters)")]
+#[command(about = "Write plots of a run, PNG and SVG (loss, per-frame EPE, 3-view error scatters)")]
 pub struct PlotArgs {
     /// The run folder.
     pub run: PathBuf,

@@ -307,8 +307,8 @@ pub fn curve_plots(records: &[FluidRecord], dir: &Path) -> Result<Vec<PathBuf>> 
             .iter()
             .map(|r| {
                 (
-                    format!("{} TEST", r.variant),
-                    format!("{} TRAIN", r.variant),
+                    format!("{} test", r.variant),
+                    format!("{} train", r.variant),
                 )
             })
             .collect();
@@ -329,15 +329,15 @@ pub fn curve_plots(records: &[FluidRecord], dir: &Path) -> Result<Vec<PathBuf>> 
                 points: pts(|c| c.train_epe_x1e4),
             });
         }
-        let canvas = line_plot(
-            &format!("FLUID CLIP {start}, {hidden}D"),
-            "ITERATION",
-            "EPE X1E-4 (LOG)",
+        let figure = line_plot(
+            &format!("Fluid clip {start}, {hidden}-wide"),
+            "iteration",
+            "EPE ×1e-4",
             &series,
             true,
         );
         let path = dir.join(format!("fluid_clip{start}_{hidden}d.png"));
-        canvas.save(&path)?;
+        figure.save_png_and_svg(&path)?;
         written.push(path);
     }
     Ok(written)

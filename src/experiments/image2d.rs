@@ -25,7 +25,7 @@ use crate::experiments::Experiment;
 use crate::field::model::ModelName;
 use crate::field::{DomaFieldConfig, Variant};
 use crate::metrics::{EPE_SCALE, epe, predict};
-use crate::plot::{Canvas, Rgb, ramp};
+use crate::plot::{Rgb, ramp};
 use crate::prelude::*;
 use crate::train::{FitConfig, Trainer};
 
@@ -154,16 +154,8 @@ pub struct Image2dRecord {
 }
 
 /// Draws `points` coloured by `colours` into a square picture of `[−2.5, 2.5]²`.
-fn render(title: &str, points: &[[f32; 3]], colours: &[Rgb]) -> Canvas {
-    let size = 320i64;
-    let mut c = Canvas::new(size as usize, (size + 24) as usize);
-    c.text(6, 6, title, 1, [0, 0, 0]);
-    for (p, &col) in points.iter().zip(colours) {
-        let px = ((p[0] as f64 + 2.5) / 5.0 * size as f64) as i64;
-        let py = 24 + ((2.5 - p[1] as f64) / 5.0 * size as f64) as i64;
-        c.set(px, py, col);
-    }
-    c
+fn render(title: &str, points: &[[f32; 3]], colours: &[Rgb]) -> crate::plot::Figure {
+    crate::plot::point_picture(title, points, colours, 320)
 }
 
 /// A seeded split of the pixels: a quarter for training, the rest held out.
@@ -193,7 +185,7 @@ pub fn run(job: &Image2dJob, mut on_run: impl FnMut(&Image2dRecord)) -> Result<V
         let (train, test) = (all.select_points(train_idx)?, all.select_points(test_idx)?);
         let last = job.frames - 1;
         if let Some(dir) = &job.png_dir {
-            let title = format!("{} FRAME {last}: TRUE", motion.to_string().to_uppercase());
+            let title = format!("{motion}, frame {last}: true");
             render(&title, &as_points(test.frame(last)), &colours)
                 .save(&dir.join(format!("{motion}_truth.png")))?;
         }
@@ -211,9 +203,8 @@ pub fn run(job: &Image2dJob, mut on_run: impl FnMut(&Image2dRecord)) -> Result<V
                 if let (Some(dir), true) = (&job.png_dir, Some(&hidden) == job.widths.iter().min())
                 {
                     let title = format!(
-                        "{} {}-{hidden}: EPE {:.1}",
-                        motion.to_string().to_uppercase(),
-                        variant.paper_name().to_uppercase(),
+                        "{motion}, {}-{hidden}: EPE {:.1}",
+                        variant.paper_name(),
                         e * EPE_SCALE
                     );
                     render(&title, &as_points(predicted.frame(last)), &colours)

@@ -1,4 +1,4 @@
-//! `doma plot`: PNG plots of a run.
+//! `doma plot`: plots of a run, each as PNG and SVG ([`crate::plot`]).
 
 use std::path::{Path, PathBuf};
 
@@ -13,10 +13,11 @@ use crate::train::IterationRecord;
 use crate::train::select::WeightChoice;
 use crate::{DomaError, Result};
 
-/// Writes the run's plots into `RUN_DIR/plots/`: `loss.png` (trajectory and total loss per
-/// iteration, log scale), `epe_per_frame.png` (held-out EPE per frame) and, for each of
-/// `frames` (default: the middle and the last frame), `points_frame_KKKK.png` (three views
-/// of the held-out points coloured by error). Returns the paths written.
+/// Writes the run's plots into `RUN_DIR/plots/`, each as `.png` and `.svg`: `loss`
+/// (trajectory and total loss per iteration, log scale), `epe_per_frame` (held-out EPE per
+/// frame) and, for each of `frames` (default: the middle and the last frame),
+/// `points_frame_KKKK` (three views of the held-out points coloured by error). Returns the
+/// PNG paths written.
 pub fn plot_run(run: &RunDir, frames: Option<&[usize]>, device: &Device) -> Result<Vec<PathBuf>> {
     let config = run.load_config()?;
     let field = run.load_field(&config, device)?;
@@ -50,9 +51,9 @@ pub fn plot_run(run: &RunDir, frames: Option<&[usize]>, device: &Device) -> Resu
         // The colour scale ends at the 99th percentile, so that one outlier does not wash
         // out the rest.
         let max = errors[(errors.len() - 1) * 99 / 100];
-        let title = format!("FRAME {k}: EPE {:.1} X1E-4", per_frame[k] * EPE_SCALE);
+        let title = format!("Frame {k}: EPE {:.1} ×1e-4", per_frame[k] * EPE_SCALE);
         let path = dir.join(format!("points_frame_{k:04}.png"));
-        three_views(&title, &canonical, &truth, &pred, max).save(&path)?;
+        three_views(&title, &canonical, &truth, &pred, max).save_png_and_svg(&path)?;
         written.push(path);
     }
     Ok(written)
@@ -65,18 +66,18 @@ fn loss_plot(history: &[IterationRecord], dir: &Path) -> Result<PathBuf> {
     };
     let series = [
         Series {
-            name: "TRAJECTORY L1",
+            name: "trajectory L1",
             color: [40, 60, 200],
             points: curve(|r| r.trajectory_loss),
         },
         Series {
-            name: "TOTAL",
+            name: "total",
             color: [210, 30, 30],
             points: curve(|r| r.total_loss),
         },
     ];
     let path = dir.join("loss.png");
-    line_plot("LOSS", "ITERATION", "LOSS (LOG)", &series, true).save(&path)?;
+    line_plot("Loss", "iteration", "loss", &series, true).save_png_and_svg(&path)?;
     Ok(path)
 }
 
@@ -90,7 +91,7 @@ fn weight_plot(choice: &WeightChoice, dir: &Path) -> Result<PathBuf> {
         .filter(|&w| w > 0.0)
         .fold(1.0, f64::min);
     let series = [Series {
-        name: "VALIDATION EPE",
+        name: "validation EPE (0 drawn a decade left of the smallest)",
         color: [120, 40, 170],
         points: choice
             .grid
@@ -101,17 +102,19 @@ fn weight_plot(choice: &WeightChoice, dir: &Path) -> Result<PathBuf> {
                 } else {
                     smallest / 10.0
                 };
-                (w.log10(), p.validation_epe_x1e4)
+                (w, p.validation_epe_x1e4)
             })
             .collect(),
     }];
     let path = dir.join("weight_search.png");
     let chosen = match choice.weight {
-        0.0 => "0 (NO L_H)".to_string(),
-        w => format!("{w:E}"),
+        0.0 => "0 (no L_H)".to_string(),
+        w => format!("{w:e}"),
     };
-    let title = format!("L_H WEIGHT BY VALIDATION: CHOSE {chosen}");
-    line_plot(&title, "LOG10 WEIGHT", "EPE X1E-4", &series, false).save(&path)?;
+    let title = format!("L_H weight by validation: chose {chosen}");
+    line_plot(&title, "weight", "EPE ×1e-4", &series, false)
+        .log_x()
+        .save_png_and_svg(&path)?;
     Ok(path)
 }
 
@@ -128,12 +131,12 @@ fn epe_plot(per_frame: &[f64], dir: &Path) -> Result<PathBuf> {
     }];
     let path = dir.join("epe_per_frame.png");
     line_plot(
-        "HELD-OUT EPE PER FRAME",
-        "FRAME",
-        "EPE X1E-4",
+        "Held-out EPE per frame",
+        "frame",
+        "EPE ×1e-4",
         &series,
         false,
     )
-    .save(&path)?;
+    .save_png_and_svg(&path)?;
     Ok(path)
 }
