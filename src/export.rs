@@ -25,7 +25,7 @@ use json::validation::{Checked::Valid, USize64};
 
 use crate::data::mesh::{as_points, read_obj, vertex_normals};
 use crate::data::textured::{Material, Part, TexturedMesh};
-use crate::run::RunDir;
+use crate::run::{OpenRun, RunDir};
 use crate::{DomaError, Result};
 
 /// What to export.
@@ -61,17 +61,13 @@ pub fn export_gltf(
     device: &Device,
 ) -> Result<ExportSummary> {
     crate::io::check_writable(out)?;
-    let config = run.load_config()?;
-    let field = run.load_field(&config, device)?;
-    let own = config.load()?;
+    let OpenRun {
+        config,
+        field,
+        data: own,
+        frames: range,
+    } = run.open(options.frames.clone(), device)?;
     let total = own.trajectories.frames();
-    let range = options.frames.clone().unwrap_or(0..total);
-    if range.start >= range.end || range.end > total {
-        return Err(DomaError::InvalidConfig(format!(
-            "frames {}..{} are not within the run's {total} frames",
-            range.start, range.end
-        )));
-    }
     let to_data =
         |p: [f32; 3]| -> [f32; 3] { std::array::from_fn(|c| p[c] * own.scale + own.center[c]) };
     let to_norm =

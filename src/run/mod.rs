@@ -149,6 +149,18 @@ pub struct Report {
     pub seconds: f64,
 }
 
+/// A fitted run opened for warping or showing it (`warp`, `export`, `view`).
+pub struct OpenRun {
+    /// Its config.
+    pub config: RunConfig,
+    /// Its fitted field.
+    pub field: Model,
+    /// Its data, normalised as when it was fitted.
+    pub data: Sequence,
+    /// The frames asked for, checked to lie within the data's.
+    pub frames: std::ops::Range<usize>,
+}
+
 /// The files of a run folder.
 #[derive(Clone, Debug)]
 pub struct RunDir {
@@ -216,6 +228,28 @@ impl RunDir {
         decode_checkpoint(fresh, &snapshot.model).map_err(|e| DomaError::Malformed {
             path: self.resume(),
             reason: format!("the model part: {e}"),
+        })
+    }
+
+    /// Loads the run's config, field and data, and checks `frames` (default: all of the
+    /// run's frames) against them.
+    pub fn open(&self, frames: Option<std::ops::Range<usize>>, device: &Device) -> Result<OpenRun> {
+        let config = self.load_config()?;
+        let field = self.load_field(&config, device)?;
+        let data = config.load()?;
+        let total = data.trajectories.frames();
+        let frames = frames.unwrap_or(0..total);
+        if frames.start >= frames.end || frames.end > total {
+            return Err(DomaError::InvalidConfig(format!(
+                "frames {}..{} are not within the run's {total} frames",
+                frames.start, frames.end
+            )));
+        }
+        Ok(OpenRun {
+            config,
+            field,
+            data,
+            frames,
         })
     }
 

@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
 
-use super::RunDir;
+use super::{OpenRun, RunDir};
 use crate::data::mesh::{TriMesh, as_points, read_obj, vertex_normals, write_obj_to};
 use crate::data::sequence::Sequence;
 use crate::data::textured::TexturedMesh;
@@ -24,17 +24,13 @@ pub fn warp_run(
     frames: Option<std::ops::Range<usize>>,
     device: &Device,
 ) -> Result<Vec<PathBuf>> {
-    let config = run.load_config()?;
-    let field = run.load_field(&config, device)?;
-    let own = config.load()?;
+    let OpenRun {
+        config,
+        field,
+        data: own,
+        frames: range,
+    } = run.open(frames, device)?;
     let total = own.trajectories.frames();
-    let range = frames.unwrap_or(0..total);
-    if range.start >= range.end || range.end > total {
-        return Err(DomaError::InvalidConfig(format!(
-            "frames {}..{} are not within the run's {total} frames",
-            range.start, range.end
-        )));
-    }
     std::fs::create_dir_all(out).map_err(|e| DomaError::io(out, e))?;
     let to_norm =
         |v: &[f32; 3]| -> [f32; 3] { std::array::from_fn(|c| (v[c] - own.center[c]) / own.scale) };

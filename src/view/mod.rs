@@ -13,7 +13,7 @@ use serde::Serialize;
 use crate::data::mesh::as_points;
 use crate::data::textured::TexturedMesh;
 use crate::metrics::EPE_SCALE;
-use crate::run::RunDir;
+use crate::run::{OpenRun, RunDir};
 use crate::{DomaError, Result};
 
 const TEMPLATE: &str = include_str!("viewer.html");
@@ -56,17 +56,13 @@ pub fn view_html(
     frames: Option<std::ops::Range<usize>>,
     device: &Device,
 ) -> Result<String> {
-    let config = run.load_config()?;
-    let field = run.load_field(&config, device)?;
-    let own = config.load()?;
+    let OpenRun {
+        config,
+        field,
+        data: own,
+        frames: range,
+    } = run.open(frames, device)?;
     let total = own.trajectories.frames();
-    let range = frames.unwrap_or(0..total);
-    if range.start >= range.end || range.end > total {
-        return Err(DomaError::InvalidConfig(format!(
-            "frames {}..{} are not within the run's {total} frames",
-            range.start, range.end
-        )));
-    }
     let to_data =
         |p: &[f32; 3]| -> [f32; 3] { std::array::from_fn(|c| p[c] * own.scale + own.center[c]) };
     let (canonical, triangles, with_truth) = match mesh {
