@@ -217,58 +217,46 @@ fn scaling_plots(
     sizes: &[scaling::CheckpointSize],
 ) -> Vec<(&'static str, crate::plot::Figure)> {
     use crate::plot::{Series, line_plot};
-    let curve = |t: usize, k: bool| -> Vec<(f64, f64)> {
-        cells
-            .iter()
-            .filter(|c| c.frames == t && c.points_per_step.is_some() == k)
-            .map(|c| (c.points as f64, c.step_ms))
-            .collect()
-    };
-    let step = line_plot(
+    // One picture per measured quantity: a curve per T against N (all points per step).
+    let against_n =
+        |title: &str, y_label: &str, value: fn(&scaling::ScalingCell) -> Option<f64>| {
+            let curve = |t: usize| -> Vec<(f64, f64)> {
+                cells
+                    .iter()
+                    .filter(|c| c.frames == t && c.points_per_step.is_none())
+                    .filter_map(|c| Some((c.points as f64, value(c)?)))
+                    .collect()
+            };
+            line_plot(
+                title,
+                "training points N",
+                y_label,
+                &[
+                    Series {
+                        name: "T = 20",
+                        color: [31, 119, 180],
+                        points: curve(20),
+                    },
+                    Series {
+                        name: "T = 100",
+                        color: [214, 39, 40],
+                        points: curve(100),
+                    },
+                ],
+                true,
+            )
+            .log_x()
+        };
+    let step = against_n(
         "Time per training step (flex, Affinity, analytic)",
-        "training points N",
         "ms per step",
-        &[
-            Series {
-                name: "T = 20",
-                color: [31, 119, 180],
-                points: curve(20, false),
-            },
-            Series {
-                name: "T = 100",
-                color: [214, 39, 40],
-                points: curve(100, false),
-            },
-        ],
-        true,
-    )
-    .log_x();
-    let memory = |t: usize, k: bool| -> Vec<(f64, f64)> {
-        cells
-            .iter()
-            .filter(|c| c.frames == t && c.points_per_step.is_some() == k)
-            .filter_map(|c| Some((c.points as f64, c.peak_mib?)))
-            .collect()
-    };
-    let peak = line_plot(
+        |c| Some(c.step_ms),
+    );
+    let peak = against_n(
         "Peak memory of a fit (flex, Affinity, analytic)",
-        "training points N",
         "peak MiB",
-        &[
-            Series {
-                name: "T = 20",
-                color: [31, 119, 180],
-                points: memory(20, false),
-            },
-            Series {
-                name: "T = 100",
-                color: [214, 39, 40],
-                points: memory(100, false),
-            },
-        ],
-        true,
-    )
-    .log_x();
+        |c| c.peak_mib,
+    );
     let bytes = |f: fn(&scaling::CheckpointSize) -> usize| -> Vec<(f64, f64)> {
         sizes
             .iter()
