@@ -219,7 +219,7 @@ fn resume(run: &RunDir, interrupt: &AtomicBool, progress: bool) -> Result<FitOut
 }
 
 /// The status of an entry in `--collect`'s table.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum RunStatus {
     /// `report.json` is written.
@@ -229,11 +229,12 @@ pub enum RunStatus {
     /// Started, not finished: interrupted, killed, or running now.
     Unfinished,
     /// Not started.
+    #[default]
     Pending,
 }
 
 /// One row of `--collect`'s table.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct SummaryRow {
     /// The entry's name (its run folder).
     pub name: String,
@@ -298,17 +299,7 @@ pub fn collect(out: &Path) -> Result<Vec<SummaryRow>> {
 fn summary_row(run: &RunDir, name: String) -> Result<SummaryRow> {
     let mut row = SummaryRow {
         name,
-        status: RunStatus::Pending,
-        model: None,
-        data: None,
-        epe_x1e4: None,
-        iterations: None,
-        seconds: None,
-        frames: None,
-        points: None,
-        params: None,
-        checkpoint_bytes: None,
-        error: None,
+        ..SummaryRow::default()
     };
     if run.config().is_file() {
         let config = run.load_config()?;
@@ -391,16 +382,10 @@ mod tests {
         let row = SummaryRow {
             name: "a".into(),
             status: RunStatus::Failed,
-            model: None,
             data: Some("/d/x,y.traj".into()),
             epe_x1e4: Some(1.5),
-            iterations: None,
-            seconds: None,
-            frames: None,
-            points: None,
-            params: None,
-            checkpoint_bytes: None,
             error: Some("bad \"file\"\nline".into()),
+            ..SummaryRow::default()
         };
         let csv = to_csv(&[row]);
         let line = csv.lines().nth(1).unwrap();
