@@ -115,6 +115,15 @@ fn textured_box(dir: &Path) -> PathBuf {
     dir.join("box.obj")
 }
 
+/// The JSON chunk of a `.glb` (glTF 2.0 §4.4: it follows the 12-byte header and its own
+/// 8-byte chunk header).
+fn glb_json(path: &Path) -> serde_json::Value {
+    let bytes = std::fs::read(path).unwrap();
+    assert_eq!(&bytes[..4], b"glTF");
+    let len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    serde_json::from_slice(&bytes[20..20 + len]).unwrap()
+}
+
 /// Runs the Khronos validator on `files`; `None` when it is not installed (skipped).
 fn validate(test: &str, files: &[PathBuf]) -> Option<Vec<serde_json::Value>> {
     let tool = Path::new(ROOT).join("tools/gltf");
@@ -172,9 +181,7 @@ fn exported_glb_files_pass_the_khronos_validator() {
         assert_eq!(code, Some(0), "{args:?}: {err}");
     }
     // The document: one morph target per frame, the animation on the weights.
-    let bytes = std::fs::read(glb("mesh.glb")).unwrap();
-    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
-    let doc: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    let doc = glb_json(&glb("mesh.glb"));
     assert_eq!(
         doc["meshes"][0]["primitives"][0]["targets"]
             .as_array()
@@ -199,9 +206,7 @@ fn exported_glb_files_pass_the_khronos_validator() {
         assert_eq!(r["errors"], 0, "{r}");
     }
     // The textured export embeds its texture.
-    let bytes = std::fs::read(glb("textured.glb")).unwrap();
-    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
-    let doc: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    let doc = glb_json(&glb("textured.glb"));
     assert_eq!(doc["images"][0]["mimeType"], "image/png");
     assert!(doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"].is_u64());
 }
