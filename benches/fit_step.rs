@@ -39,7 +39,7 @@ fn fit_step(c: &mut Criterion) {
                     b.iter(|| {
                         let losses = trainer.step(k % 20, 1e-4).expect("a step");
                         k += 1;
-                        device.sync().expect("the device syncs");
+                        doma::readback::sync(&device).expect("the device syncs");
                         losses
                     })
                 });
@@ -55,7 +55,7 @@ fn fit_step(c: &mut Criterion) {
                 b.iter(|| {
                     let losses = trainer.step(k % 20, 1e-4).expect("a step");
                     k += 1;
-                    device.sync().expect("the device syncs");
+                    doma::readback::sync(&device).expect("the device syncs");
                     losses
                 })
             });

@@ -41,7 +41,7 @@ fn jacobian(c: &mut Criterion) {
                         let l =
                             loss::smoothness(tangent, SmoothnessNorm::Squared) + raw.value.mean();
                         let grads = l.backward();
-                        device.sync().expect("the device syncs");
+                        doma::readback::sync(&device).expect("the device syncs");
                         grads
                     })
                 });

@@ -88,9 +88,7 @@ struct NonFinite {
 
 impl burn::module::ModuleVisitor for NonFinite {
     fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-        let finite = param
-            .val()
-            .try_into_vec_as::<f64>()
+        let finite = crate::readback::to_vec::<f64, D, _>(param.val())
             .map(|v| v.iter().all(|x| x.is_finite()))
             .unwrap_or(false);
         if !finite && self.first_bad.is_none() {

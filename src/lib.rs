@@ -65,6 +65,7 @@ pub mod metrics;
 pub mod names;
 pub mod plot;
 pub mod prelude;
+pub mod readback;
 pub mod register;
 pub mod run;
 pub mod siren;

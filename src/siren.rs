@@ -216,8 +216,7 @@ pub(crate) fn linear_from(layer: &LayerWeights, device: &Device) -> Linear {
 }
 
 fn read_back(t: Tensor<2>) -> Vec<f64> {
-    t.try_into_vec_as::<f64>()
-        .expect("a float tensor converts to f64")
+    crate::readback::to_vec(t).expect("a float tensor converts to f64")
 }
 
 impl Siren {

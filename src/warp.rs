@@ -5,10 +5,10 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 
+use crate::Result;
 use crate::data::Trajectories;
 use crate::data::mesh::{TriMesh, as_points};
 use crate::field::MotionField;
-use crate::{DomaError, Result};
 
 /// The rows that [`warp_points`] sends through the field at once. A chunk's peak is its
 /// fused SIREN op's workspaces (each sine layer's pre-activation and output, kept for a
@@ -42,10 +42,7 @@ pub fn warp_points_in_chunks(
             TensorData::new(chunk.as_flattened().to_vec(), [chunk.len(), 3]),
             device,
         );
-        let y = field
-            .warp(x, t)
-            .try_into_vec_as::<f32>()
-            .map_err(|e| DomaError::Device(format!("{e:?}")))?;
+        let y = crate::readback::to_vec::<f32, 2, _>(field.warp(x, t))?;
         out.extend(as_points(&y));
     }
     Ok(out)

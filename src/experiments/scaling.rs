@@ -12,6 +12,7 @@ use std::time::Instant;
 use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
+use crate::Result;
 use crate::checkpoint::Precision;
 use crate::data::Trajectories;
 use crate::field::dpf::DpfConfig;
@@ -20,7 +21,6 @@ use crate::field::{DomaFieldConfig, Variant};
 use crate::jacobian::JacobianKind;
 use crate::siren::SirenShape;
 use crate::train::{FitConfig, Trainer};
-use crate::{DomaError, Result};
 
 /// One (N, T) cell of the scaling table.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -99,9 +99,7 @@ pub fn measure_cell(
         let start = Instant::now();
         let losses = trainer.step(s % frames, lr)?;
         // Reading the loss waits for the step on an asynchronous device.
-        losses
-            .try_into_vec_as::<f32>()
-            .map_err(|e| DomaError::Device(format!("{e:?}")))?;
+        crate::readback::to_vec::<f32, 1, _>(losses)?;
         if s >= warmup {
             times.push(start.elapsed().as_secs_f64() * 1e3);
         }

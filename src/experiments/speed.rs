@@ -7,7 +7,7 @@
 
 use std::time::Instant;
 
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Tensor, TensorData};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
@@ -18,6 +18,7 @@ use crate::error::{DomaError, Result};
 use crate::field::{DomaFieldConfig, MotionField, Variant};
 use crate::jacobian::JacobianKind;
 use crate::loss::{self, SmoothnessNorm};
+use crate::readback::sync;
 use crate::train::{FitConfig, Trainer};
 
 /// What a row measures.
@@ -123,12 +124,6 @@ fn median_ms(mut step: impl FnMut() -> Result<()>, warmup: usize, steps: usize) 
     }
     times.sort_by(f64::total_cmp);
     Ok(times[times.len() / 2])
-}
-
-fn sync(device: &Device) -> Result<()> {
-    device
-        .sync()
-        .map_err(|e| DomaError::Device(format!("{e:?}")))
 }
 
 /// The `jacobian` row: outputs, J and the backward of `L_H + mean(o)` at `points` random

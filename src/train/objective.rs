@@ -293,7 +293,7 @@ mod tests {
             .map(|_| step_rows(40, 7, &mut replay))
             .collect();
         let (rows, _) = objective.prepared_rows.clone().unwrap();
-        let rows: Vec<i64> = rows.try_into_vec_as::<i64>().unwrap();
+        let rows: Vec<i64> = crate::readback::to_vec(rows).unwrap();
         assert_eq!(rows, drawn.concat());
         for step in &drawn {
             let distinct: std::collections::BTreeSet<_> = step.iter().collect();
@@ -305,11 +305,11 @@ mod tests {
         let inference = field.clone().valid();
         for (s, &k) in order.iter().enumerate() {
             let (l1, _) = objective.step_loss(&field, k, 0, &mut rng).unwrap();
-            let l1 = l1.into_scalar::<f64>();
-            let all = inference
-                .warp(data.frame_tensor(0, &device), data.time(k))
-                .try_into_vec_as::<f32>()
-                .unwrap();
+            let l1 = crate::readback::to_vec::<f64, 1, _>(l1).unwrap()[0];
+            let all: Vec<f32> = crate::readback::to_vec(
+                inference.warp(data.frame_tensor(0, &device), data.time(k)),
+            )
+            .unwrap();
             let target = data.frame(k);
             let expected = drawn[s]
                 .iter()

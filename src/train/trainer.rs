@@ -310,9 +310,7 @@ fn read_step_losses(
     order: &[usize],
     iteration: usize,
 ) -> Result<(f64, f64)> {
-    let losses = Tensor::stack::<2>(step_losses, 0)
-        .try_into_vec_as::<f64>()
-        .map_err(|e| DomaError::Device(format!("{e:?}")))?;
+    let losses = crate::readback::to_vec::<f64, 2, _>(Tensor::stack::<2>(step_losses, 0))?;
     if let Some(i) = losses.iter().position(|v| !v.is_finite()) {
         return Err(DomaError::NonFiniteLoss {
             iteration,
