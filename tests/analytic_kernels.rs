@@ -1,6 +1,7 @@
 //! The CubeCL kernels of the analytic op on wgpu against their reference, the Burn-primitive
-//! composition run on flex, on random inputs in f32 (1e-4 relative): the dual and the
-//! value-only sine activation, each forward and backward. Skipped without a wgpu adapter,
+//! composition run on flex, on random inputs in f32 (1e-4 relative): the dual, the first
+//! (input) dual and the value-only sine activation, each forward and backward. Skipped
+//! without a wgpu adapter,
 //! except under CI (`CI` set), where that fails.
 
 mod common;
@@ -14,15 +15,27 @@ fn tensor(values: &[f64], shape: Vec<usize>, device: &Device) -> Tensor<2> {
     Tensor::<2>::from_data(data, device)
 }
 
-/// The pass `which` on `device`, for `zs` and `g` of `[rows, d]` and the bias `b` (`[d]`).
-fn run(which: Activation, device: &Device, inputs: [&[f64]; 3], rows: usize, d: usize) -> Vec<f64> {
-    let [zs, b, g] = inputs;
+/// Rows of `zs` (`z_v` for the input layer's passes) and of `g` for `n` points.
+fn rows(which: Activation, n: usize) -> (usize, usize) {
+    match which {
+        Activation::DualForward | Activation::DualBackward => (4 * n, 4 * n),
+        Activation::Forward | Activation::Backward => (n, n),
+        Activation::DualInputForward | Activation::DualInputBackward => (n, 4 * n),
+    }
+}
+
+/// The pass `which` on `device` for `n` points: `zs` and `g` (see [`rows`]), the bias `b`
+/// (`[d]`) and `W` (`[4, d]`).
+fn run(which: Activation, device: &Device, inputs: [&[f64]; 4], n: usize, d: usize) -> Vec<f64> {
+    let [zs, b, g, w] = inputs;
+    let (zs_rows, g_rows) = rows(which, n);
     let bias = tensor(b, vec![1, d], device).reshape([d]);
     let out = activation(
         which,
-        tensor(zs, vec![rows, d], device),
+        tensor(zs, vec![zs_rows, d], device),
         bias,
-        tensor(g, vec![rows, d], device),
+        tensor(g, vec![g_rows, d], device),
+        tensor(w, vec![4, d], device),
         30.0,
     );
     to_vec(out)
@@ -38,16 +51,19 @@ fn every_sine_kernel_matches_the_primitive_reference() {
     let flex = Device::flex();
     // 4N = 4 · 37 rows, d = 19: neither a multiple of the cube size nor of a row.
     let (n, d) = (37, 19);
-    for (which, rows) in [
-        (Activation::DualForward, 4 * n),
-        (Activation::DualBackward, 4 * n),
-        (Activation::Forward, n),
-        (Activation::Backward, n),
+    for which in [
+        Activation::DualForward,
+        Activation::DualBackward,
+        Activation::Forward,
+        Activation::Backward,
+        Activation::DualInputForward,
+        Activation::DualInputBackward,
     ] {
+        let (zs_rows, g_rows) = rows(which, n);
         // random_points gives 3 values per point in [-1, 1]; scale zs like a layer's S W.
-        let zs: Vec<f64> = random_points(rows * d, 1)
+        let zs: Vec<f64> = random_points(zs_rows * d, 1)
             .iter()
-            .take(rows * d)
+            .take(zs_rows * d)
             .map(|v| 0.1 * v)
             .collect();
         let b: Vec<f64> = random_points(d, 2)
@@ -55,24 +71,35 @@ fn every_sine_kernel_matches_the_primitive_reference() {
             .take(d)
             .map(|v| 0.05 * v)
             .collect();
-        let g: Vec<f64> = random_points(rows * d, 3)
+        let g: Vec<f64> = random_points(g_rows * d, 3)
             .into_iter()
-            .take(rows * d)
+            .take(g_rows * d)
+            .collect();
+        // A first layer's weights: SIREN's init scale, U(-1/c, 1/c) for c = 4 inputs.
+        let w: Vec<f64> = random_points(4 * d, 4)
+            .iter()
+            .take(4 * d)
+            .map(|v| 0.25 * v)
             .collect();
         let before = kernel::launches();
-        let reference = run(which, &flex, [&zs, &b, &g], rows, d);
+        let reference = run(which, &flex, [&zs, &b, &g, &w], n, d);
         assert_eq!(
             kernel::launches(),
             before,
             "flex runs the reference, not a kernel"
         );
-        let kernel = run(which, &wgpu, [&zs, &b, &g], rows, d);
+        let kernel = run(which, &wgpu, [&zs, &b, &g, &w], n, d);
         assert_eq!(
             kernel::launches(),
             before + 1,
             "{which:?}: wgpu launched its CubeCL kernel once"
         );
         assert_eq!(kernel.len(), reference.len());
+        assert_eq!(
+            kernel.len(),
+            g_rows * d,
+            "{which:?}: the output has g's shape"
+        );
         let e = rel_err(&kernel, &reference);
         assert!(e < 1e-4, "{which:?}: kernel vs reference {e:e}");
     }

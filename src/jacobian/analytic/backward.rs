@@ -2,7 +2,9 @@
 //! the whole network as one node ([`super::SirenBackend::siren`], the CPU path), whose
 //! backward is [`super::SirenOps::siren_backward`]; or one node per sine layer
 //! ([`super::SirenBackend::sine_dual_layer`], the wgpu path), whose backward is the
-//! activation's backward, `g_W = Sᵀ G_Z`, `g_b = Σ_rows G_Z[0..N]` and `g_S = G_Z Wᵀ`.
+//! activation's backward, `g_W = Sᵀ G_Z`, `g_b = Σ_rows G_Z[0..N]` and `g_S = G_Z Wᵀ`; the
+//! first of them from the input without its seeds
+//! ([`super::SirenBackend::sine_dual_input_layer`]).
 
 use burn::backend::autodiff::{
     Autodiff, NodeId,
@@ -110,6 +112,85 @@ impl<B: SirenBackend> Backward<B, 3> for SineLayerBackward {
     }
 }
 
+/// The backward of the first dual sine layer
+/// ([`super::SirenBackend::sine_dual_input_layer`]). With `G = [G_z; G_ż]` the activation's
+/// backward: `g_b = Σ_rows G_z`, `g_X = G_z Wᵀ`, and
+/// `g_W = Xᵀ G_z + [Σ_rows G_ż,x; Σ_rows G_ż,y; Σ_rows G_ż,z; 0]`, the second term being
+/// the seeds' part `Σ_k e_kᵀ G_ż,k` of `S_0ᵀ G` without building `S_0`.
+#[derive(Debug)]
+struct InputLayerBackward;
+
+impl<B: SirenBackend> Backward<B, 3> for InputLayerBackward {
+    /// `X`, `W` and `b` (checkpointed), `z_v = X W`, and `ω`.
+    type State = (NodeId, NodeId, NodeId, FloatTensor<B>, f64);
+
+    fn backward(
+        self,
+        ops: Ops<Self::State, 3>,
+        grads: &mut Gradients,
+        checkpointer: &mut Checkpointer,
+    ) {
+        let [node_x, node_w, node_b] = ops.parents;
+        let grad = grads.consume::<B>(&ops.node);
+        let (x_id, w_id, b_id, zv, omega) = ops.state;
+        let input: FloatTensor<B> = checkpointer.retrieve_node_output(x_id);
+        let weight: FloatTensor<B> = checkpointer.retrieve_node_output(w_id);
+        let bias: FloatTensor<B> = checkpointer.retrieve_node_output(b_id);
+        let [n, d] = zv.shape().dims::<2>();
+        let g = B::sine_dual_input_activation_backward(zv, weight.clone(), bias, grad, omega);
+        let g_z = B::float_slice(g.clone(), &[Slice::from(0..n), Slice::from(0..d)]);
+        if let Some(node) = node_b {
+            let g_b = B::float_reshape(B::float_sum_dim(g_z.clone(), 0), Shape::new([d]));
+            grads.register::<B>(node.id, g_b);
+        }
+        if let Some(node) = node_w {
+            let g_w = B::float_matmul(B::float_transpose(input), g_z.clone());
+            let tangents = B::float_reshape(
+                B::float_slice(g, &[Slice::from(n..4 * n), Slice::from(0..d)]),
+                Shape::new([3, n, d]),
+            );
+            let seeds = B::float_reshape(B::float_sum_dim(tangents, 1), Shape::new([3, d]));
+            let top = [Slice::from(0..3), Slice::from(0..d)];
+            let sum = B::float_add(B::float_slice(g_w.clone(), &top), seeds);
+            grads.register::<B>(node.id, B::float_slice_assign(g_w, &top, sum));
+        }
+        if let Some(node) = node_x {
+            grads.register::<B>(node.id, B::float_matmul(g_z, B::float_transpose(weight)));
+        }
+    }
+}
+
+/// Records the first dual sine layer on the autodiff graph with [`InputLayerBackward`].
+fn tracked_input_layer<B: SirenBackend, C: CheckpointStrategy>(
+    input: FloatTensor<Autodiff<B, C>>,
+    weight: FloatTensor<Autodiff<B, C>>,
+    bias: FloatTensor<Autodiff<B, C>>,
+    omega: f64,
+) -> FloatTensor<Autodiff<B, C>> {
+    match InputLayerBackward
+        .prepare::<C>([input.node(), weight.node(), bias.node()])
+        .compute_bound()
+        .stateful()
+    {
+        OpsKind::Tracked(mut prep) => {
+            let x_id = prep.checkpoint(&input);
+            let w_id = prep.checkpoint(&weight);
+            let b_id = prep.checkpoint(&bias);
+            let weight = weight.into_primitive();
+            let zv = B::float_matmul(input.into_primitive(), weight.clone());
+            let out =
+                B::sine_dual_input_activation(zv.clone(), weight, bias.into_primitive(), omega);
+            prep.finish((x_id, w_id, b_id, zv, omega), out)
+        }
+        OpsKind::UnTracked(prep) => prep.finish(B::sine_dual_input_layer(
+            input.into_primitive(),
+            weight.into_primitive(),
+            bias.into_primitive(),
+            omega,
+        )),
+    }
+}
+
 /// Records a sine layer on the autodiff graph with [`SineLayerBackward`] as its backward.
 fn tracked_layer<B: SirenBackend, C: CheckpointStrategy>(
     input: FloatTensor<Autodiff<B, C>>,
@@ -153,6 +234,15 @@ fn tracked_layer<B: SirenBackend, C: CheckpointStrategy>(
 }
 
 impl<B: SirenOps + SirenBackend, C: CheckpointStrategy> SirenBackend for Autodiff<B, C> {
+    fn sine_dual_input_layer(
+        input: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        omega: f64,
+    ) -> FloatTensor<Self> {
+        tracked_input_layer::<B, C>(input, weight, bias, omega)
+    }
+
     fn sine_dual_layer(
         stacked: FloatTensor<Self>,
         weight: FloatTensor<Self>,

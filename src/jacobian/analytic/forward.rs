@@ -66,6 +66,38 @@ pub fn activation_backward<B: Backend>(
     B::float_mul_scalar(B::float_cat(vec![g_z, g_zdot], 0), Scalar::from(omega))
 }
 
+/// What `S_0 W` is for the first layer, whose stacked input is `[X; e_x; e_y; e_z]` (the
+/// seeds on the first three columns): `[z_v; W[0]; W[1]; W[2]]` (`[4N, d]`), each of
+/// `W`'s first three rows repeated for the `N` points.
+fn input_stacked<B: Backend>(zv: FloatTensor<B>, weight: FloatTensor<B>) -> FloatTensor<B> {
+    let [n, d] = zv.shape().dims::<2>();
+    let rows = B::float_slice(weight, &[Slice::from(0..3), Slice::from(0..d)]);
+    let rows = B::float_repeat_dim(B::float_reshape(rows, Shape::new([3, 1, d])), 1, n);
+    B::float_cat(vec![zv, B::float_reshape(rows, Shape::new([3 * n, d]))], 0)
+}
+
+/// The first layer's `[sin z; cos z ⊙ ż]` from `z_v = X W` (`[N, d]`): [`activation`] of
+/// the stacked pre-activation that the seeds would give.
+pub fn input_activation<B: Backend>(
+    zv: FloatTensor<B>,
+    weight: FloatTensor<B>,
+    bias: FloatTensor<B>,
+    omega: f64,
+) -> FloatTensor<B> {
+    activation::<B>(input_stacked::<B>(zv, weight), bias, omega)
+}
+
+/// Its backward: [`activation_backward`] of the same stacked pre-activation.
+pub fn input_activation_backward<B: Backend>(
+    zv: FloatTensor<B>,
+    weight: FloatTensor<B>,
+    bias: FloatTensor<B>,
+    grad: FloatTensor<B>,
+    omega: f64,
+) -> FloatTensor<B> {
+    activation_backward::<B>(input_stacked::<B>(zv, weight), bias, grad, omega)
+}
+
 /// The value-only sine layer's activation: `sin(ω(zs + b))` for `zs = X W` (`[N, d]`).
 pub fn plain_activation<B: Backend>(
     zs: FloatTensor<B>,

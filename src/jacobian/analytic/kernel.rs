@@ -4,7 +4,9 @@
 //! Each kernel does one layer's elementwise work in one pass over `[N, d]` (dual: four
 //! blocks), one thread per value-row element: `sin z`, and `ω cos z · Z_k` for the three
 //! tangents, in one pass; the backward `g_z = ω (g_h cos z − ω sin z Σ_k g_ḣ,k Z_k)` and
-//! `g_Ż_k = ω cos z g_ḣ,k`; and their value-only forms. The matmuls stay Burn's (CubeCL's
+//! `g_Ż_k = ω cos z g_ḣ,k`; and their value-only forms. The first layer's pair reads the
+//! tangent pre-activations `Z_k` from `W`'s rows (its input's tangents are the seeds
+//! `e_x, e_y, e_z`), so that layer's matmul has `N` rows, not `4N`. The matmuls stay Burn's (CubeCL's
 //! tuned matmul), and the network around them is [`super::forward::siren`].
 //!
 //! **Where they run.** Burn 0.22 runs wgpu as `Fusion<CubeBackend>`. The kernels are
@@ -24,6 +26,7 @@ use burn::backend::TensorMetadata;
 use burn::backend::cubecl::dtype_to_storage_type;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::wgpu::CubeBackend;
+use burn::tensor::Shape;
 use burn_cubecl::fusion::FusionCubeRuntime;
 use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::ops::numeric::empty_device_contiguous_dtype;
@@ -89,6 +92,66 @@ fn sine_dual_backward_kernel<F: Float>(
     out[i + 3 * nd] = wc * g[i + 3 * nd];
 }
 
+/// The first dual sine layer, whose tangent pre-activations are `W`'s rows (the input's
+/// seeds are `e_x, e_y, e_z`): `out = [sin z; ω cos z ⊙ W[0]; ω cos z ⊙ W[1]; ω cos z ⊙ W[2]]`
+/// with `z = ω(z_v + b)`, for `z_v = X W` (`[N, d]`); `out` is `[4N, d]`.
+#[cube(launch)]
+fn sine_dual_input_forward_kernel<F: Float>(
+    zv: &Tensor<F>,
+    bias: &Tensor<F>,
+    weight: &Tensor<F>,
+    out: &mut Tensor<F>,
+    omega: f32,
+    #[define(F)] _dtype: ElemType,
+) {
+    let d = bias.shape(0);
+    let nd = zv.shape(0) * zv.shape(1);
+    let i = ABSOLUTE_POS;
+    if i >= nd {
+        terminate!();
+    }
+    let j = i % d;
+    let w = F::cast_from(omega);
+    let z = w * (zv[i] + bias[j]);
+    let wc = w * F::cos(z);
+    out[i] = F::sin(z);
+    out[i + nd] = wc * weight[j];
+    out[i + 2 * nd] = wc * weight[d + j];
+    out[i + 3 * nd] = wc * weight[2 * d + j];
+}
+
+/// Its backward, from `g = [g_h; g_ḣ_1; g_ḣ_2; g_ḣ_3]` (`[4N, d]`):
+/// `[ω (g_h cos z − ω sin z Σ_k g_ḣ_k W[k]); ω cos z ⊙ g_ḣ_k]`.
+#[cube(launch)]
+fn sine_dual_input_backward_kernel<F: Float>(
+    zv: &Tensor<F>,
+    bias: &Tensor<F>,
+    g: &Tensor<F>,
+    weight: &Tensor<F>,
+    out: &mut Tensor<F>,
+    omega: f32,
+    #[define(F)] _dtype: ElemType,
+) {
+    let d = bias.shape(0);
+    let nd = zv.shape(0) * zv.shape(1);
+    let i = ABSOLUTE_POS;
+    if i >= nd {
+        terminate!();
+    }
+    let j = i % d;
+    let w = F::cast_from(omega);
+    let z = w * (zv[i] + bias[j]);
+    let s = F::sin(z);
+    let c = F::cos(z);
+    let wc = w * c;
+    let mixed =
+        g[i + nd] * weight[j] + g[i + 2 * nd] * weight[d + j] + g[i + 3 * nd] * weight[2 * d + j];
+    out[i] = w * (g[i] * c - s * w * mixed);
+    out[i + nd] = wc * g[i + nd];
+    out[i + 2 * nd] = wc * g[i + 2 * nd];
+    out[i + 3 * nd] = wc * g[i + 3 * nd];
+}
+
 /// A value-only sine layer: `sin(ω(Z + b))`.
 #[cube(launch)]
 fn sine_forward_kernel<F: Float>(
@@ -133,13 +196,15 @@ pub fn launches() -> usize {
     LAUNCHES.load(std::sync::atomic::Ordering::Relaxed)
 }
 
-/// The four kernels, as one value the fusion wrapper can carry.
+/// The six kernels, as one value the fusion wrapper can carry.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum SineKernel {
     DualForward,
     DualBackward,
     Forward,
     Backward,
+    DualInputForward,
+    DualInputBackward,
 }
 
 impl SineKernel {
@@ -149,24 +214,46 @@ impl SineKernel {
             SineKernel::DualBackward => "doma::sine_dual_backward",
             SineKernel::Forward => "doma::sine_forward",
             SineKernel::Backward => "doma::sine_backward",
+            SineKernel::DualInputForward => "doma::sine_dual_input_forward",
+            SineKernel::DualInputBackward => "doma::sine_dual_input_backward",
         }
     }
 
-    /// Launches the kernel on `inputs` (`zs`, `bias`, and for a backward `g`); the
-    /// output has `zs`'s shape.
+    /// The output's shape for inputs whose first, `zs` (or `z_v`), is `[rows, d]`: four
+    /// times the rows for the input layer's forward, else `[rows, d]`.
+    fn out_shape(self, rows: usize, d: usize) -> Shape {
+        match self {
+            SineKernel::DualInputForward | SineKernel::DualInputBackward => {
+                Shape::new([4 * rows, d])
+            }
+            _ => Shape::new([rows, d]),
+        }
+    }
+
+    /// Launches the kernel on `inputs`: `zs` (`z_v` for the input layer's), `bias`, then
+    /// `g` for a backward, then `W` for the input layer's.
     fn launch(self, inputs: Vec<CubeTensor>, omega: f64) -> CubeTensor {
         let mut inputs = inputs.into_iter().map(into_contiguous);
         let zs = inputs.next().expect("zs");
         let bias = inputs.next().expect("the bias");
-        let g = inputs.next();
+        let (g, weight) = match self {
+            SineKernel::DualForward | SineKernel::Forward => (None, None),
+            SineKernel::DualBackward | SineKernel::Backward => (inputs.next(), None),
+            SineKernel::DualInputForward => (None, inputs.next()),
+            SineKernel::DualInputBackward => (inputs.next(), inputs.next()),
+        };
         let [rows, d] = zs.shape().dims::<2>();
         let (client, dtype) = (zs.client.clone(), zs.dtype);
-        let out =
-            empty_device_contiguous_dtype(client.clone(), zs.device.clone(), zs.shape(), dtype);
+        let out = empty_device_contiguous_dtype(
+            client.clone(),
+            zs.device.clone(),
+            self.out_shape(rows, d),
+            dtype,
+        );
         // One thread per element of the value block.
         let threads = match self {
             SineKernel::DualForward | SineKernel::DualBackward => rows / 4 * d,
-            SineKernel::Forward | SineKernel::Backward => rows * d,
+            _ => rows * d,
         };
         if threads == 0 {
             return out;
@@ -181,6 +268,11 @@ impl SineKernel {
             out.clone().into_tensor_arg(),
         );
         let g = || g.expect("a backward kernel takes g").into_tensor_arg();
+        let weight = || {
+            weight
+                .expect("an input-layer kernel takes W")
+                .into_tensor_arg()
+        };
         match self {
             SineKernel::DualForward => sine_dual_forward_kernel::launch(
                 &client, cube_count, cube_dim, zs, bias, o, w, elem,
@@ -206,6 +298,29 @@ impl SineKernel {
                 zs,
                 bias,
                 g(),
+                o,
+                w,
+                elem,
+            ),
+            SineKernel::DualInputForward => sine_dual_input_forward_kernel::launch(
+                &client,
+                cube_count,
+                cube_dim,
+                zs,
+                bias,
+                weight(),
+                o,
+                w,
+                elem,
+            ),
+            SineKernel::DualInputBackward => sine_dual_input_backward_kernel::launch(
+                &client,
+                cube_count,
+                cube_dim,
+                zs,
+                bias,
+                g(),
+                weight(),
                 o,
                 w,
                 elem,
@@ -241,17 +356,18 @@ impl Operation<FusionCubeRuntime> for SineKernelOp {
     }
 }
 
-/// Registers `kernel` on fusion tensors; the output (of `inputs[0]`'s shape and type) is
-/// lazy, like any fusion tensor.
+/// Registers `kernel` on fusion tensors; the output (of [`SineKernel::out_shape`] and
+/// `inputs[0]`'s type) is lazy, like any fusion tensor.
 fn fused_call(
     kernel: SineKernel,
     inputs: Vec<FusionTensor<FusionCubeRuntime>>,
     omega: f64,
 ) -> FusionTensor<FusionCubeRuntime> {
     let client = inputs[0].client.clone();
+    let [rows, d] = inputs[0].shape.dims::<2>();
     let out = TensorIr::uninit(
         client.create_empty_handle(),
-        inputs[0].shape.clone(),
+        kernel.out_shape(rows, d),
         inputs[0].dtype,
     );
     let inputs: Vec<TensorIr> = inputs.into_iter().map(|t| t.into_ir()).collect();
@@ -311,6 +427,29 @@ macro_rules! kernel_backend {
                 omega: f64,
             ) -> FloatTensor<Self> {
                 $call(SineKernel::Forward, vec![zs, bias], omega)
+            }
+
+            fn sine_dual_input_activation(
+                zv: FloatTensor<Self>,
+                weight: FloatTensor<Self>,
+                bias: FloatTensor<Self>,
+                omega: f64,
+            ) -> FloatTensor<Self> {
+                $call(SineKernel::DualInputForward, vec![zv, bias, weight], omega)
+            }
+
+            fn sine_dual_input_activation_backward(
+                zv: FloatTensor<Self>,
+                weight: FloatTensor<Self>,
+                bias: FloatTensor<Self>,
+                grad: FloatTensor<Self>,
+                omega: f64,
+            ) -> FloatTensor<Self> {
+                $call(
+                    SineKernel::DualInputBackward,
+                    vec![zv, bias, grad, weight],
+                    omega,
+                )
             }
 
             fn sine_activation_backward(

@@ -127,6 +127,46 @@ pub trait SirenBackend: burn::backend::Backend {
         forward::plain_activation_backward::<Self>(zs, bias, grad, omega)
     }
 
+    /// The first dual sine layer's activation (Eq. 6 at the input). Its input's tangents
+    /// are the seeds `e_x, e_y, e_z`, so every point's tangent pre-activation is a row of
+    /// `W`: from `z_v = X W` (`[N, d]`, the value rows only), `W` (`[c, d]`, `c ≥ 3`) and the
+    /// bias, `[sin z; ω cos z ⊙ W[0]; ω cos z ⊙ W[1]; ω cos z ⊙ W[2]]` with `z = ω(z_v + b)`
+    /// (`[4N, d]`). Neither the seeds nor their `3N` matmul rows are built.
+    fn sine_dual_input_activation(
+        zv: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        omega: f64,
+    ) -> FloatTensor<Self> {
+        forward::input_activation::<Self>(zv, weight, bias, omega)
+    }
+
+    /// Its backward: from the upstream gradient `G = [g_h; g_ḣ]` (`[4N, d]`), what
+    /// [`SirenBackend::sine_dual_activation_backward`] gives for the stacked
+    /// `[z_v; W[0]; W[1]; W[2]]`: `ω [g_h ⊙ cos z − sin z ⊙ Σ_k g_ḣ,k ⊙ ω W[k] ; g_ḣ ⊙ cos z]`.
+    fn sine_dual_input_activation_backward(
+        zv: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        omega: f64,
+    ) -> FloatTensor<Self> {
+        forward::input_activation_backward::<Self>(zv, weight, bias, grad, omega)
+    }
+
+    /// The first dual sine layer (the wgpu path): the input `X [N, c]` (spatial columns
+    /// first), `W [c, d]`, `b [d]` → `[sin z; cos z ⊙ ż]` (`[4N, d]`), with one `N`-row
+    /// matmul instead of the `4N` rows of the stacked input and its seeds.
+    fn sine_dual_input_layer(
+        input: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        omega: f64,
+    ) -> FloatTensor<Self> {
+        let zv = Self::float_matmul(input, weight.clone());
+        Self::sine_dual_input_activation(zv, weight, bias, omega)
+    }
+
     /// One dual sine layer (the wgpu path, one autodiff node per layer): `S [4N, d_in]`,
     /// `W [d_in, d_out]`, `b [d_out]` → `[sin z; cos z ⊙ ż]` (`[4N, d_out]`).
     fn sine_dual_layer(
@@ -218,20 +258,36 @@ pub enum Activation {
     Forward,
     /// [`SirenBackend::sine_activation_backward`] on `zs` and `grad` (`[N, d]`).
     Backward,
+    /// [`SirenBackend::sine_dual_input_activation`] on `zs = z_v` (`[N, d]`) and `weight`.
+    DualInputForward,
+    /// [`SirenBackend::sine_dual_input_activation_backward`] on `zs = z_v` (`[N, d]`),
+    /// `weight` and `grad` (`[4N, d]`).
+    DualInputBackward,
 }
 
 /// One sine layer's elementwise pass on high-level tensors, on whatever backend `zs` lives
 /// (the CubeCL kernels on wgpu, the primitive reference on the CPU backends); `grad` is
-/// used by the backward passes only.
+/// used by the backward passes only, `weight` (the layer's `W`) by the input layer's only.
 pub fn activation(
     which: Activation,
     zs: Tensor<2>,
     bias: Tensor<1>,
     grad: Tensor<2>,
+    weight: Tensor<2>,
     omega: f64,
 ) -> Tensor<2> {
     let (zs, bias) = (zs.into_dispatch(), bias.into_dispatch());
     Tensor::from_dispatch(match which {
+        Activation::DualInputForward => {
+            Dispatch::sine_dual_input_activation(zs, weight.into_dispatch(), bias, omega)
+        }
+        Activation::DualInputBackward => Dispatch::sine_dual_input_activation_backward(
+            zs,
+            weight.into_dispatch(),
+            bias,
+            grad.into_dispatch(),
+            omega,
+        ),
         Activation::DualForward => Dispatch::sine_dual_activation(zs, bias, omega),
         Activation::DualBackward => {
             Dispatch::sine_dual_activation_backward(zs, bias, grad.into_dispatch(), omega)
@@ -258,6 +314,22 @@ pub fn sine_dual_layer(
     ))
 }
 
+/// The first dual sine layer on high-level tensors (see
+/// [`SirenBackend::sine_dual_input_layer`]).
+pub fn sine_dual_input_layer(
+    input: Tensor<2>,
+    weight: Tensor<2>,
+    bias: Tensor<1>,
+    omega: f64,
+) -> Tensor<2> {
+    Tensor::from_dispatch(Dispatch::sine_dual_input_layer(
+        input.into_dispatch(),
+        weight.into_dispatch(),
+        bias.into_dispatch(),
+        omega,
+    ))
+}
+
 /// One value-only sine layer on high-level tensors (see [`SirenBackend::sine_layer`]).
 pub fn sine_layer(input: Tensor<2>, weight: Tensor<2>, bias: Tensor<1>, omega: f64) -> Tensor<2> {
     Tensor::from_dispatch(Dispatch::sine_layer(
@@ -270,46 +342,44 @@ pub fn sine_layer(input: Tensor<2>, weight: Tensor<2>, bias: Tensor<1>, omega: f
 
 /// The SIREN layer by layer (the wgpu path): one custom op per sine layer, whose
 /// elementwise parts are CubeCL kernels, and Burn's linear output layer. `[N, O]`, or
-/// `[4N, O]` stacked values and tangents when `dual`.
+/// `[4N, O]` stacked values and tangents when `dual` (see [`layered_dual`]).
 pub fn layered_siren(siren: &Siren, xt: Tensor<2>, dual: bool) -> Tensor<2> {
-    let n = xt.dims()[0];
-    let mut h = if dual {
-        let [_, c] = xt.dims();
-        // The input tangents are e_x, e_y, e_z (the time column has none).
-        let seed = Dual::seed_spatial(xt);
-        let tangent = seed
-            .tangent
-            .expect("a seed has tangents")
-            .reshape([3 * n, c]);
-        Tensor::cat(vec![seed.value, tangent], 0)
-    } else {
-        xt
-    };
-    for layer in &siren.sine {
-        let bias = layer.bias.as_ref().expect("SIREN layers have a bias").val();
-        h = if dual {
-            sine_dual_layer(h, layer.weight.val(), bias, siren.omega)
-        } else {
-            sine_layer(h, layer.weight.val(), bias, siren.omega)
-        };
+    if !dual {
+        let mut h = xt;
+        for layer in &siren.sine {
+            h = sine_layer(h, layer.weight.val(), bias_of(layer), siren.omega);
+        }
+        return h.matmul(siren.output.weight.val()) + bias_of(&siren.output).unsqueeze_dim(0);
+    }
+    let out = layered_dual(siren, xt);
+    let [n, d_out] = out.value.dims();
+    let tangent = out.tangent.expect("a dual pass has tangents");
+    Tensor::cat(vec![out.value, tangent.reshape([3 * n, d_out])], 0)
+}
+
+/// The SIREN's values and spatial tangents layer by layer (the wgpu path, Eq. 6): the first
+/// layer from the input itself, since its tangents are the seeds `e_x, e_y, e_z`
+/// ([`sine_dual_input_layer`]); the others on the stacked `[h; ḣ_x; ḣ_y; ḣ_z]`
+/// ([`sine_dual_layer`]); then one matmul of the output layer for all `4N` rows, whose bias
+/// only the values take. `xt` is `[N, c]` with the spatial coordinates first.
+pub fn layered_dual(siren: &Siren, xt: Tensor<2>) -> Dual {
+    let [n, c] = xt.dims();
+    assert!(c >= 3, "a spatial tangent needs 3 input columns, got {c}");
+    let (first, rest) = siren.sine.split_first().expect("a SIREN has a sine layer");
+    let mut h = sine_dual_input_layer(xt, first.weight.val(), bias_of(first), siren.omega);
+    for layer in rest {
+        h = sine_dual_layer(h, layer.weight.val(), bias_of(layer), siren.omega);
     }
     let out = h.matmul(siren.output.weight.val());
-    let bias = siren
-        .output
-        .bias
-        .as_ref()
-        .expect("SIREN layers have a bias")
-        .val()
-        .unsqueeze_dim(0);
-    if !dual {
-        return out + bias;
-    }
     let d_out = out.dims()[1];
-    Tensor::cat(
-        vec![out.clone().narrow(0, 0, n) + bias, out.narrow(0, n, 3 * n)],
-        0,
-    )
-    .reshape([4 * n, d_out])
+    Dual {
+        value: out.clone().narrow(0, 0, n) + bias_of(&siren.output).unsqueeze_dim(0),
+        tangent: Some(out.narrow(0, n, 3 * n).reshape([3, n, d_out])),
+    }
+}
+
+fn bias_of(layer: &burn::nn::Linear) -> Tensor<1> {
+    layer.bias.as_ref().expect("SIREN layers have a bias").val()
 }
 
 /// The SIREN through the analytic op of its device: the whole network as one op on the
@@ -369,6 +439,10 @@ impl JacobianMethod for Analytic {
     }
 
     fn forward_dual(&self, siren: &Siren, xt: Tensor<2>) -> Dual {
+        if !crate::backend::runs_on_cpu(&xt.device()) {
+            // No stacking of values and tangents into one tensor that is split again.
+            return layered_dual(siren, xt);
+        }
         let n = xt.dims()[0];
         let out = analytic_siren(siren, xt, true);
         let d_out = out.dims()[1];
