@@ -40,24 +40,29 @@ use super::{SirenBackend, SirenOps, forward};
 
 /// One dual sine layer: `out = [sin z; ω cos z ⊙ Z_1; ω cos z ⊙ Z_2; ω cos z ⊙ Z_3]` with
 /// `z = ω(Z_0 + b)`, for the stacked `zs = [Z_0; Z_1; Z_2; Z_3]` (`[4N, d]`).
+///
+/// Every kernel here reads and writes vectors of `N` elements along a row (`N = 4` when
+/// `d` is a multiple of 4, as the value and tangent blocks and `W`'s rows then are); the
+/// indices below count vectors.
 #[cube(launch)]
-fn sine_dual_forward_kernel<F: Float>(
-    zs: &Tensor<F>,
-    bias: &Tensor<F>,
-    out: &mut Tensor<F>,
+fn sine_dual_forward_kernel<F: Float, N: Size>(
+    zs: &Tensor<Vector<F, N>>,
+    bias: &Tensor<Vector<F, N>>,
+    out: &mut Tensor<Vector<F, N>>,
     omega: f32,
     #[define(F)] _dtype: ElemType,
 ) {
-    let d = bias.shape(0);
-    let nd = out.shape(0) / 4 * out.shape(1);
+    let v = out.vector_size();
+    let d = bias.shape(0) / v;
+    let nd = out.shape(0) / 4 * out.shape(1) / v;
     let i = ABSOLUTE_POS;
     if i >= nd {
         terminate!();
     }
-    let w = F::cast_from(omega);
+    let w = Vector::<F, N>::new(F::cast_from(omega));
     let z = w * (zs[i] + bias[i % d]);
-    let wc = w * F::cos(z);
-    out[i] = F::sin(z);
+    let wc = w * Vector::cos(z);
+    out[i] = Vector::sin(z);
     out[i + nd] = wc * zs[i + nd];
     out[i + 2 * nd] = wc * zs[i + 2 * nd];
     out[i + 3 * nd] = wc * zs[i + 3 * nd];
@@ -66,27 +71,28 @@ fn sine_dual_forward_kernel<F: Float>(
 /// Its backward, from the upstream gradient `g = [g_h; g_ḣ_1; g_ḣ_2; g_ḣ_3]`:
 /// `[ω (g_h cos z − ω sin z Σ_k g_ḣ_k Z_k); ω cos z ⊙ g_ḣ_k]`.
 #[cube(launch)]
-fn sine_dual_backward_kernel<F: Float>(
-    zs: &Tensor<F>,
-    bias: &Tensor<F>,
-    g: &Tensor<F>,
-    out: &mut Tensor<F>,
+fn sine_dual_backward_kernel<F: Float, N: Size>(
+    zs: &Tensor<Vector<F, N>>,
+    bias: &Tensor<Vector<F, N>>,
+    g: &Tensor<Vector<F, N>>,
+    out: &mut Tensor<Vector<F, N>>,
     omega: f32,
     #[define(F)] _dtype: ElemType,
 ) {
-    let d = bias.shape(0);
-    let nd = out.shape(0) / 4 * out.shape(1);
+    let v = out.vector_size();
+    let d = bias.shape(0) / v;
+    let nd = out.shape(0) / 4 * out.shape(1) / v;
     let i = ABSOLUTE_POS;
     if i >= nd {
         terminate!();
     }
-    let w = F::cast_from(omega);
+    let w = Vector::<F, N>::new(F::cast_from(omega));
     let z = w * (zs[i] + bias[i % d]);
-    let s = F::sin(z);
-    let wc = w * F::cos(z);
+    let c = Vector::cos(z);
+    let wc = w * c;
     let mixed =
         g[i + nd] * zs[i + nd] + g[i + 2 * nd] * zs[i + 2 * nd] + g[i + 3 * nd] * zs[i + 3 * nd];
-    out[i] = w * (g[i] * F::cos(z) - s * w * mixed);
+    out[i] = w * (g[i] * c - Vector::sin(z) * w * mixed);
     out[i + nd] = wc * g[i + nd];
     out[i + 2 * nd] = wc * g[i + 2 * nd];
     out[i + 3 * nd] = wc * g[i + 3 * nd];
@@ -96,25 +102,26 @@ fn sine_dual_backward_kernel<F: Float>(
 /// seeds are `e_x, e_y, e_z`): `out = [sin z; ω cos z ⊙ W[0]; ω cos z ⊙ W[1]; ω cos z ⊙ W[2]]`
 /// with `z = ω(z_v + b)`, for `z_v = X W` (`[N, d]`); `out` is `[4N, d]`.
 #[cube(launch)]
-fn sine_dual_input_forward_kernel<F: Float>(
-    zv: &Tensor<F>,
-    bias: &Tensor<F>,
-    weight: &Tensor<F>,
-    out: &mut Tensor<F>,
+fn sine_dual_input_forward_kernel<F: Float, N: Size>(
+    zv: &Tensor<Vector<F, N>>,
+    bias: &Tensor<Vector<F, N>>,
+    weight: &Tensor<Vector<F, N>>,
+    out: &mut Tensor<Vector<F, N>>,
     omega: f32,
     #[define(F)] _dtype: ElemType,
 ) {
-    let d = bias.shape(0);
-    let nd = zv.shape(0) * zv.shape(1);
+    let v = out.vector_size();
+    let d = bias.shape(0) / v;
+    let nd = zv.shape(0) * zv.shape(1) / v;
     let i = ABSOLUTE_POS;
     if i >= nd {
         terminate!();
     }
     let j = i % d;
-    let w = F::cast_from(omega);
+    let w = Vector::<F, N>::new(F::cast_from(omega));
     let z = w * (zv[i] + bias[j]);
-    let wc = w * F::cos(z);
-    out[i] = F::sin(z);
+    let wc = w * Vector::cos(z);
+    out[i] = Vector::sin(z);
     out[i + nd] = wc * weight[j];
     out[i + 2 * nd] = wc * weight[d + j];
     out[i + 3 * nd] = wc * weight[2 * d + j];
@@ -123,30 +130,30 @@ fn sine_dual_input_forward_kernel<F: Float>(
 /// Its backward, from `g = [g_h; g_ḣ_1; g_ḣ_2; g_ḣ_3]` (`[4N, d]`):
 /// `[ω (g_h cos z − ω sin z Σ_k g_ḣ_k W[k]); ω cos z ⊙ g_ḣ_k]`.
 #[cube(launch)]
-fn sine_dual_input_backward_kernel<F: Float>(
-    zv: &Tensor<F>,
-    bias: &Tensor<F>,
-    g: &Tensor<F>,
-    weight: &Tensor<F>,
-    out: &mut Tensor<F>,
+fn sine_dual_input_backward_kernel<F: Float, N: Size>(
+    zv: &Tensor<Vector<F, N>>,
+    bias: &Tensor<Vector<F, N>>,
+    g: &Tensor<Vector<F, N>>,
+    weight: &Tensor<Vector<F, N>>,
+    out: &mut Tensor<Vector<F, N>>,
     omega: f32,
     #[define(F)] _dtype: ElemType,
 ) {
-    let d = bias.shape(0);
-    let nd = zv.shape(0) * zv.shape(1);
+    let v = out.vector_size();
+    let d = bias.shape(0) / v;
+    let nd = zv.shape(0) * zv.shape(1) / v;
     let i = ABSOLUTE_POS;
     if i >= nd {
         terminate!();
     }
     let j = i % d;
-    let w = F::cast_from(omega);
+    let w = Vector::<F, N>::new(F::cast_from(omega));
     let z = w * (zv[i] + bias[j]);
-    let s = F::sin(z);
-    let c = F::cos(z);
+    let c = Vector::cos(z);
     let wc = w * c;
     let mixed =
         g[i + nd] * weight[j] + g[i + 2 * nd] * weight[d + j] + g[i + 3 * nd] * weight[2 * d + j];
-    out[i] = w * (g[i] * c - s * w * mixed);
+    out[i] = w * (g[i] * c - Vector::sin(z) * w * mixed);
     out[i + nd] = wc * g[i + nd];
     out[i + 2 * nd] = wc * g[i + 2 * nd];
     out[i + 3 * nd] = wc * g[i + 3 * nd];
@@ -154,38 +161,41 @@ fn sine_dual_input_backward_kernel<F: Float>(
 
 /// A value-only sine layer: `sin(ω(Z + b))`.
 #[cube(launch)]
-fn sine_forward_kernel<F: Float>(
-    zs: &Tensor<F>,
-    bias: &Tensor<F>,
-    out: &mut Tensor<F>,
+fn sine_forward_kernel<F: Float, N: Size>(
+    zs: &Tensor<Vector<F, N>>,
+    bias: &Tensor<Vector<F, N>>,
+    out: &mut Tensor<Vector<F, N>>,
     omega: f32,
     #[define(F)] _dtype: ElemType,
 ) {
-    let d = bias.shape(0);
+    let v = out.vector_size();
+    let d = bias.shape(0) / v;
     let i = ABSOLUTE_POS;
-    if i >= out.shape(0) * out.shape(1) {
+    if i >= out.shape(0) * out.shape(1) / v {
         terminate!();
     }
-    out[i] = F::sin(F::cast_from(omega) * (zs[i] + bias[i % d]));
+    let w = Vector::<F, N>::new(F::cast_from(omega));
+    out[i] = Vector::sin(w * (zs[i] + bias[i % d]));
 }
 
 /// Its backward: `ω g cos(ω(Z + b))`.
 #[cube(launch)]
-fn sine_backward_kernel<F: Float>(
-    zs: &Tensor<F>,
-    bias: &Tensor<F>,
-    g: &Tensor<F>,
-    out: &mut Tensor<F>,
+fn sine_backward_kernel<F: Float, N: Size>(
+    zs: &Tensor<Vector<F, N>>,
+    bias: &Tensor<Vector<F, N>>,
+    g: &Tensor<Vector<F, N>>,
+    out: &mut Tensor<Vector<F, N>>,
     omega: f32,
     #[define(F)] _dtype: ElemType,
 ) {
-    let d = bias.shape(0);
+    let v = out.vector_size();
+    let d = bias.shape(0) / v;
     let i = ABSOLUTE_POS;
-    if i >= out.shape(0) * out.shape(1) {
+    if i >= out.shape(0) * out.shape(1) / v {
         terminate!();
     }
-    let w = F::cast_from(omega);
-    out[i] = w * g[i] * F::cos(w * (zs[i] + bias[i % d]));
+    let w = Vector::<F, N>::new(F::cast_from(omega));
+    out[i] = w * g[i] * Vector::cos(w * (zs[i] + bias[i % d]));
 }
 
 static LAUNCHES: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
@@ -250,11 +260,13 @@ impl SineKernel {
             self.out_shape(rows, d),
             dtype,
         );
-        // One thread per element of the value block.
+        // Vectors of 4 along a row when rows split into them (d = 128 in doma's SIRENs).
+        let vector: usize = if d % 4 == 0 { 4 } else { 1 };
+        // One thread per vector of the value block.
         let threads = match self {
             SineKernel::DualForward | SineKernel::DualBackward => rows / 4 * d,
             _ => rows * d,
-        };
+        } / vector;
         if threads == 0 {
             return out;
         }
@@ -275,12 +287,13 @@ impl SineKernel {
         };
         match self {
             SineKernel::DualForward => sine_dual_forward_kernel::launch(
-                &client, cube_count, cube_dim, zs, bias, o, w, elem,
+                &client, cube_count, cube_dim, vector, zs, bias, o, w, elem,
             ),
             SineKernel::DualBackward => sine_dual_backward_kernel::launch(
                 &client,
                 cube_count,
                 cube_dim,
+                vector,
                 zs,
                 bias,
                 g(),
@@ -288,13 +301,14 @@ impl SineKernel {
                 w,
                 elem,
             ),
-            SineKernel::Forward => {
-                sine_forward_kernel::launch(&client, cube_count, cube_dim, zs, bias, o, w, elem)
-            }
+            SineKernel::Forward => sine_forward_kernel::launch(
+                &client, cube_count, cube_dim, vector, zs, bias, o, w, elem,
+            ),
             SineKernel::Backward => sine_backward_kernel::launch(
                 &client,
                 cube_count,
                 cube_dim,
+                vector,
                 zs,
                 bias,
                 g(),
@@ -306,6 +320,7 @@ impl SineKernel {
                 &client,
                 cube_count,
                 cube_dim,
+                vector,
                 zs,
                 bias,
                 weight(),
@@ -317,6 +332,7 @@ impl SineKernel {
                 &client,
                 cube_count,
                 cube_dim,
+                vector,
                 zs,
                 bias,
                 g(),
