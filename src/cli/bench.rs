@@ -40,7 +40,8 @@ pub struct BenchArgs {
     /// Rounds. The comparison alternates doma and PyTorch this many times (default 3). The
     /// table runs all its rows this many times, so that the methods alternate, and reports
     /// each row's median over the rounds (default 1): on a machine whose speed drifts
-    /// (lavapipe, shared hosts), a ratio of rows timed minutes apart is not one run.
+    /// (lavapipe, shared hosts), a ratio of rows timed minutes apart is not one run. (The
+    /// training-step rows also time the methods' steps in turn within a round.)
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub rounds: Option<u64>,
     /// Instead of the table: time per training step and peak memory for N ∈ {10³, 10⁴,

@@ -180,44 +180,74 @@ pub fn fit_step_row(
     warmup: usize,
     steps: usize,
 ) -> Result<BenchRow> {
+    let mut rows = fit_step_rows(backend, &[method], smoothness, warmup, steps)?;
+    Ok(rows.remove(0))
+}
+
+/// The `fit_step` (or `fit_step_l1`) rows of several methods, timed **step by step in
+/// turn**: one trainer per method, and each round of the loop times one step of each. On
+/// a machine whose speed drifts (lavapipe on a shared host: ±20 % within a minute), rows
+/// timed one after the other compare different machines; steps in turn see the same one.
+pub fn fit_step_rows(
+    backend: BackendKind,
+    methods: &[JacobianKind],
+    smoothness: bool,
+    warmup: usize,
+    steps: usize,
+) -> Result<Vec<BenchRow>> {
     let device = backend.device()?;
     let seq = benchmark_sequence(Motion::Rotation, 0)?;
-    let config = FitConfig::doma(DomaFieldConfig::new(Variant::Affinity))
-        .with_smoothness_weight(if smoothness { 0.1 } else { 0.0 })
-        .with_jacobian(method);
-    let mut trainer = Trainer::from_config(&config, &seq.train, &device)?;
+    let config = |method| {
+        FitConfig::doma(DomaFieldConfig::new(Variant::Affinity))
+            .with_smoothness_weight(if smoothness { 0.1 } else { 0.0 })
+            .with_jacobian(method)
+    };
+    let mut trainers = methods
+        .iter()
+        .map(|&m| Trainer::from_config(&config(m), &seq.train, &device))
+        .collect::<Result<Vec<_>>>()?;
     let n = seq.train.points();
     // REFERENCE §4.2: min(1024, N) jittered training points, so 750 here.
-    let h_points = config
+    let h_points = config(JacobianKind::Autodiff)
         .smoothness_sampling
         .max_points
         .map_or(n, |m| m.min(n));
     let frames = seq.train.frames();
-    let mut k = 0;
-    let ms = median_ms(
-        || {
-            trainer.step(k % frames, config.schedule.learning_rate)?;
-            k += 1;
-            sync(&device)
-        },
-        warmup,
-        steps,
-    )?;
+    let lr = config(JacobianKind::Autodiff).schedule.learning_rate;
+    let mut times = vec![Vec::with_capacity(steps); methods.len()];
+    for k in 0..warmup + steps.max(1) {
+        for (trainer, times) in trainers.iter_mut().zip(&mut times) {
+            let start = Instant::now();
+            trainer.step(k % frames, lr)?;
+            sync(&device)?;
+            if k >= warmup {
+                times.push(start.elapsed().as_secs_f64() * 1e3);
+            }
+        }
+    }
     let (kind, points, flops) = if smoothness {
         let flops = siren_flops(n, &widths()) + siren_flops(4 * h_points, &widths());
         (BenchKind::FitStep, h_points, flops)
     } else {
         (BenchKind::FitStepL1, n, siren_flops(n, &widths()))
     };
-    Ok(BenchRow {
-        kind,
-        backend,
-        method: Some(method),
-        points,
-        ms,
-        gflops: flops / (ms * 1e6),
-        peak_percent: f64::NAN,
-    })
+    Ok(methods
+        .iter()
+        .zip(times)
+        .map(|(&method, mut times)| {
+            times.sort_by(f64::total_cmp);
+            let ms = times[times.len() / 2];
+            BenchRow {
+                kind,
+                backend,
+                method: Some(method),
+                points,
+                ms,
+                gflops: flops / (ms * 1e6),
+                peak_percent: f64::NAN,
+            }
+        })
+        .collect())
 }
 
 /// The `warp` row: one chunk of evaluation (Affinity, d = 128, n = 2) through `method`'s
@@ -310,11 +340,13 @@ pub fn run(job: &BenchJob, mut on_row: impl FnMut(&BenchRow)) -> Result<Vec<Benc
         for round in 0..rounds {
             let mut this_round = Vec::new();
             for smoothness in [true, false] {
-                for &method in &job.methods {
-                    this_round.push(fit_step_row(
-                        backend, method, smoothness, job.warmup, job.steps,
-                    )?);
-                }
+                this_round.extend(fit_step_rows(
+                    backend,
+                    &job.methods,
+                    smoothness,
+                    job.warmup,
+                    job.steps,
+                )?);
             }
             for &points in &job.points {
                 for &method in &job.methods {
