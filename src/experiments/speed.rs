@@ -62,6 +62,12 @@ pub struct BenchRow {
     /// `gflops` as a percentage of the GEMM peak measured on the same backend in the same
     /// run.
     pub peak_percent: f64,
+    /// Training-step rows of a method other than Autodiff, timed in turn with it: the
+    /// median over steps of Autodiff's step time over this method's, each pair timed back
+    /// to back (over rounds, the median of the rounds'). A ratio that the machine's drift
+    /// between steps cannot move, unlike the ratio of two medians.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub speedup: Option<f64>,
 }
 
 /// What to measure.
@@ -168,6 +174,7 @@ pub fn jacobian_row(
         ms,
         gflops: siren_flops(4 * points, &widths()) / (ms * 1e6),
         peak_percent: f64::NAN,
+        speedup: None,
     })
 }
 
@@ -231,12 +238,20 @@ pub fn fit_step_rows(
     } else {
         (BenchKind::FitStepL1, n, siren_flops(n, &widths()))
     };
+    let autodiff = methods.iter().position(|&m| m == JacobianKind::Autodiff);
+    let speedups: Vec<Option<f64>> = (0..methods.len())
+        .map(|i| {
+            let a = autodiff.filter(|&a| a != i)?;
+            let ratios = times[a].iter().zip(&times[i]).map(|(a, m)| a / m).collect();
+            Some(median(ratios))
+        })
+        .collect();
     Ok(methods
         .iter()
         .zip(times)
-        .map(|(&method, mut times)| {
-            times.sort_by(f64::total_cmp);
-            let ms = times[times.len() / 2];
+        .zip(speedups)
+        .map(|((&method, times), speedup)| {
+            let ms = median(times);
             BenchRow {
                 kind,
                 backend,
@@ -245,9 +260,16 @@ pub fn fit_step_rows(
                 ms,
                 gflops: flops / (ms * 1e6),
                 peak_percent: f64::NAN,
+                speedup,
             }
         })
         .collect())
+}
+
+/// The median of `values` (the upper one of an even count).
+fn median(mut values: Vec<f64>) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values[values.len() / 2]
 }
 
 /// The `warp` row: one chunk of evaluation (Affinity, d = 128, n = 2) through `method`'s
@@ -290,6 +312,7 @@ pub fn warp_row(
         ms,
         gflops: forward / (ms * 1e6),
         peak_percent: f64::NAN,
+        speedup: None,
     })
 }
 
@@ -321,6 +344,7 @@ pub fn gemm_row(backend: BackendKind, warmup: usize, steps: usize) -> Result<Ben
         ms: best,
         gflops: 2.0 * (m * k * n) as f64 / (best * 1e6),
         peak_percent: 100.0,
+        speedup: None,
     })
 }
 
@@ -361,8 +385,11 @@ pub fn run(job: &BenchJob, mut on_row: impl FnMut(&BenchRow)) -> Result<Vec<Benc
             if rounds > 1 {
                 for r in &this_round {
                     let method = r.method.map_or("-".into(), |m| m.to_string());
+                    let speedup = r
+                        .speedup
+                        .map_or(String::new(), |x| format!(" ({x:.2}× Autodiff, paired)"));
                     eprintln!(
-                        "round {round}: {:?} {} {method} {} points: {:.2} ms",
+                        "round {round}: {:?} {} {method} {} points: {:.2} ms{speedup}",
                         r.kind, r.backend, r.points, r.ms
                     );
                 }
@@ -373,9 +400,11 @@ pub fn run(job: &BenchJob, mut on_row: impl FnMut(&BenchRow)) -> Result<Vec<Benc
             let mut times: Vec<f64> = measured.iter().map(|r| r[i].ms).collect();
             times.sort_by(f64::total_cmp);
             let mut row = measured[0][i].clone();
-            let median = times[times.len() / 2];
-            row.gflops *= row.ms / median;
-            row.ms = median;
+            let median_ms = times[times.len() / 2];
+            row.gflops *= row.ms / median_ms;
+            row.ms = median_ms;
+            let speedups: Vec<f64> = measured.iter().filter_map(|r| r[i].speedup).collect();
+            row.speedup = (!speedups.is_empty()).then(|| median(speedups));
             row.peak_percent = 100.0 * row.gflops / peak_gflops;
             on_row(&row);
             rows.push(row);
@@ -572,10 +601,10 @@ pub fn comparison_table(rows: &[Comparison]) -> String {
 /// The rows as a fixed-width table.
 pub fn table(rows: &[BenchRow]) -> String {
     let mut s = format!(
-        "{:<11} {:<8} {:<9} {:>7} {:>10} {:>8} {:>7}\n",
-        "kind", "backend", "method", "points", "ms/step", "GFLOP/s", "% peak"
+        "{:<11} {:<8} {:<9} {:>7} {:>10} {:>8} {:>7} {:>9}\n",
+        "kind", "backend", "method", "points", "ms/step", "GFLOP/s", "% peak", "speed-up"
     );
-    s += &"-".repeat(66);
+    s += &"-".repeat(76);
     s += "\n";
     for r in rows {
         let kind = match r.kind {
@@ -586,10 +615,13 @@ pub fn table(rows: &[BenchRow]) -> String {
             BenchKind::Gemm => "gemm",
         };
         let method = r.method.map_or("-".to_string(), |m| m.to_string());
-        s += &format!(
-            "{:<11} {:<8} {:<9} {:>7} {:>10.2} {:>8.1} {:>7.1}\n",
-            kind, r.backend, method, r.points, r.ms, r.gflops, r.peak_percent
+        let speedup = r.speedup.map_or(String::new(), |x| format!("{x:.2}×"));
+        let line = format!(
+            "{:<11} {:<8} {:<9} {:>7} {:>10.2} {:>8.1} {:>7.1} {:>9}",
+            kind, r.backend, method, r.points, r.ms, r.gflops, r.peak_percent, speedup
         );
+        s += line.trim_end();
+        s += "\n";
     }
     s
 }
@@ -622,5 +654,27 @@ mod tests {
         // Medians 5 and 13: 2.6x.
         assert!((c.ratio() - 2.6).abs() < 1e-12);
         assert!(comparison_table(&[c]).contains("2.60x"));
+    }
+
+    #[test]
+    fn the_table_states_a_paired_speed_up_and_pads_nothing_after_the_last_column() {
+        assert_eq!(median(vec![3.0, 1.0, 2.0]), 2.0);
+        let row = |method, speedup| BenchRow {
+            kind: BenchKind::FitStep,
+            backend: BackendKind::Flex,
+            method: Some(method),
+            points: 750,
+            ms: 10.0,
+            gflops: 1.0,
+            peak_percent: 50.0,
+            speedup,
+        };
+        let t = table(&[
+            row(JacobianKind::Autodiff, None),
+            row(JacobianKind::Analytic, Some(1.256)),
+        ]);
+        let lines: Vec<&str> = t.lines().collect();
+        assert!(lines[2].ends_with("50.0"), "{:?}", lines[2]);
+        assert!(lines[3].ends_with("1.26×"), "{:?}", lines[3]);
     }
 }
