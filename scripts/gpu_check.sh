@@ -5,7 +5,8 @@
 #   synthetic.json    one full Affinity-H fit on wgpu (1000 iterations, rotation), its EPE
 #                     and seconds: the issue's goal is < 15 s (the paper: 96 s, TITAN RTX)
 #   tests.log         the wgpu tests (kernels against their reference, Analytic against
-#                     Autodiff, wgpu against flex), with CI=true so that a missing adapter fails
+#                     Autodiff, wgpu against flex, no host read inside a step), with CI=true
+#                     so that a missing adapter fails
 # Usage: scripts/gpu_check.sh [DOMA_BINARY]   (builds the release binary when none is given)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -22,6 +23,6 @@ nvidia-smi -L > "$OUT/gpu.txt" 2>&1 || true
 "$DOMA" synthetic --motion rotation --variant affinity --reg h --backend wgpu \
   --json "$OUT/synthetic.json" 2>&1 | tee "$OUT/synthetic.log"
 if [ -z "${1:-}" ]; then
-  CI=true cargo test --release --test analytic --test analytic_kernels --test fit \
+  CI=true cargo test --release --test analytic --test analytic_kernels --test fit --test host_sync \
     2>&1 | tee "$OUT/tests.log"
 fi
