@@ -60,11 +60,26 @@ impl<B: SirenOps> Backward<B, 2> for SirenBackward {
     }
 }
 
-/// The backward of a sine layer; `dual` says whether its input stacks values and
-/// tangents (`sine_dual_layer`) or holds values only (`sine_layer`).
+/// What a sine layer's input holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum LayerInput {
+    /// Values only (`sine_layer`).
+    Values,
+    /// Values and their tangents, stacked (`sine_dual_layer`).
+    Stacked,
+    /// The network's input, whose tangents are the seeds `e_x, e_y, e_z`, not built
+    /// (`sine_dual_input_layer`).
+    Seeded,
+}
+
+/// The backward of a sine layer with input `S`, pre-activation `zs = S W` and the
+/// activation's backward `G` (`G_z`: its value rows): `g_b = Σ_rows G_z`, `g_W = Sᵀ G`,
+/// `g_S = G Wᵀ`. For the [`LayerInput::Seeded`] first layer, `S` is the input `X` alone:
+/// `g_W = Xᵀ G_z + [Σ_rows G_ż,x; Σ_rows G_ż,y; Σ_rows G_ż,z; 0]`, the second term being the
+/// seeds' part `Σ_k e_kᵀ G_ż,k` of `S_0ᵀ G` without building `S_0`, and `g_X = G_z Wᵀ`.
 #[derive(Debug)]
 struct SineLayerBackward {
-    dual: bool,
+    input: LayerInput,
 }
 
 impl<B: SirenBackend> Backward<B, 3> for SineLayerBackward {
@@ -80,114 +95,52 @@ impl<B: SirenBackend> Backward<B, 3> for SineLayerBackward {
         let [node_s, node_w, node_b] = ops.parents;
         let grad = grads.consume::<B>(&ops.node);
         let (s_id, w_id, b_id, zs, omega) = ops.state;
-        let stacked: FloatTensor<B> = checkpointer.retrieve_node_output(s_id);
+        let input: FloatTensor<B> = checkpointer.retrieve_node_output(s_id);
         let weight: FloatTensor<B> = checkpointer.retrieve_node_output(w_id);
         let bias: FloatTensor<B> = checkpointer.retrieve_node_output(b_id);
         let [r, d] = zs.shape().dims::<2>();
-        let (g_zs, value_rows) = if self.dual {
-            (
+        let rows = |t: FloatTensor<B>, from: usize, to: usize| {
+            B::float_slice(t, &[Slice::from(from..to), Slice::from(0..d)])
+        };
+        let (g, value_rows) = match self.input {
+            LayerInput::Values => (B::sine_activation_backward(zs, bias, grad, omega), r),
+            LayerInput::Stacked => (
                 B::sine_dual_activation_backward(zs, bias, grad, omega),
                 r / 4,
-            )
-        } else {
-            (B::sine_activation_backward(zs, bias, grad, omega), r)
+            ),
+            LayerInput::Seeded => (
+                B::sine_dual_input_activation_backward(zs, weight.clone(), bias, grad, omega),
+                r,
+            ),
+        };
+        // The rows of G that meet S in `zs = S W`: all of them, except for the first layer,
+        // whose tangent rows met the seeds.
+        let g_s_rows = match self.input {
+            LayerInput::Seeded => rows(g.clone(), 0, value_rows),
+            _ => g.clone(),
         };
         if let Some(node) = node_b {
             // The bias enters the values only; tangents do not see it.
-            let g_z = B::float_slice(
-                g_zs.clone(),
-                &[Slice::from(0..value_rows), Slice::from(0..d)],
-            );
+            let g_z = rows(g.clone(), 0, value_rows);
             let g_b = B::float_reshape(B::float_sum_dim(g_z, 0), Shape::new([d]));
             grads.register::<B>(node.id, g_b);
         }
         if let Some(node) = node_w {
-            let g_w = B::float_matmul(B::float_transpose(stacked), g_zs.clone());
+            let mut g_w = B::float_matmul(B::float_transpose(input), g_s_rows.clone());
+            if self.input == LayerInput::Seeded {
+                let n = value_rows;
+                let tangents = B::float_reshape(rows(g, n, 4 * n), Shape::new([3, n, d]));
+                let seeds = B::float_reshape(B::float_sum_dim(tangents, 1), Shape::new([3, d]));
+                let top = [Slice::from(0..3), Slice::from(0..d)];
+                let sum = B::float_add(B::float_slice(g_w.clone(), &top), seeds);
+                g_w = B::float_slice_assign(g_w, &top, sum);
+            }
             grads.register::<B>(node.id, g_w);
         }
         if let Some(node) = node_s {
-            let g_s = B::float_matmul(g_zs, B::float_transpose(weight));
+            let g_s = B::float_matmul(g_s_rows, B::float_transpose(weight));
             grads.register::<B>(node.id, g_s);
         }
-    }
-}
-
-/// The backward of the first dual sine layer
-/// ([`super::SirenBackend::sine_dual_input_layer`]). With `G = [G_z; G_ż]` the activation's
-/// backward: `g_b = Σ_rows G_z`, `g_X = G_z Wᵀ`, and
-/// `g_W = Xᵀ G_z + [Σ_rows G_ż,x; Σ_rows G_ż,y; Σ_rows G_ż,z; 0]`, the second term being
-/// the seeds' part `Σ_k e_kᵀ G_ż,k` of `S_0ᵀ G` without building `S_0`.
-#[derive(Debug)]
-struct InputLayerBackward;
-
-impl<B: SirenBackend> Backward<B, 3> for InputLayerBackward {
-    /// `X`, `W` and `b` (checkpointed), `z_v = X W`, and `ω`.
-    type State = (NodeId, NodeId, NodeId, FloatTensor<B>, f64);
-
-    fn backward(
-        self,
-        ops: Ops<Self::State, 3>,
-        grads: &mut Gradients,
-        checkpointer: &mut Checkpointer,
-    ) {
-        let [node_x, node_w, node_b] = ops.parents;
-        let grad = grads.consume::<B>(&ops.node);
-        let (x_id, w_id, b_id, zv, omega) = ops.state;
-        let input: FloatTensor<B> = checkpointer.retrieve_node_output(x_id);
-        let weight: FloatTensor<B> = checkpointer.retrieve_node_output(w_id);
-        let bias: FloatTensor<B> = checkpointer.retrieve_node_output(b_id);
-        let [n, d] = zv.shape().dims::<2>();
-        let g = B::sine_dual_input_activation_backward(zv, weight.clone(), bias, grad, omega);
-        let g_z = B::float_slice(g.clone(), &[Slice::from(0..n), Slice::from(0..d)]);
-        if let Some(node) = node_b {
-            let g_b = B::float_reshape(B::float_sum_dim(g_z.clone(), 0), Shape::new([d]));
-            grads.register::<B>(node.id, g_b);
-        }
-        if let Some(node) = node_w {
-            let g_w = B::float_matmul(B::float_transpose(input), g_z.clone());
-            let tangents = B::float_reshape(
-                B::float_slice(g, &[Slice::from(n..4 * n), Slice::from(0..d)]),
-                Shape::new([3, n, d]),
-            );
-            let seeds = B::float_reshape(B::float_sum_dim(tangents, 1), Shape::new([3, d]));
-            let top = [Slice::from(0..3), Slice::from(0..d)];
-            let sum = B::float_add(B::float_slice(g_w.clone(), &top), seeds);
-            grads.register::<B>(node.id, B::float_slice_assign(g_w, &top, sum));
-        }
-        if let Some(node) = node_x {
-            grads.register::<B>(node.id, B::float_matmul(g_z, B::float_transpose(weight)));
-        }
-    }
-}
-
-/// Records the first dual sine layer on the autodiff graph with [`InputLayerBackward`].
-fn tracked_input_layer<B: SirenBackend, C: CheckpointStrategy>(
-    input: FloatTensor<Autodiff<B, C>>,
-    weight: FloatTensor<Autodiff<B, C>>,
-    bias: FloatTensor<Autodiff<B, C>>,
-    omega: f64,
-) -> FloatTensor<Autodiff<B, C>> {
-    match InputLayerBackward
-        .prepare::<C>([input.node(), weight.node(), bias.node()])
-        .compute_bound()
-        .stateful()
-    {
-        OpsKind::Tracked(mut prep) => {
-            let x_id = prep.checkpoint(&input);
-            let w_id = prep.checkpoint(&weight);
-            let b_id = prep.checkpoint(&bias);
-            let weight = weight.into_primitive();
-            let zv = B::float_matmul(input.into_primitive(), weight.clone());
-            let out =
-                B::sine_dual_input_activation(zv.clone(), weight, bias.into_primitive(), omega);
-            prep.finish((x_id, w_id, b_id, zv, omega), out)
-        }
-        OpsKind::UnTracked(prep) => prep.finish(B::sine_dual_input_layer(
-            input.into_primitive(),
-            weight.into_primitive(),
-            bias.into_primitive(),
-            omega,
-        )),
     }
 }
 
@@ -197,9 +150,9 @@ fn tracked_layer<B: SirenBackend, C: CheckpointStrategy>(
     weight: FloatTensor<Autodiff<B, C>>,
     bias: FloatTensor<Autodiff<B, C>>,
     omega: f64,
-    dual: bool,
+    kind: LayerInput,
 ) -> FloatTensor<Autodiff<B, C>> {
-    match (SineLayerBackward { dual })
+    match (SineLayerBackward { input: kind })
         .prepare::<C>([input.node(), weight.node(), bias.node()])
         .compute_bound()
         .stateful()
@@ -208,12 +161,15 @@ fn tracked_layer<B: SirenBackend, C: CheckpointStrategy>(
             let s_id = prep.checkpoint(&input);
             let w_id = prep.checkpoint(&weight);
             let b_id = prep.checkpoint(&bias);
-            let zs = B::float_matmul(input.into_primitive(), weight.into_primitive());
+            let weight = weight.into_primitive();
+            let zs = B::float_matmul(input.into_primitive(), weight.clone());
             let bias = bias.into_primitive();
-            let out = if dual {
-                B::sine_dual_activation(zs.clone(), bias, omega)
-            } else {
-                B::sine_activation(zs.clone(), bias, omega)
+            let out = match kind {
+                LayerInput::Values => B::sine_activation(zs.clone(), bias, omega),
+                LayerInput::Stacked => B::sine_dual_activation(zs.clone(), bias, omega),
+                LayerInput::Seeded => {
+                    B::sine_dual_input_activation(zs.clone(), weight, bias, omega)
+                }
             };
             prep.finish((s_id, w_id, b_id, zs, omega), out)
         }
@@ -223,12 +179,11 @@ fn tracked_layer<B: SirenBackend, C: CheckpointStrategy>(
                 weight.into_primitive(),
                 bias.into_primitive(),
             );
-            let out = if dual {
-                B::sine_dual_layer(input, weight, bias, omega)
-            } else {
-                B::sine_layer(input, weight, bias, omega)
-            };
-            prep.finish(out)
+            prep.finish(match kind {
+                LayerInput::Values => B::sine_layer(input, weight, bias, omega),
+                LayerInput::Stacked => B::sine_dual_layer(input, weight, bias, omega),
+                LayerInput::Seeded => B::sine_dual_input_layer(input, weight, bias, omega),
+            })
         }
     }
 }
@@ -240,7 +195,7 @@ impl<B: SirenOps + SirenBackend, C: CheckpointStrategy> SirenBackend for Autodif
         bias: FloatTensor<Self>,
         omega: f64,
     ) -> FloatTensor<Self> {
-        tracked_input_layer::<B, C>(input, weight, bias, omega)
+        tracked_layer::<B, C>(input, weight, bias, omega, LayerInput::Seeded)
     }
 
     fn sine_dual_layer(
@@ -249,7 +204,7 @@ impl<B: SirenOps + SirenBackend, C: CheckpointStrategy> SirenBackend for Autodif
         bias: FloatTensor<Self>,
         omega: f64,
     ) -> FloatTensor<Self> {
-        tracked_layer::<B, C>(stacked, weight, bias, omega, true)
+        tracked_layer::<B, C>(stacked, weight, bias, omega, LayerInput::Stacked)
     }
 
     fn sine_layer(
@@ -258,7 +213,7 @@ impl<B: SirenOps + SirenBackend, C: CheckpointStrategy> SirenBackend for Autodif
         bias: FloatTensor<Self>,
         omega: f64,
     ) -> FloatTensor<Self> {
-        tracked_layer::<B, C>(input, weight, bias, omega, false)
+        tracked_layer::<B, C>(input, weight, bias, omega, LayerInput::Values)
     }
 
     fn siren(

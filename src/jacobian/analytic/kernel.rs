@@ -53,19 +53,14 @@ fn sine_dual_forward_kernel<F: Float, N: Size>(
     #[define(F)] _dtype: ElemType,
 ) {
     let v = out.vector_size();
-    let d = bias.shape(0) / v;
     let nd = out.shape(0) / 4 * out.shape(1) / v;
     let i = ABSOLUTE_POS;
     if i >= nd {
         terminate!();
     }
     let w = Vector::<F, N>::new(F::cast_from(omega));
-    let z = w * (zs[i] + bias[i % d]);
-    let wc = w * Vector::cos(z);
-    out[i] = Vector::sin(z);
-    out[i + nd] = wc * zs[i + nd];
-    out[i + 2 * nd] = wc * zs[i + 2 * nd];
-    out[i + 3 * nd] = wc * zs[i + 3 * nd];
+    let z = w * (zs[i] + bias[i % (bias.shape(0) / v)]);
+    write_dual(out, i, nd, z, w, zs[i + nd], zs[i + 2 * nd], zs[i + 3 * nd]);
 }
 
 /// Its backward, from the upstream gradient `g = [g_h; g_ḣ_1; g_ḣ_2; g_ḣ_3]`:
@@ -80,22 +75,24 @@ fn sine_dual_backward_kernel<F: Float, N: Size>(
     #[define(F)] _dtype: ElemType,
 ) {
     let v = out.vector_size();
-    let d = bias.shape(0) / v;
     let nd = out.shape(0) / 4 * out.shape(1) / v;
     let i = ABSOLUTE_POS;
     if i >= nd {
         terminate!();
     }
     let w = Vector::<F, N>::new(F::cast_from(omega));
-    let z = w * (zs[i] + bias[i % d]);
-    let c = Vector::cos(z);
-    let wc = w * c;
-    let mixed =
-        g[i + nd] * zs[i + nd] + g[i + 2 * nd] * zs[i + 2 * nd] + g[i + 3 * nd] * zs[i + 3 * nd];
-    out[i] = w * (g[i] * c - Vector::sin(z) * w * mixed);
-    out[i + nd] = wc * g[i + nd];
-    out[i + 2 * nd] = wc * g[i + 2 * nd];
-    out[i + 3 * nd] = wc * g[i + 3 * nd];
+    let z = w * (zs[i] + bias[i % (bias.shape(0) / v)]);
+    write_dual_backward(
+        out,
+        g,
+        i,
+        nd,
+        z,
+        w,
+        zs[i + nd],
+        zs[i + 2 * nd],
+        zs[i + 3 * nd],
+    );
 }
 
 /// The first dual sine layer, whose tangent pre-activations are `W`'s rows (the input's
@@ -120,11 +117,16 @@ fn sine_dual_input_forward_kernel<F: Float, N: Size>(
     let j = i % d;
     let w = Vector::<F, N>::new(F::cast_from(omega));
     let z = w * (zv[i] + bias[j]);
-    let wc = w * Vector::cos(z);
-    out[i] = Vector::sin(z);
-    out[i + nd] = wc * weight[j];
-    out[i + 2 * nd] = wc * weight[d + j];
-    out[i + 3 * nd] = wc * weight[2 * d + j];
+    write_dual(
+        out,
+        i,
+        nd,
+        z,
+        w,
+        weight[j],
+        weight[d + j],
+        weight[2 * d + j],
+    );
 }
 
 /// Its backward, from `g = [g_h; g_ḣ_1; g_ḣ_2; g_ḣ_3]` (`[4N, d]`):
@@ -149,10 +151,59 @@ fn sine_dual_input_backward_kernel<F: Float, N: Size>(
     let j = i % d;
     let w = Vector::<F, N>::new(F::cast_from(omega));
     let z = w * (zv[i] + bias[j]);
+    write_dual_backward(
+        out,
+        g,
+        i,
+        nd,
+        z,
+        w,
+        weight[j],
+        weight[d + j],
+        weight[2 * d + j],
+    );
+}
+
+/// A dual layer's output at vector `i` of the value block (`nd` vectors a block): `sin z`,
+/// and `ω cos z ⊙ Z_k` for the tangent pre-activations `Z_1, Z_2, Z_3` (`ż_k = ω Z_k`).
+#[cube]
+#[allow(clippy::too_many_arguments)]
+fn write_dual<F: Float, N: Size>(
+    out: &mut Tensor<Vector<F, N>>,
+    i: usize,
+    nd: usize,
+    z: Vector<F, N>,
+    w: Vector<F, N>,
+    z1: Vector<F, N>,
+    z2: Vector<F, N>,
+    z3: Vector<F, N>,
+) {
+    let wc = w * Vector::cos(z);
+    out[i] = Vector::sin(z);
+    out[i + nd] = wc * z1;
+    out[i + 2 * nd] = wc * z2;
+    out[i + 3 * nd] = wc * z3;
+}
+
+/// Its backward at vector `i`, from the upstream gradient `g`:
+/// `ω (g_h cos z − ω sin z Σ_k g_ḣ_k Z_k)` for the value and `ω cos z ⊙ g_ḣ_k` for each
+/// tangent.
+#[cube]
+#[allow(clippy::too_many_arguments)]
+fn write_dual_backward<F: Float, N: Size>(
+    out: &mut Tensor<Vector<F, N>>,
+    g: &Tensor<Vector<F, N>>,
+    i: usize,
+    nd: usize,
+    z: Vector<F, N>,
+    w: Vector<F, N>,
+    z1: Vector<F, N>,
+    z2: Vector<F, N>,
+    z3: Vector<F, N>,
+) {
     let c = Vector::cos(z);
     let wc = w * c;
-    let mixed =
-        g[i + nd] * weight[j] + g[i + 2 * nd] * weight[d + j] + g[i + 3 * nd] * weight[2 * d + j];
+    let mixed = g[i + nd] * z1 + g[i + 2 * nd] * z2 + g[i + 3 * nd] * z3;
     out[i] = w * (g[i] * c - Vector::sin(z) * w * mixed);
     out[i + nd] = wc * g[i + nd];
     out[i + 2 * nd] = wc * g[i + 2 * nd];
