@@ -214,13 +214,15 @@ pub fn fit_step_rows(
         .map(|&m| Trainer::from_config(&config(m), &seq.train, &device))
         .collect::<Result<Vec<_>>>()?;
     let n = seq.train.points();
+    // The sampling and schedule do not depend on the method.
+    let common = config(JacobianKind::Autodiff);
     // REFERENCE §4.2: min(1024, N) jittered training points, so 750 here.
-    let h_points = config(JacobianKind::Autodiff)
+    let h_points = common
         .smoothness_sampling
         .max_points
         .map_or(n, |m| m.min(n));
     let frames = seq.train.frames();
-    let lr = config(JacobianKind::Autodiff).schedule.learning_rate;
+    let lr = common.schedule.learning_rate;
     let mut times = vec![Vec::with_capacity(steps); methods.len()];
     for k in 0..warmup + steps.max(1) {
         for (trainer, times) in trainers.iter_mut().zip(&mut times) {
