@@ -1,4 +1,4 @@
-//! The spatial Jacobian of a SIREN, behind one trait (DESIGN §2).
+//! The spatial Jacobian of a SIREN, behind one trait (docs/design.md §2).
 //!
 //! The smoothness loss `L_H` (Eq. 13) and the elasticity loss need `∂o/∂x` inside the
 //! loss, and the loss is then differentiated with respect to the weights θ. Burn 0.22

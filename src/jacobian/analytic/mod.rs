@@ -1,29 +1,32 @@
-//! `Analytic`: the hand-derived SIREN Jacobian (paper Eq. 6; DESIGN §2) as one custom
-//! Burn operation for the whole network, with a hand-written backward.
+//! `Analytic`: the hand-derived SIREN Jacobian (paper Eq. 6; docs/design.md §2.2) as
+//! custom Burn operations with a hand-written backward.
 //!
 //! The network works on the *stacked* matrix `S = [h; ḣ_x; ḣ_y; ḣ_z]` (`[4N, d]`): the
 //! values and their three spatial tangents. Per sine layer, one matmul `Z = S W` gives
 //! both the pre-activation `z = ω(Z[0..N] + b)` and its tangents `ż = ω Z[N..4N]`, and the
 //! layer returns `[sin z; cos z ⊙ ż]`. The output layer is one more matmul. The backward
-//! is two matmuls and one elementwise pass per layer, with no autodiff graph inside the
-//! network: the whole SIREN is one node.
+//! is two matmuls and one elementwise pass per layer, with no autodiff graph inside.
 //!
-//! The operation is a Burn backend extension ([`SirenBackend`], one method, [`SirenBackend::siren`]),
-//! split like Burn's `custom-cubecl-kernel` example:
-//! - [`SirenOps`] is the per-backend forward (keeping what the backward needs) and backward;
-//! - [`net`] implements it once on raw CPU buffers, with workspaces reused between steps,
-//!   and [`host`] lends it flex's and ndarray's buffers;
-//! - [`forward`] implements it from tensor primitives (the wgpu path, [`kernel`]);
-//! - [`backward`] records it on the `Autodiff` graph.
+//! The op is a Burn backend extension ([`SirenBackend`]), shelved by backend:
+//!
+//! | path | used by | files |
+//! |---|---|---|
+//! | the whole SIREN as one op on raw buffers | flex, ndarray | `cpu/` (`real`, `gemm`, `rows`, `net`, `host`) |
+//! | one op per sine layer, CubeCL kernels, Burn's matmuls | wgpu | `wgpu/` (`kernels.rs`: the `#[cube]` functions) |
+//! | the op from Burn's tensor primitives: the oracle | tests; other float types | `reference.rs` |
+//! | the backward nodes on Burn's `Autodiff` graph | every backend | `autodiff.rs` |
+//!
+//! [`analytic_siren`] picks the path for a device; [`Analytic`] is the
+//! [`JacobianMethod`] on top.
 
 #![allow(deprecated)] // `NdArray` stays selectable although Burn deprecates it.
 
-pub mod backward;
-pub mod cpu;
-pub mod forward;
-pub mod host;
-pub mod kernel;
-pub mod net;
+mod autodiff;
+mod cpu;
+mod reference;
+mod wgpu;
+
+pub use wgpu::kernel_launches;
 
 use burn::backend::{Dispatch, backend_extension, tensor::FloatTensor};
 use burn::tensor::Tensor;
@@ -31,59 +34,127 @@ use burn::tensor::Tensor;
 use super::{Dual, JacobianMethod};
 use crate::siren::Siren;
 
+/// What the whole-SIREN op is asked for: the layers' shapes, `ω`, and whether tangents
+/// ride along.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OpSpec {
+    /// Each layer's `[d_in, d_out]`: the sine layers, then the output layer.
+    pub shapes: Vec<[usize; 2]>,
+    /// SIREN's `ω` (Eq. 1), shared by every sine layer.
+    pub omega: f64,
+    /// Whether the input's first three columns are seeded with `e_x, e_y, e_z` and the
+    /// output stacks the values and the three tangents (Eq. 6).
+    pub dual: bool,
+}
+
+impl OpSpec {
+    /// The spec of `siren`'s layers.
+    pub fn of(siren: &Siren, dual: bool) -> Self {
+        let shapes = siren
+            .sine
+            .iter()
+            .chain(std::iter::once(&siren.output))
+            .map(|layer| layer.weight.dims())
+            .collect();
+        OpSpec {
+            shapes,
+            omega: siren.omega,
+            dual,
+        }
+    }
+
+    /// The number of parameters, weights and biases.
+    pub fn param_count(&self) -> usize {
+        self.shapes.iter().map(|[i, o]| i * o + o).sum()
+    }
+
+    /// The output's rows for `n` points: `4n` when dual, else `n`.
+    pub fn rows(&self, n: usize) -> usize {
+        if self.dual { 4 * n } else { n }
+    }
+
+    /// The output's columns (the output layer's width).
+    pub fn outputs(&self) -> usize {
+        self.shapes.last().map_or(0, |s| s[1])
+    }
+}
+
+/// The six elementwise passes of a sine layer: what a CubeCL kernel implements, what
+/// [`activation`] runs, and (for a forward pass) what kind of layer an autodiff node holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SineKernel {
+    /// [`SirenBackend::sine_dual_activation`] on `zs` (`[4N, d]`).
+    DualForward,
+    /// [`SirenBackend::sine_dual_activation_backward`] on `zs` and `grad` (`[4N, d]`).
+    DualBackward,
+    /// [`SirenBackend::sine_activation`] on `zs` (`[N, d]`).
+    Forward,
+    /// [`SirenBackend::sine_activation_backward`] on `zs` and `grad` (`[N, d]`).
+    Backward,
+    /// [`SirenBackend::sine_dual_input_activation`] on `zs = z_v` (`[N, d]`) and `weight`.
+    DualInputForward,
+    /// [`SirenBackend::sine_dual_input_activation_backward`] on `zs = z_v` (`[N, d]`),
+    /// `weight` and `grad` (`[4N, d]`).
+    DualInputBackward,
+}
+
+impl SineKernel {
+    /// The backward pass of a forward pass (a backward pass is its own).
+    pub fn backward(self) -> Self {
+        match self {
+            SineKernel::DualForward => SineKernel::DualBackward,
+            SineKernel::Forward => SineKernel::Backward,
+            SineKernel::DualInputForward => SineKernel::DualInputBackward,
+            other => other,
+        }
+    }
+}
+
 /// One backend's implementation of the whole-SIREN operation: the forward, which keeps
-/// what the backward needs, and the hand-written backward (DESIGN §2).
+/// what the backward needs, and the hand-written backward (docs/design.md §2.2).
 ///
 /// `params` is one flat tensor, `[W_0, b_0, W_1, b_1, …, W_o, b_o]`: the sine layers'
-/// weights (`[d_in, d_out]`, row-major) and biases (`[d_out]`), then the output layer's;
-/// `shapes` gives each layer's `[d_in, d_out]`. (Burn 0.22's backend extensions take no
-/// `Vec` of tensors, and an autodiff node has a fixed number of parents: one flat tensor
-/// serves any depth, for the price of one copy of the ~50k parameters per call.)
-/// The input is `[N, c]`; when
-/// `dual`, its first three columns are seeded with `e_x, e_y, e_z` and the output stacks
-/// the values and the three tangents, `[4N, O]`; otherwise it is `[N, O]`.
+/// weights (`[d_in, d_out]`, row-major) and biases (`[d_out]`), then the output layer's,
+/// of the shapes in [`OpSpec::shapes`]. (Burn 0.22's backend extensions take no `Vec` of
+/// tensors, and an autodiff node has a fixed number of parents: one flat tensor serves any
+/// depth, for the price of one copy of the ~50k parameters per call.) The input is
+/// `[N, c]`; when [`OpSpec::dual`], its first three columns are seeded with
+/// `e_x, e_y, e_z` and the output stacks the values and the three tangents, `[4N, O]`;
+/// otherwise it is `[N, O]`.
 pub trait SirenOps: burn::backend::Backend {
     /// The activations the backward reads.
     type Saved: Clone + Send + std::fmt::Debug + 'static;
 
-    /// The SIREN's output (Eq. 1), with its spatial tangents when `dual` (Eq. 6).
+    /// The SIREN's output (Eq. 1), with its spatial tangents when dual (Eq. 6).
     fn siren_forward(
         input: FloatTensor<Self>,
         params: FloatTensor<Self>,
-        shapes: &[[usize; 2]],
-        omega: f64,
-        dual: bool,
+        spec: &OpSpec,
     ) -> (FloatTensor<Self>, Self::Saved);
 
     /// From the output's gradient `grad`: the input's gradient (when `input_grad`) and
     /// the parameters' (flat, laid out like `params`).
-    #[allow(clippy::too_many_arguments)]
     fn siren_backward(
         saved: Self::Saved,
         input: FloatTensor<Self>,
         params: FloatTensor<Self>,
-        shapes: &[[usize; 2]],
+        spec: &OpSpec,
         grad: FloatTensor<Self>,
-        omega: f64,
-        dual: bool,
         input_grad: bool,
     ) -> (Option<FloatTensor<Self>>, FloatTensor<Self>);
 }
 
 /// The analytic SIREN as a backend operation, reachable from high-level tensors through
 /// Burn's `Dispatch` ([`fused_siren`]), and the elementwise part of its sine layers, which
-/// the tensor-primitive network ([`forward::siren`]) calls. The activations' default
-/// bodies compose Burn primitives and are the reference; wgpu overrides them with CubeCL
-/// kernels ([`kernel`]).
+/// the tensor-primitive network calls. The activations' default bodies compose Burn
+/// primitives and are the reference; wgpu overrides them with CubeCL kernels.
 #[backend_extension(Flex, NdArray, Cube, Autodiff)]
 pub trait SirenBackend: burn::backend::Backend {
     /// The whole SIREN (see [`SirenOps`] for the layout of `params` and the output).
     fn siren(
         input: FloatTensor<Self>,
         params: FloatTensor<Self>,
-        shapes: Vec<[usize; 2]>,
-        omega: f64,
-        dual: bool,
+        spec: OpSpec,
     ) -> FloatTensor<Self>;
 
     /// A dual sine layer's activation (Eq. 6): from `zs = S W` (`[4N, d]`, values then the
@@ -94,7 +165,7 @@ pub trait SirenBackend: burn::backend::Backend {
         bias: FloatTensor<Self>,
         omega: f64,
     ) -> FloatTensor<Self> {
-        forward::activation::<Self>(zs, bias, omega)
+        reference::activation::<Self>(zs, bias, omega)
     }
 
     /// Its backward: from the upstream gradient `G = [g_h; g_ḣ]`, the gradient with respect
@@ -105,7 +176,7 @@ pub trait SirenBackend: burn::backend::Backend {
         grad: FloatTensor<Self>,
         omega: f64,
     ) -> FloatTensor<Self> {
-        forward::activation_backward::<Self>(zs, bias, grad, omega)
+        reference::activation_backward::<Self>(zs, bias, grad, omega)
     }
 
     /// A value-only sine layer's activation (Eq. 1): `sin(ω(zs + b))`.
@@ -114,7 +185,7 @@ pub trait SirenBackend: burn::backend::Backend {
         bias: FloatTensor<Self>,
         omega: f64,
     ) -> FloatTensor<Self> {
-        forward::plain_activation::<Self>(zs, bias, omega)
+        reference::plain_activation::<Self>(zs, bias, omega)
     }
 
     /// Its backward: `ω g ⊙ cos(ω(zs + b))`.
@@ -124,7 +195,7 @@ pub trait SirenBackend: burn::backend::Backend {
         grad: FloatTensor<Self>,
         omega: f64,
     ) -> FloatTensor<Self> {
-        forward::plain_activation_backward::<Self>(zs, bias, grad, omega)
+        reference::plain_activation_backward::<Self>(zs, bias, grad, omega)
     }
 
     /// The first dual sine layer's activation (Eq. 6 at the input). Its input's tangents
@@ -138,7 +209,7 @@ pub trait SirenBackend: burn::backend::Backend {
         bias: FloatTensor<Self>,
         omega: f64,
     ) -> FloatTensor<Self> {
-        forward::input_activation::<Self>(zv, weight, bias, omega)
+        reference::input_activation::<Self>(zv, weight, bias, omega)
     }
 
     /// Its backward: from the upstream gradient `G = [g_h; g_ḣ]` (`[4N, d]`), what
@@ -151,7 +222,7 @@ pub trait SirenBackend: burn::backend::Backend {
         grad: FloatTensor<Self>,
         omega: f64,
     ) -> FloatTensor<Self> {
-        forward::input_activation_backward::<Self>(zv, weight, bias, grad, omega)
+        reference::input_activation_backward::<Self>(zv, weight, bias, grad, omega)
     }
 
     /// The first dual sine layer (the wgpu path): the input `X [N, c]` (spatial columns
@@ -179,7 +250,9 @@ pub trait SirenBackend: burn::backend::Backend {
         Self::sine_dual_activation(zs, bias, omega)
     }
 
-    /// One value-only sine layer (Eq. 1): `sin(ω(X W + b))`.
+    /// One value-only sine layer (Eq. 1): `sin(ω(X W + b))`. Not on a production path
+    /// (the value path uses Burn's layers on wgpu and the whole-network op on the CPU);
+    /// kept for the per-layer op's completeness and tested.
     fn sine_layer(
         input: FloatTensor<Self>,
         weight: FloatTensor<Self>,
@@ -191,112 +264,49 @@ pub trait SirenBackend: burn::backend::Backend {
     }
 }
 
-/// A CPU backend (no gradient tracking) runs the forward and drops the saved activations;
-/// its activations keep the reference bodies (the fused op does not call them).
-macro_rules! untracked_siren {
-    ($($backend:ty),*) => {$(
-        impl SirenBackend for $backend {
-            fn siren(
-                input: FloatTensor<Self>,
-                params: FloatTensor<Self>,
-                shapes: Vec<[usize; 2]>,
-                omega: f64,
-                dual: bool,
-            ) -> FloatTensor<Self> {
-                <Self as SirenOps>::siren_forward(input, params, &shapes, omega, dual).0
-            }
+/// Runs the pass `kernel` on primitives of backend `B`: `grad` is read by the backward
+/// passes only, `weight` (the layer's `W`) by the first layer's only.
+pub(crate) fn sine_pass<B: SirenBackend>(
+    kernel: SineKernel,
+    zs: FloatTensor<B>,
+    bias: FloatTensor<B>,
+    grad: Option<FloatTensor<B>>,
+    weight: Option<FloatTensor<B>>,
+    omega: f64,
+) -> FloatTensor<B> {
+    let grad = || grad.expect("a backward pass takes the upstream gradient");
+    let weight = || weight.expect("the first layer's pass takes W");
+    match kernel {
+        SineKernel::DualForward => B::sine_dual_activation(zs, bias, omega),
+        SineKernel::DualBackward => B::sine_dual_activation_backward(zs, bias, grad(), omega),
+        SineKernel::Forward => B::sine_activation(zs, bias, omega),
+        SineKernel::Backward => B::sine_activation_backward(zs, bias, grad(), omega),
+        SineKernel::DualInputForward => B::sine_dual_input_activation(zs, weight(), bias, omega),
+        SineKernel::DualInputBackward => {
+            B::sine_dual_input_activation_backward(zs, weight(), bias, grad(), omega)
         }
-    )*};
-}
-
-untracked_siren!(burn::backend::Flex, burn::backend::NdArray);
-
-/// The CPU backends lend their buffers to [`net`].
-macro_rules! cpu_siren_ops {
-    ($($backend:ty),*) => {$(
-        impl SirenOps for $backend {
-            type Saved = host::CpuSaved<FloatTensor<Self>>;
-
-            fn siren_forward(
-                input: FloatTensor<Self>,
-                params: FloatTensor<Self>,
-                shapes: &[[usize; 2]],
-                omega: f64,
-                dual: bool,
-            ) -> (FloatTensor<Self>, Self::Saved) {
-                host::siren_forward::<Self>(input, params, shapes, omega, dual)
-            }
-
-            fn siren_backward(
-                saved: Self::Saved,
-                input: FloatTensor<Self>,
-                params: FloatTensor<Self>,
-                shapes: &[[usize; 2]],
-                grad: FloatTensor<Self>,
-                omega: f64,
-                dual: bool,
-                input_grad: bool,
-            ) -> (Option<FloatTensor<Self>>, FloatTensor<Self>) {
-                host::siren_backward::<Self>(
-                    saved, input, params, shapes, grad, omega, dual, input_grad,
-                )
-            }
-        }
-    )*};
-}
-
-cpu_siren_ops!(burn::backend::Flex, burn::backend::NdArray);
-
-/// Which elementwise pass of a sine layer [`activation`] runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Activation {
-    /// [`SirenBackend::sine_dual_activation`] on `zs` (`[4N, d]`).
-    DualForward,
-    /// [`SirenBackend::sine_dual_activation_backward`] on `zs` and `grad` (`[4N, d]`).
-    DualBackward,
-    /// [`SirenBackend::sine_activation`] on `zs` (`[N, d]`).
-    Forward,
-    /// [`SirenBackend::sine_activation_backward`] on `zs` and `grad` (`[N, d]`).
-    Backward,
-    /// [`SirenBackend::sine_dual_input_activation`] on `zs = z_v` (`[N, d]`) and `weight`.
-    DualInputForward,
-    /// [`SirenBackend::sine_dual_input_activation_backward`] on `zs = z_v` (`[N, d]`),
-    /// `weight` and `grad` (`[4N, d]`).
-    DualInputBackward,
+    }
 }
 
 /// One sine layer's elementwise pass on high-level tensors, on whatever backend `zs` lives
 /// (the CubeCL kernels on wgpu, the primitive reference on the CPU backends); `grad` is
 /// used by the backward passes only, `weight` (the layer's `W`) by the input layer's only.
 pub fn activation(
-    which: Activation,
+    which: SineKernel,
     zs: Tensor<2>,
     bias: Tensor<1>,
     grad: Tensor<2>,
     weight: Tensor<2>,
     omega: f64,
 ) -> Tensor<2> {
-    let (zs, bias) = (zs.into_dispatch(), bias.into_dispatch());
-    Tensor::from_dispatch(match which {
-        Activation::DualInputForward => {
-            Dispatch::sine_dual_input_activation(zs, weight.into_dispatch(), bias, omega)
-        }
-        Activation::DualInputBackward => Dispatch::sine_dual_input_activation_backward(
-            zs,
-            weight.into_dispatch(),
-            bias,
-            grad.into_dispatch(),
-            omega,
-        ),
-        Activation::DualForward => Dispatch::sine_dual_activation(zs, bias, omega),
-        Activation::DualBackward => {
-            Dispatch::sine_dual_activation_backward(zs, bias, grad.into_dispatch(), omega)
-        }
-        Activation::Forward => Dispatch::sine_activation(zs, bias, omega),
-        Activation::Backward => {
-            Dispatch::sine_activation_backward(zs, bias, grad.into_dispatch(), omega)
-        }
-    })
+    Tensor::from_dispatch(sine_pass::<Dispatch>(
+        which,
+        zs.into_dispatch(),
+        bias.into_dispatch(),
+        Some(grad.into_dispatch()),
+        Some(weight.into_dispatch()),
+        omega,
+    ))
 }
 
 /// One dual sine layer on high-level tensors (see [`SirenBackend::sine_dual_layer`]).
@@ -388,7 +398,7 @@ fn bias_of(layer: &burn::nn::Linear) -> Tensor<1> {
 /// call, each a kernel dispatch. Without tangents on wgpu, Burn's own layers: its fusion
 /// engine folds the bias, the scaling and the sine into the matmul's epilogue, which an
 /// opaque custom op prevents (lavapipe, value-only step: 32 ms against 42 ms through the
-/// kernels; README, Speed).
+/// kernels).
 pub fn analytic_siren(siren: &Siren, xt: Tensor<2>, dual: bool) -> Tensor<2> {
     if crate::backend::runs_on_cpu(&xt.device()) {
         fused_siren(siren, xt, dual)
@@ -415,12 +425,15 @@ pub fn fused_siren(siren: &Siren, xt: Tensor<2>, dual: bool) -> Tensor<2> {
     // On the autodiff graph, `cat`'s backward hands each parameter its slice of the
     // flat gradient.
     let params = Tensor::cat(flat, 0);
+    let spec = OpSpec {
+        shapes,
+        omega: siren.omega,
+        dual,
+    };
     Tensor::from_dispatch(Dispatch::siren(
         xt.into_dispatch(),
         params.into_dispatch(),
-        shapes,
-        siren.omega,
-        dual,
+        spec,
     ))
 }
 

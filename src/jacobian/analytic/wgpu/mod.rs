@@ -1,13 +1,8 @@
-//! The wgpu implementation of the analytic op: hand-written CubeCL kernels for the
-//! elementwise part of every sine layer, forward and backward, dual and value-only.
-//!
-//! Each kernel does one layer's elementwise work in one pass over `[N, d]` (dual: four
-//! blocks), one thread per value-row element: `sin z`, and `ω cos z · Z_k` for the three
-//! tangents, in one pass; the backward `g_z = ω (g_h cos z − ω sin z Σ_k g_ḣ,k Z_k)` and
-//! `g_Ż_k = ω cos z g_ḣ,k`; and their value-only forms. The first layer's pair reads the
-//! tangent pre-activations `Z_k` from `W`'s rows (its input's tangents are the seeds
-//! `e_x, e_y, e_z`), so that layer's matmul has `N` rows, not `4N`. The matmuls stay Burn's (CubeCL's
-//! tuned matmul), and the network around them is [`super::forward::siren`].
+//! The analytic op on wgpu: the CubeCL kernels of [`kernels`] launched, registered in
+//! Burn's fusion stream, and plugged into [`SirenBackend`] and [`SirenOps`] for the CubeCL
+//! backend. The matmuls stay Burn's (CubeCL's tuned matmul), and the network around the
+//! kernels is [`reference::siren`] (through [`crate::jacobian::analytic::layered_siren`] in
+//! production: one autodiff node per layer).
 //!
 //! **Where they run.** Burn 0.22 runs wgpu as `Fusion<CubeBackend>`. The kernels are
 //! written for `CubeBackend`; for `Fusion<CubeBackend>` each call is registered in the
@@ -15,12 +10,19 @@
 //! opaque ops, the way `burn-linalg` registers its SVD), which the stream executes lazily
 //! in order, with the inputs it resolves from its handle container. So a kernel call costs
 //! no host sync and no stream drain. The backend extension macro can generate this wrapper
-//! too, but only with Burn's `fusion` feature, which would rebuild the Burn stack here;
-//! the hand-written wrapper is 40 lines.
+//! too, but only with Burn's `fusion` feature, which would rebuild the Burn stack; the
+//! hand-written wrapper is 40 lines.
 //!
-//! The reference is the tensor-primitive composition in [`super::forward`] (the trait's
-//! default bodies); `tests/analytic_kernels.rs` checks each kernel against it on random
-//! inputs.
+//! The value-only kernels ([`SineKernel::Forward`], [`SineKernel::Backward`]) have no
+//! production caller: without tangents, wgpu runs Burn's own layers, whose fusion folds
+//! the bias and the sine into the matmul (docs/speed.md). They are kept, tested against
+//! the reference, for the whole-network op on wgpu and for a GPU where they may pay.
+//!
+//! The reference is the tensor-primitive composition in [`reference`] (the trait's
+//! default bodies); the kernel test (`tests/numerics/analytic_kernels.rs`) checks each
+//! kernel against it on random inputs.
+
+mod kernels;
 
 use burn::backend::TensorMetadata;
 use burn::backend::cubecl::dtype_to_storage_type;
@@ -36,239 +38,25 @@ use burn_fusion::stream::Operation;
 use burn_fusion::{ExecutionError, Fusion, FusionRuntime, FusionTensor};
 use cubecl::{calculate_cube_count_elemwise, prelude::*};
 
-use super::{SirenBackend, SirenOps, forward};
-
-/// One dual sine layer: `out = [sin z; ω cos z ⊙ Z_1; ω cos z ⊙ Z_2; ω cos z ⊙ Z_3]` with
-/// `z = ω(Z_0 + b)`, for the stacked `zs = [Z_0; Z_1; Z_2; Z_3]` (`[4N, d]`).
-///
-/// Every kernel here reads and writes vectors of `N` elements along a row (`N = 4` when
-/// `d` is a multiple of 4, as the value and tangent blocks and `W`'s rows then are); the
-/// indices below count vectors.
-#[cube(launch)]
-fn sine_dual_forward_kernel<F: Float, N: Size>(
-    zs: &Tensor<Vector<F, N>>,
-    bias: &Tensor<Vector<F, N>>,
-    out: &mut Tensor<Vector<F, N>>,
-    omega: f32,
-    #[define(F)] _dtype: ElemType,
-) {
-    let v = out.vector_size();
-    let nd = out.shape(0) / 4 * out.shape(1) / v;
-    let i = ABSOLUTE_POS;
-    if i >= nd {
-        terminate!();
-    }
-    let w = Vector::<F, N>::new(F::cast_from(omega));
-    let z = w * (zs[i] + bias[i % (bias.shape(0) / v)]);
-    write_dual(out, i, nd, z, w, zs[i + nd], zs[i + 2 * nd], zs[i + 3 * nd]);
-}
-
-/// Its backward, from the upstream gradient `g = [g_h; g_ḣ_1; g_ḣ_2; g_ḣ_3]`:
-/// `[ω (g_h cos z − ω sin z Σ_k g_ḣ_k Z_k); ω cos z ⊙ g_ḣ_k]`.
-#[cube(launch)]
-fn sine_dual_backward_kernel<F: Float, N: Size>(
-    zs: &Tensor<Vector<F, N>>,
-    bias: &Tensor<Vector<F, N>>,
-    g: &Tensor<Vector<F, N>>,
-    out: &mut Tensor<Vector<F, N>>,
-    omega: f32,
-    #[define(F)] _dtype: ElemType,
-) {
-    let v = out.vector_size();
-    let nd = out.shape(0) / 4 * out.shape(1) / v;
-    let i = ABSOLUTE_POS;
-    if i >= nd {
-        terminate!();
-    }
-    let w = Vector::<F, N>::new(F::cast_from(omega));
-    let z = w * (zs[i] + bias[i % (bias.shape(0) / v)]);
-    write_dual_backward(
-        out,
-        g,
-        i,
-        nd,
-        z,
-        w,
-        zs[i + nd],
-        zs[i + 2 * nd],
-        zs[i + 3 * nd],
-    );
-}
-
-/// The first dual sine layer, whose tangent pre-activations are `W`'s rows (the input's
-/// seeds are `e_x, e_y, e_z`): `out = [sin z; ω cos z ⊙ W[0]; ω cos z ⊙ W[1]; ω cos z ⊙ W[2]]`
-/// with `z = ω(z_v + b)`, for `z_v = X W` (`[N, d]`); `out` is `[4N, d]`.
-#[cube(launch)]
-fn sine_dual_input_forward_kernel<F: Float, N: Size>(
-    zv: &Tensor<Vector<F, N>>,
-    bias: &Tensor<Vector<F, N>>,
-    weight: &Tensor<Vector<F, N>>,
-    out: &mut Tensor<Vector<F, N>>,
-    omega: f32,
-    #[define(F)] _dtype: ElemType,
-) {
-    let v = out.vector_size();
-    let d = bias.shape(0) / v;
-    let nd = zv.shape(0) * zv.shape(1) / v;
-    let i = ABSOLUTE_POS;
-    if i >= nd {
-        terminate!();
-    }
-    let j = i % d;
-    let w = Vector::<F, N>::new(F::cast_from(omega));
-    let z = w * (zv[i] + bias[j]);
-    write_dual(
-        out,
-        i,
-        nd,
-        z,
-        w,
-        weight[j],
-        weight[d + j],
-        weight[2 * d + j],
-    );
-}
-
-/// Its backward, from `g = [g_h; g_ḣ_1; g_ḣ_2; g_ḣ_3]` (`[4N, d]`):
-/// `[ω (g_h cos z − ω sin z Σ_k g_ḣ_k W[k]); ω cos z ⊙ g_ḣ_k]`.
-#[cube(launch)]
-fn sine_dual_input_backward_kernel<F: Float, N: Size>(
-    zv: &Tensor<Vector<F, N>>,
-    bias: &Tensor<Vector<F, N>>,
-    g: &Tensor<Vector<F, N>>,
-    weight: &Tensor<Vector<F, N>>,
-    out: &mut Tensor<Vector<F, N>>,
-    omega: f32,
-    #[define(F)] _dtype: ElemType,
-) {
-    let v = out.vector_size();
-    let d = bias.shape(0) / v;
-    let nd = zv.shape(0) * zv.shape(1) / v;
-    let i = ABSOLUTE_POS;
-    if i >= nd {
-        terminate!();
-    }
-    let j = i % d;
-    let w = Vector::<F, N>::new(F::cast_from(omega));
-    let z = w * (zv[i] + bias[j]);
-    write_dual_backward(
-        out,
-        g,
-        i,
-        nd,
-        z,
-        w,
-        weight[j],
-        weight[d + j],
-        weight[2 * d + j],
-    );
-}
-
-/// A dual layer's output at vector `i` of the value block (`nd` vectors a block): `sin z`,
-/// and `ω cos z ⊙ Z_k` for the tangent pre-activations `Z_1, Z_2, Z_3` (`ż_k = ω Z_k`).
-#[cube]
-#[allow(clippy::too_many_arguments)]
-fn write_dual<F: Float, N: Size>(
-    out: &mut Tensor<Vector<F, N>>,
-    i: usize,
-    nd: usize,
-    z: Vector<F, N>,
-    w: Vector<F, N>,
-    z1: Vector<F, N>,
-    z2: Vector<F, N>,
-    z3: Vector<F, N>,
-) {
-    let wc = w * Vector::cos(z);
-    out[i] = Vector::sin(z);
-    out[i + nd] = wc * z1;
-    out[i + 2 * nd] = wc * z2;
-    out[i + 3 * nd] = wc * z3;
-}
-
-/// Its backward at vector `i`, from the upstream gradient `g`:
-/// `ω (g_h cos z − ω sin z Σ_k g_ḣ_k Z_k)` for the value and `ω cos z ⊙ g_ḣ_k` for each
-/// tangent.
-#[cube]
-#[allow(clippy::too_many_arguments)]
-fn write_dual_backward<F: Float, N: Size>(
-    out: &mut Tensor<Vector<F, N>>,
-    g: &Tensor<Vector<F, N>>,
-    i: usize,
-    nd: usize,
-    z: Vector<F, N>,
-    w: Vector<F, N>,
-    z1: Vector<F, N>,
-    z2: Vector<F, N>,
-    z3: Vector<F, N>,
-) {
-    let c = Vector::cos(z);
-    let wc = w * c;
-    let mixed = g[i + nd] * z1 + g[i + 2 * nd] * z2 + g[i + 3 * nd] * z3;
-    out[i] = w * (g[i] * c - Vector::sin(z) * w * mixed);
-    out[i + nd] = wc * g[i + nd];
-    out[i + 2 * nd] = wc * g[i + 2 * nd];
-    out[i + 3 * nd] = wc * g[i + 3 * nd];
-}
-
-/// A value-only sine layer: `sin(ω(Z + b))`.
-#[cube(launch)]
-fn sine_forward_kernel<F: Float, N: Size>(
-    zs: &Tensor<Vector<F, N>>,
-    bias: &Tensor<Vector<F, N>>,
-    out: &mut Tensor<Vector<F, N>>,
-    omega: f32,
-    #[define(F)] _dtype: ElemType,
-) {
-    let v = out.vector_size();
-    let d = bias.shape(0) / v;
-    let i = ABSOLUTE_POS;
-    if i >= out.shape(0) * out.shape(1) / v {
-        terminate!();
-    }
-    let w = Vector::<F, N>::new(F::cast_from(omega));
-    out[i] = Vector::sin(w * (zs[i] + bias[i % d]));
-}
-
-/// Its backward: `ω g cos(ω(Z + b))`.
-#[cube(launch)]
-fn sine_backward_kernel<F: Float, N: Size>(
-    zs: &Tensor<Vector<F, N>>,
-    bias: &Tensor<Vector<F, N>>,
-    g: &Tensor<Vector<F, N>>,
-    out: &mut Tensor<Vector<F, N>>,
-    omega: f32,
-    #[define(F)] _dtype: ElemType,
-) {
-    let v = out.vector_size();
-    let d = bias.shape(0) / v;
-    let i = ABSOLUTE_POS;
-    if i >= out.shape(0) * out.shape(1) / v {
-        terminate!();
-    }
-    let w = Vector::<F, N>::new(F::cast_from(omega));
-    out[i] = w * g[i] * Vector::cos(w * (zs[i] + bias[i % d]));
-}
+use super::{OpSpec, SineKernel, SirenBackend, SirenOps, reference};
+use kernels::*;
 
 static LAUNCHES: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
 /// How many sine kernels this process has launched, so that a test can tell the kernels
 /// from the reference path (both give the same numbers).
-pub fn launches() -> usize {
+pub fn kernel_launches() -> usize {
     LAUNCHES.load(std::sync::atomic::Ordering::Relaxed)
 }
 
-/// The six kernels, as one value the fusion wrapper can carry.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum SineKernel {
-    DualForward,
-    DualBackward,
-    Forward,
-    Backward,
-    DualInputForward,
-    DualInputBackward,
+/// The kernel's wgpu side: its fusion id, output shape and launch.
+trait Launch {
+    fn id(self) -> &'static str;
+    fn out_shape(self, rows: usize, d: usize) -> Shape;
+    fn launch(self, inputs: Vec<CubeTensor>, omega: f64) -> CubeTensor;
 }
 
-impl SineKernel {
+impl Launch for SineKernel {
     fn id(self) -> &'static str {
         match self {
             SineKernel::DualForward => "doma::sine_dual_forward",
@@ -457,18 +245,16 @@ fn fused_call(
 }
 
 /// [`SirenBackend`] and [`SirenOps`] for a CubeCL backend: the network from
-/// [`super::forward`], its activations from the kernels; `$call` runs one kernel.
+/// [`reference`], its activations from the kernels; `$call` runs one kernel.
 macro_rules! kernel_backend {
     ($backend:ty, $call:expr) => {
         impl SirenBackend for $backend {
             fn siren(
                 input: FloatTensor<Self>,
                 params: FloatTensor<Self>,
-                shapes: Vec<[usize; 2]>,
-                omega: f64,
-                dual: bool,
+                spec: OpSpec,
             ) -> FloatTensor<Self> {
-                <Self as SirenOps>::siren_forward(input, params, &shapes, omega, dual).0
+                <Self as SirenOps>::siren_forward(input, params, &spec).0
             }
 
             fn sine_dual_activation(
@@ -535,26 +321,20 @@ macro_rules! kernel_backend {
             fn siren_forward(
                 input: FloatTensor<Self>,
                 params: FloatTensor<Self>,
-                shapes: &[[usize; 2]],
-                omega: f64,
-                dual: bool,
+                spec: &OpSpec,
             ) -> (FloatTensor<Self>, Self::Saved) {
-                forward::siren::<Self>(input, params, shapes, omega, dual)
+                reference::siren::<Self>(input, params, spec)
             }
 
-            #[allow(clippy::too_many_arguments)]
             fn siren_backward(
                 saved: Self::Saved,
                 _input: FloatTensor<Self>,
                 params: FloatTensor<Self>,
-                shapes: &[[usize; 2]],
+                spec: &OpSpec,
                 grad: FloatTensor<Self>,
-                omega: f64,
-                dual: bool,
                 input_grad: bool,
             ) -> (Option<FloatTensor<Self>>, FloatTensor<Self>) {
-                let (g_input, grads) =
-                    forward::siren_backward::<Self>(saved, params, shapes, grad, omega, dual);
+                let (g_input, grads) = reference::siren_backward::<Self>(saved, params, spec, grad);
                 (input_grad.then_some(g_input), grads)
             }
         }

@@ -1,14 +1,15 @@
-//! The analytic SIREN from backend tensor primitives: the network ([`siren`],
-//! [`siren_backward`]) that wgpu runs around its kernels, and the elementwise parts of a
-//! sine layer, which are the default bodies of [`super::SirenBackend`]'s activations and
-//! the reference that the kernels are tested against.
+//! The analytic op from Burn's tensor primitives: the oracle. It holds the elementwise
+//! passes of a sine layer (docs/design.md §2.2), which are the default bodies of
+//! [`SirenBackend`]'s activations and what the CubeCL kernels are tested against, and the
+//! whole network ([`siren`], [`siren_backward`]), which wgpu runs around its kernels and
+//! the CPU backends fall back to for float types other than f32 and f64.
 
 use burn::backend::{Backend, Scalar, Slice, tensor::FloatTensor};
 use burn::tensor::Shape;
 
 use burn::backend::TensorMetadata;
 
-use super::SirenBackend;
+use super::{OpSpec, SirenBackend};
 
 /// Rows `[from, to)` of a `[R, d]` primitive.
 fn rows<B: Backend>(t: FloatTensor<B>, from: usize, to: usize, d: usize) -> FloatTensor<B> {
@@ -163,18 +164,17 @@ fn unflatten<B: Backend>(params: FloatTensor<B>, shapes: &[[usize; 2]]) -> Vec<F
 }
 
 /// The whole SIREN from tensor primitives: [`super::SirenOps::siren_forward`] on wgpu.
-/// `params` is the flat parameter tensor of [`super::SirenOps`];
-/// the output is `[n, O]`, or `[4n, O]` stacked values and tangents when `dual`. The
-/// saved tensors are `[S_0, Z_0, S_1, Z_1, …, S_L]`: each sine layer's input and
-/// pre-activation, and the output layer's input.
+/// `params` is the flat parameter tensor of [`super::SirenOps`]; the output is `[n, O]`,
+/// or `[4n, O]` stacked values and tangents when `spec.dual`. The saved tensors are
+/// `[S_0, Z_0, S_1, Z_1, …, S_L]`: each sine layer's input and pre-activation, and the
+/// output layer's input.
 pub fn siren<B: SirenBackend>(
     input: FloatTensor<B>,
     params: FloatTensor<B>,
-    shapes: &[[usize; 2]],
-    omega: f64,
-    dual: bool,
+    spec: &OpSpec,
 ) -> (FloatTensor<B>, Vec<FloatTensor<B>>) {
-    let params = unflatten::<B>(params, shapes);
+    let (omega, dual) = (spec.omega, spec.dual);
+    let params = unflatten::<B>(params, &spec.shapes);
     let params = &params[..];
     let [n, c] = input.shape().dims::<2>();
     let mut s = if dual {
@@ -214,12 +214,11 @@ pub fn siren<B: SirenBackend>(
 pub fn siren_backward<B: SirenBackend>(
     saved: Vec<FloatTensor<B>>,
     params: FloatTensor<B>,
-    shapes: &[[usize; 2]],
+    spec: &OpSpec,
     grad: FloatTensor<B>,
-    omega: f64,
-    dual: bool,
 ) -> (FloatTensor<B>, FloatTensor<B>) {
-    let params = unflatten::<B>(params, shapes);
+    let (omega, dual) = (spec.omega, spec.dual);
+    let params = unflatten::<B>(params, &spec.shapes);
     let n = saved[0].shape().dims::<2>()[0] / if dual { 4 } else { 1 };
     let value_sum = |g: FloatTensor<B>| {
         let d = g.shape().dims::<2>()[1];

@@ -1,5 +1,5 @@
-//! The CPU backends' side of [`super::SirenOps`]: flex and ndarray lend their buffers to
-//! the one implementation on slices ([`super::net`]), so each kernel is written once.
+//! The CPU backends' side of [`SirenOps`]: flex and ndarray lend their buffers to the one
+//! implementation on slices ([`super::net`]), so each kernel is written once.
 //! A tensor is read in place when it is contiguous, and copied once otherwise.
 
 #![allow(deprecated)] // `NdArray` stays selectable although Burn deprecates it.
@@ -12,9 +12,9 @@ use burn::backend::ndarray::NdArrayTensor;
 use burn::backend::{TensorMetadata, tensor::FloatTensor};
 use burn::tensor::{DType, TensorData};
 
-use super::cpu::Real;
-use super::forward;
-use super::net::{self, Activations};
+use super::net::{Activations, Net};
+use super::real::Real;
+use crate::jacobian::analytic::{OpSpec, SirenBackend, SirenOps, reference};
 
 /// A CPU tensor whose elements can be borrowed as a slice.
 pub(crate) trait HostTensor: Clone + TensorMetadata {
@@ -89,53 +89,29 @@ enum Saved<T> {
     Tensors(Vec<T>),
 }
 
-/// The number of parameters of layers of these shapes.
-pub(crate) fn param_count(shapes: &[[usize; 2]]) -> usize {
-    shapes.iter().map(|[i, o]| i * o + o).sum()
-}
-
 fn forward_typed<E: Real, T: HostTensor>(
     input: &T,
     params: &T,
-    shapes: &[[usize; 2]],
-    omega: f64,
-    dual: bool,
+    spec: &OpSpec,
 ) -> (T, Activations<E>) {
     let n = input.shape().dims::<2>()[0];
     let (x, flat) = (input.host::<E>(), params.host::<E>());
-    let layers = net::layers_of(&flat, shapes);
-    let (out, acts) = net::forward(&x, n, &layers, omega, dual);
-    let rows = if dual { 4 * n } else { n };
-    let o = shapes.last().expect("an output layer")[1];
-    (T::from_host(out, vec![rows, o]), acts)
+    let (out, acts) = Net::new(&flat, spec).forward(&x);
+    (T::from_host(out, vec![spec.rows(n), spec.outputs()]), acts)
 }
 
-#[allow(clippy::too_many_arguments)]
 fn backward_typed<E: Real, T: HostTensor>(
     acts: &Activations<E>,
     input: &T,
     params: &T,
-    shapes: &[[usize; 2]],
+    spec: &OpSpec,
     grad: &T,
-    omega: f64,
-    dual: bool,
     input_grad: bool,
 ) -> (Option<T>, T) {
     let [n, c] = input.shape().dims::<2>();
     let (x, flat, g) = (input.host::<E>(), params.host::<E>(), grad.host::<E>());
-    let layers = net::layers_of(&flat, shapes);
-    let mut g_params = vec![E::zero(); param_count(shapes)];
-    let g_x = net::backward(
-        acts,
-        &x,
-        n,
-        &layers,
-        omega,
-        dual,
-        &g,
-        input_grad,
-        &mut g_params,
-    );
+    let mut g_params = vec![E::zero(); spec.param_count()];
+    let g_x = Net::new(&flat, spec).backward(acts, &x, &g, input_grad, &mut g_params);
     let len = g_params.len();
     (
         g_x.map(|v| T::from_host(v, vec![n, c])),
@@ -143,60 +119,103 @@ fn backward_typed<E: Real, T: HostTensor>(
     )
 }
 
-/// [`super::SirenOps::siren_forward`] for a CPU backend `B`.
-pub(crate) fn siren_forward<B>(
+/// [`SirenOps::siren_forward`] for a CPU backend `B`.
+fn siren_forward<B>(
     input: FloatTensor<B>,
     params: FloatTensor<B>,
-    shapes: &[[usize; 2]],
-    omega: f64,
-    dual: bool,
+    spec: &OpSpec,
 ) -> (FloatTensor<B>, CpuSaved<FloatTensor<B>>)
 where
-    B: super::SirenBackend,
+    B: SirenBackend,
     FloatTensor<B>: HostTensor,
 {
     match input.dtype() {
         DType::F32 => {
-            let (out, acts) = forward_typed::<f32, _>(&input, &params, shapes, omega, dual);
+            let (out, acts) = forward_typed::<f32, _>(&input, &params, spec);
             (out, CpuSaved(Saved::F32(Arc::new(acts))))
         }
         DType::F64 => {
-            let (out, acts) = forward_typed::<f64, _>(&input, &params, shapes, omega, dual);
+            let (out, acts) = forward_typed::<f64, _>(&input, &params, spec);
             (out, CpuSaved(Saved::F64(Arc::new(acts))))
         }
         _ => {
-            let (out, saved) = forward::siren::<B>(input, params, shapes, omega, dual);
+            let (out, saved) = reference::siren::<B>(input, params, spec);
             (out, CpuSaved(Saved::Tensors(saved)))
         }
     }
 }
 
-/// [`super::SirenOps::siren_backward`] for a CPU backend `B`.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn siren_backward<B>(
+/// [`SirenOps::siren_backward`] for a CPU backend `B`.
+fn siren_backward<B>(
     saved: CpuSaved<FloatTensor<B>>,
     input: FloatTensor<B>,
     params: FloatTensor<B>,
-    shapes: &[[usize; 2]],
+    spec: &OpSpec,
     grad: FloatTensor<B>,
-    omega: f64,
-    dual: bool,
     input_grad: bool,
 ) -> (Option<FloatTensor<B>>, FloatTensor<B>)
 where
-    B: super::SirenBackend,
+    B: SirenBackend,
     FloatTensor<B>: HostTensor,
 {
     match saved.0 {
-        Saved::F32(acts) => backward_typed::<f32, _>(
-            &acts, &input, &params, shapes, &grad, omega, dual, input_grad,
-        ),
-        Saved::F64(acts) => backward_typed::<f64, _>(
-            &acts, &input, &params, shapes, &grad, omega, dual, input_grad,
-        ),
+        Saved::F32(acts) => {
+            backward_typed::<f32, _>(&acts, &input, &params, spec, &grad, input_grad)
+        }
+        Saved::F64(acts) => {
+            backward_typed::<f64, _>(&acts, &input, &params, spec, &grad, input_grad)
+        }
         Saved::Tensors(saved) => {
-            let (g_x, g) = forward::siren_backward::<B>(saved, params, shapes, grad, omega, dual);
+            let (g_x, g) = reference::siren_backward::<B>(saved, params, spec, grad);
             (input_grad.then_some(g_x), g)
         }
     }
 }
+
+/// A CPU backend (no gradient tracking) runs the forward and drops the saved activations;
+/// its activations keep the reference bodies (the fused op does not call them).
+macro_rules! untracked_siren {
+    ($($backend:ty),*) => {$(
+        impl SirenBackend for $backend {
+            fn siren(
+                input: FloatTensor<Self>,
+                params: FloatTensor<Self>,
+                spec: OpSpec,
+            ) -> FloatTensor<Self> {
+                <Self as SirenOps>::siren_forward(input, params, &spec).0
+            }
+        }
+    )*};
+}
+
+untracked_siren!(burn::backend::Flex, burn::backend::NdArray);
+
+/// The CPU backends lend their buffers to [`super::net`].
+macro_rules! cpu_siren_ops {
+    ($($backend:ty),*) => {$(
+        impl SirenOps for $backend {
+            type Saved = CpuSaved<FloatTensor<Self>>;
+
+            fn siren_forward(
+                input: FloatTensor<Self>,
+                params: FloatTensor<Self>,
+                spec: &OpSpec,
+            ) -> (FloatTensor<Self>, Self::Saved) {
+                siren_forward::<Self>(input, params, spec)
+            }
+
+            fn siren_backward(
+                saved: Self::Saved,
+                input: FloatTensor<Self>,
+                params: FloatTensor<Self>,
+                spec: &OpSpec,
+                grad: FloatTensor<Self>,
+                input_grad: bool,
+            ) -> (Option<FloatTensor<Self>>, FloatTensor<Self>) {
+                siren_backward::<Self>(saved, input, params, spec, grad, input_grad)
+            }
+        }
+    )*};
+}
+
+cpu_siren_ops!(burn::backend::Flex, burn::backend::NdArray);
