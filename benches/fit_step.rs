@@ -1,19 +1,20 @@
 //! One training step of the synthetic protocol (750 trajectory points; `L_H` on min(1,024, 750)
 //! = 750 jittered points; T = 20), DOMA-Affinity with and without the smoothness loss, for each CPU
-//! backend and Jacobian method (and wgpu when an adapter exists); and one step of the DPF
-//! baseline (T = 20 frame nets of the same width), whose SIRENs run through the method: Burn's
-//! `sin` under `autodiff`, the fused sine layers under `analytic`.
+//! backend and Jacobian method (and wgpu when an adapter exists): the step of `doma bench`'s
+//! `fit_step` rows ([`doma::experiments::speed::FitStep`]). And one step of the DPF baseline
+//! (T = 20 frame nets of the same width), whose SIRENs run through the method: Burn's `sin`
+//! under `autodiff`, the fused sine layers under `analytic`.
 //!
 //! `cargo bench --bench fit_step`
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use doma::backend::{BackendKind, wgpu_available};
 use doma::data::synthetic::{Motion, benchmark_sequence};
+use doma::experiments::speed::FitStep;
 use doma::field::dpf::DpfConfig;
 use doma::field::model::ModelConfig;
-use doma::field::{DomaFieldConfig, Variant};
 use doma::jacobian::JacobianKind;
-use doma::train::{FitConfig, Trainer};
+use doma::train::FitConfig;
 
 fn fit_step(c: &mut Criterion) {
     doma::backend::tune_allocator();
@@ -26,38 +27,20 @@ fn fit_step(c: &mut Criterion) {
     }
     for backend in backends {
         let device = backend.device().expect("a backend that runs here");
-        for (name, w_h) in [("affinity", 0.0), ("affinity-h", 0.1)] {
+        for (name, smoothness) in [("affinity", false), ("affinity-h", true)] {
             for method in [JacobianKind::Autodiff, JacobianKind::Analytic] {
-                let config = FitConfig::doma(DomaFieldConfig::new(Variant::Affinity))
-                    .with_smoothness_weight(w_h)
-                    .with_jacobian(method);
-                let mut trainer =
-                    Trainer::from_config(&config, &seq.train, &device).expect("a trainer");
-                let mut k = 0;
+                let mut step =
+                    FitStep::synthetic(&seq.train, method, smoothness, &device).expect("a trainer");
                 let id = format!("{backend}/{name}/{method}");
-                group.bench_function(id, |b| {
-                    b.iter(|| {
-                        let losses = trainer.step(k % 20, 1e-4).expect("a step");
-                        k += 1;
-                        doma::readback::sync(&device).expect("the device syncs");
-                        losses
-                    })
-                });
+                group.bench_function(id, |b| b.iter(|| step.run().expect("a step")));
             }
         }
         for method in [JacobianKind::Autodiff, JacobianKind::Analytic] {
             let dpf = DpfConfig::new(seq.train.frames());
             let config = FitConfig::new(ModelConfig::Dpf(dpf)).with_jacobian(method);
-            let mut trainer =
-                Trainer::from_config(&config, &seq.train, &device).expect("a trainer");
-            let mut k = 0;
+            let mut step = FitStep::new(&config, &seq.train, &device).expect("a trainer");
             group.bench_function(format!("{backend}/dpf/{method}"), |b| {
-                b.iter(|| {
-                    let losses = trainer.step(k % 20, 1e-4).expect("a step");
-                    k += 1;
-                    doma::readback::sync(&device).expect("the device syncs");
-                    losses
-                })
+                b.iter(|| step.run().expect("a step"))
             });
         }
     }

@@ -1,6 +1,6 @@
-//! The file formats of doma as pure functions over bytes and text: `.traj`
-//! ([`traj`]), DeformingThings4D `.anime` ([`anime`]), NumPy `.npy` / `.npz` ([`npy`]) and
-//! OBJ meshes ([`obj`]).
+//! The file formats of doma as pure functions over bytes and text: `.traj` ([`traj`]),
+//! DeformingThings4D `.anime` ([`anime`]), NumPy `.npy` ([`npy`]) and `.npz` ([`npz`]),
+//! and OBJ meshes ([`obj`]).
 //!
 //! This crate has no Burn dependency, so that the readers can be fuzzed (`fuzz/` in the
 //! doma repository) without building a deep-learning framework under coverage
@@ -11,6 +11,7 @@
 
 pub mod anime;
 pub mod npy;
+pub mod npz;
 pub mod obj;
 pub mod traj;
 

@@ -5,7 +5,8 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    use doma_formats::npy::{npz_member_header, npz_members, parse_npy, read_npz_member};
+    use doma_formats::npy::parse_npy;
+    use doma_formats::npz::{npz_member_header, npz_members, read_npz_member};
     if let Ok(a) = parse_npy(data) {
         assert_eq!(a.shape.iter().product::<usize>(), a.data.len());
     }

@@ -131,8 +131,8 @@ fn check_name(name: &str) -> std::result::Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::experiments::meshes::Weight;
     use crate::run::ModelChoice;
+    use crate::train::select::Weight;
 
     #[test]
     fn the_documented_example_parses() {

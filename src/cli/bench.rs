@@ -9,7 +9,7 @@ use crate::experiments::speed::{self, BenchJob};
 use crate::jacobian::JacobianKind;
 use crate::{DomaError, Result};
 
-/// The flags of `doma bench` (and `cargo run --example jacobian_speed`).
+/// The flags of `doma bench`.
 #[derive(clap::Parser, Debug, Clone)]
 #[command(about = "Time the Jacobian step and the training step per backend and Jacobian method")]
 pub struct BenchArgs {
@@ -121,32 +121,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// The cells of `--scaling`: every (N, T), and N = 10⁵ again with 10⁴ points per step.
-const SCALING_CELLS: [(usize, usize, Option<usize>); 8] = [
-    (1_000, 20, None),
-    (10_000, 20, None),
-    (100_000, 20, None),
-    (100_000, 20, Some(10_000)),
-    (1_000, 100, None),
-    (10_000, 100, None),
-    (100_000, 100, None),
-    (100_000, 100, Some(10_000)),
-];
-
-/// Frames at which the checkpoint sizes are reported.
-const CHECKPOINT_FRAMES: [usize; 5] = [1, 10, 30, 100, 300];
-
 fn scaling_cell(spec: &str, args: &BenchArgs) -> Result<()> {
-    let bad = || DomaError::Usage(format!("--scaling-cell `{spec}`: expected N,T or N,T,K"));
-    let parts: Vec<usize> = spec
-        .split(',')
-        .map(|p| p.trim().parse().map_err(|_| bad()))
-        .collect::<Result<_>>()?;
-    let (n, t, k) = match parts[..] {
-        [n, t] => (n, t, None),
-        [n, t, k] => (n, t, Some(k)),
-        _ => return Err(bad()),
-    };
+    let (n, t, k) = scaling::parse_cell(spec)?;
     let cell = scaling::measure_cell(
         n,
         t,
@@ -166,36 +142,17 @@ fn scaling(args: &BenchArgs) -> Result<()> {
         check_output_folder(&dir.join("scaling_step.png"))?;
     }
     let exe = std::env::current_exe().map_err(|e| DomaError::io("the doma binary", e))?;
-    let mut cells = Vec::new();
-    for (n, t, k) in SCALING_CELLS {
-        let spec = match k {
-            Some(k) => format!("{n},{t},{k}"),
-            None => format!("{n},{t}"),
-        };
-        let out = std::process::Command::new(&exe)
-            .args(["bench", "--scaling-cell", &spec])
-            .args(["--warmup", &args.warmup.to_string()])
-            .args(["--steps", &args.steps.to_string()])
-            .output()
-            .map_err(|e| DomaError::io(&exe, e))?;
-        if !out.status.success() {
-            return Err(DomaError::Device(format!(
-                "the scaling cell {spec} failed: {}",
-                String::from_utf8_lossy(&out.stderr).trim()
-            )));
-        }
-        let cell: scaling::ScalingCell = serde_json::from_slice(&out.stdout).map_err(|e| {
-            DomaError::InvalidData(format!("the scaling cell {spec} printed no record: {e}"))
-        })?;
+    let cells = scaling::run_cells(&exe, args.warmup as usize, args.steps as usize, |cell| {
         eprintln!(
-            "N {n} T {t} per step {}: {:.2} ms, peak {} MiB",
-            k.map_or("all".into(), |k| k.to_string()),
+            "N {} T {} per step {}: {:.2} ms, peak {} MiB",
+            cell.points,
+            cell.frames,
+            cell.points_per_step.map_or("all".into(), |k| k.to_string()),
             cell.step_ms,
             cell.peak_mib.map_or("-".into(), |m| format!("{m:.0}"))
-        );
-        cells.push(cell);
-    }
-    let sizes = scaling::checkpoint_sizes(&CHECKPOINT_FRAMES)?;
+        )
+    })?;
+    let sizes = scaling::checkpoint_sizes(&scaling::CHECKPOINT_FRAMES)?;
     println!();
     print!("{}", scaling::scaling_table(&cells, &sizes));
     if let Some(path) = &args.json {
@@ -204,88 +161,11 @@ fn scaling(args: &BenchArgs) -> Result<()> {
         eprintln!("wrote {}", path.display());
     }
     if let Some(dir) = &args.plot {
-        for (name, canvas) in scaling_plots(&cells, &sizes) {
+        for (name, canvas) in scaling::scaling_plots(&cells, &sizes) {
             let path = dir.join(name);
             canvas.save_png_and_svg(&path)?;
             eprintln!("wrote {}", path.display());
         }
     }
     Ok(())
-}
-
-fn scaling_plots(
-    cells: &[scaling::ScalingCell],
-    sizes: &[scaling::CheckpointSize],
-) -> Vec<(&'static str, crate::plot::Figure)> {
-    use crate::plot::{Series, line_plot};
-    // One picture per measured quantity: a curve per T against N (all points per step).
-    let against_n =
-        |title: &str, y_label: &str, value: fn(&scaling::ScalingCell) -> Option<f64>| {
-            let curve = |t: usize| -> Vec<(f64, f64)> {
-                cells
-                    .iter()
-                    .filter(|c| c.frames == t && c.points_per_step.is_none())
-                    .filter_map(|c| Some((c.points as f64, value(c)?)))
-                    .collect()
-            };
-            line_plot(
-                title,
-                "training points N",
-                y_label,
-                &[
-                    Series {
-                        name: "T = 20",
-                        color: [31, 119, 180],
-                        points: curve(20),
-                    },
-                    Series {
-                        name: "T = 100",
-                        color: [214, 39, 40],
-                        points: curve(100),
-                    },
-                ],
-                true,
-            )
-            .log_x()
-        };
-    let step = against_n(
-        "Time per training step (flex, Affinity, analytic)",
-        "ms per step",
-        |c| Some(c.step_ms),
-    );
-    let peak = against_n(
-        "Peak memory of a fit (flex, Affinity, analytic)",
-        "peak MiB",
-        |c| c.peak_mib,
-    );
-    let bytes = |f: fn(&scaling::CheckpointSize) -> usize| -> Vec<(f64, f64)> {
-        sizes
-            .iter()
-            .map(|s| (s.frames as f64, f(s) as f64 / 1e6))
-            .collect()
-    };
-    let ckpt = line_plot(
-        "Checkpoint size against frames",
-        "frames T",
-        "MB",
-        &[
-            Series {
-                name: "DOMA",
-                color: [31, 119, 180],
-                points: bytes(|s| s.doma_bytes),
-            },
-            Series {
-                name: "DPF",
-                color: [214, 39, 40],
-                points: bytes(|s| s.dpf_bytes),
-            },
-        ],
-        true,
-    )
-    .log_x();
-    vec![
-        ("scaling_step.png", step),
-        ("scaling_memory.png", peak),
-        ("scaling_checkpoint.png", ckpt),
-    ]
 }

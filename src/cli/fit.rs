@@ -4,11 +4,11 @@ use std::path::PathBuf;
 
 use crate::backend::BackendKind;
 use crate::cli::{ClipArgs, WeightSearchArgs, fraction, weight};
-use crate::experiments::meshes::Weight;
 use crate::field::Variant;
 use crate::jacobian::JacobianKind;
 use crate::run::{FitOutcome, ModelChoice, RunConfig, RunDir, RunSpec, fit_run};
 use crate::train::FitConfig;
+use crate::train::select::Weight;
 use crate::{DomaError, Result};
 
 /// The flags of `doma fit`.

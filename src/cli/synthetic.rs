@@ -3,12 +3,12 @@
 use crate::Result;
 use crate::cli::{ExperimentArgs, RegWeightArgs, Selection, selection};
 use crate::data::synthetic::Motion;
-use crate::experiments::meshes::Weight;
 use crate::experiments::synthetic::{self, Regularizer, SyntheticJob};
 use crate::field::Variant;
 use crate::jacobian::JacobianKind;
+use crate::train::select::Weight;
 
-/// The flags of `doma synthetic` (and `cargo run --example synthetic`).
+/// The flags of `doma synthetic`.
 #[derive(clap::Parser, Debug, Clone)]
 #[command(about = "Fit the synthetic benchmark (paper Tab. 2) and print the EPE table")]
 pub struct SyntheticArgs {

@@ -1,5 +1,5 @@
 //! NumPy's `.npy` arrays and `.npz` archives, the format the authors' data comes in
-//! (REFERENCE §6: `[T, N, 3]` float64 trajectories).
+//! (docs/reference.md §6.3: `[T, N, 3]` float64 trajectories).
 //!
 //! `.npy` (NumPy's format spec, versions 1–3): the magic `\x93NUMPY`, a version, a header
 //! length, then a Python-literal dict `{'descr': '<f8', 'fortran_order': False,
@@ -19,8 +19,10 @@
 use std::path::Path;
 
 pub use doma_formats::npy::{
-    NPY_MAGIC, NpyArray, NpyHeader, NpzMember, encode_npy, encode_npz, npz_member_header,
-    npz_members, parse_npy, parse_npy_header, parse_npz, read_npz_member,
+    NPY_MAGIC, NpyArray, NpyHeader, encode_npy, parse_npy, parse_npy_header,
+};
+pub use doma_formats::npz::{
+    NpzMember, encode_npz, npz_member_header, npz_members, parse_npz, read_npz_member,
 };
 
 use super::Trajectories;

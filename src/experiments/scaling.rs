@@ -12,7 +12,6 @@ use std::time::Instant;
 use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
-use crate::Result;
 use crate::checkpoint::Precision;
 use crate::data::Trajectories;
 use crate::field::dpf::DpfConfig;
@@ -21,6 +20,7 @@ use crate::field::{DomaFieldConfig, Variant};
 use crate::jacobian::JacobianKind;
 use crate::siren::SirenShape;
 use crate::train::{FitConfig, Trainer};
+use crate::{DomaError, Result};
 
 /// One (N, T) cell of the scaling table.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -167,6 +167,149 @@ pub fn scaling_table(cells: &[ScalingCell], sizes: &[CheckpointSize]) -> String 
         s += &format!("{:>6} {:>12} {:>12}\n", r.frames, r.doma_bytes, r.dpf_bytes);
     }
     s
+}
+
+/// The cells of `--scaling`: every (N, T), and N = 10⁵ again with 10⁴ points per step.
+pub const SCALING_CELLS: [(usize, usize, Option<usize>); 8] = [
+    (1_000, 20, None),
+    (10_000, 20, None),
+    (100_000, 20, None),
+    (100_000, 20, Some(10_000)),
+    (1_000, 100, None),
+    (10_000, 100, None),
+    (100_000, 100, None),
+    (100_000, 100, Some(10_000)),
+];
+
+/// Frames at which the checkpoint sizes are reported.
+pub const CHECKPOINT_FRAMES: [usize; 5] = [1, 10, 30, 100, 300];
+
+/// Parses a cell's `N,T` or `N,T,K` (`doma bench --scaling-cell`).
+pub fn parse_cell(spec: &str) -> Result<(usize, usize, Option<usize>)> {
+    let bad = || DomaError::Usage(format!("--scaling-cell `{spec}`: expected N,T or N,T,K"));
+    let parts: Vec<usize> = spec
+        .split(',')
+        .map(|p| p.trim().parse().map_err(|_| bad()))
+        .collect::<Result<_>>()?;
+    match parts[..] {
+        [n, t] => Ok((n, t, None)),
+        [n, t, k] => Ok((n, t, Some(k))),
+        _ => Err(bad()),
+    }
+}
+
+/// Measures every cell of [`SCALING_CELLS`], each in a fresh process of `exe` (the `doma`
+/// binary, `bench --scaling-cell`), so that each peak resident memory is the cell's own;
+/// `progress` sees each cell as it finishes.
+pub fn run_cells(
+    exe: &std::path::Path,
+    warmup: usize,
+    steps: usize,
+    mut progress: impl FnMut(&ScalingCell),
+) -> Result<Vec<ScalingCell>> {
+    let mut cells = Vec::new();
+    for (n, t, k) in SCALING_CELLS {
+        let spec = match k {
+            Some(k) => format!("{n},{t},{k}"),
+            None => format!("{n},{t}"),
+        };
+        let out = std::process::Command::new(exe)
+            .args(["bench", "--scaling-cell", &spec])
+            .args(["--warmup", &warmup.to_string()])
+            .args(["--steps", &steps.to_string()])
+            .output()
+            .map_err(|e| DomaError::io(exe, e))?;
+        if !out.status.success() {
+            return Err(DomaError::Device(format!(
+                "the scaling cell {spec} failed: {}",
+                String::from_utf8_lossy(&out.stderr).trim()
+            )));
+        }
+        let cell: ScalingCell = serde_json::from_slice(&out.stdout).map_err(|e| {
+            DomaError::InvalidData(format!("the scaling cell {spec} printed no record: {e}"))
+        })?;
+        progress(&cell);
+        cells.push(cell);
+    }
+    Ok(cells)
+}
+
+/// The scaling plots: time per step and peak memory against N (a curve per T), and
+/// checkpoint bytes against T for DOMA and DPF.
+pub fn scaling_plots(
+    cells: &[ScalingCell],
+    sizes: &[CheckpointSize],
+) -> Vec<(&'static str, crate::plot::Figure)> {
+    use crate::plot::{Series, line_plot};
+    // One picture per measured quantity: a curve per T against N (all points per step).
+    let against_n = |title: &str, y_label: &str, value: fn(&ScalingCell) -> Option<f64>| {
+        let curve = |t: usize| -> Vec<(f64, f64)> {
+            cells
+                .iter()
+                .filter(|c| c.frames == t && c.points_per_step.is_none())
+                .filter_map(|c| Some((c.points as f64, value(c)?)))
+                .collect()
+        };
+        line_plot(
+            title,
+            "training points N",
+            y_label,
+            &[
+                Series {
+                    name: "T = 20",
+                    color: [31, 119, 180],
+                    points: curve(20),
+                },
+                Series {
+                    name: "T = 100",
+                    color: [214, 39, 40],
+                    points: curve(100),
+                },
+            ],
+            true,
+        )
+        .log_x()
+    };
+    let step = against_n(
+        "Time per training step (flex, Affinity, analytic)",
+        "ms per step",
+        |c| Some(c.step_ms),
+    );
+    let peak = against_n(
+        "Peak memory of a fit (flex, Affinity, analytic)",
+        "peak MiB",
+        |c| c.peak_mib,
+    );
+    let bytes = |f: fn(&CheckpointSize) -> usize| -> Vec<(f64, f64)> {
+        sizes
+            .iter()
+            .map(|s| (s.frames as f64, f(s) as f64 / 1e6))
+            .collect()
+    };
+    let ckpt = line_plot(
+        "Checkpoint size against frames",
+        "frames T",
+        "MB",
+        &[
+            Series {
+                name: "DOMA",
+                color: [31, 119, 180],
+                points: bytes(|s| s.doma_bytes),
+            },
+            Series {
+                name: "DPF",
+                color: [214, 39, 40],
+                points: bytes(|s| s.dpf_bytes),
+            },
+        ],
+        true,
+    )
+    .log_x();
+    vec![
+        ("scaling_step.png", step),
+        ("scaling_memory.png", peak),
+        ("scaling_checkpoint.png", ckpt),
+    ]
 }
 
 #[cfg(test)]

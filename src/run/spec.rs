@@ -9,11 +9,11 @@ use serde::{Deserialize, Serialize};
 
 use super::RunConfig;
 use crate::backend::BackendKind;
-use crate::experiments::meshes::Weight;
 use crate::field::dpf::DpfConfig;
 use crate::field::model::ModelConfig;
 use crate::field::{DomaFieldConfig, Variant};
 use crate::jacobian::JacobianKind;
+use crate::train::select::Weight;
 use crate::train::select::{Penalty, WeightChoice, WeightSearch, choose_weight};
 use crate::train::{FitConfig, SmoothnessSampling};
 use crate::{DomaError, Result};

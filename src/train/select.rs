@@ -13,6 +13,50 @@ use crate::data::sequence::split_indices;
 use crate::metrics::{EPE_SCALE, evaluate_epe};
 use crate::{DomaError, Result};
 
+/// A regulariser's weight: given, or chosen by validation on the training points
+/// ([`choose_weight`]).
+///
+/// In JSON (a batch manifest): a number, or the string `"auto"`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "WeightRepr", into = "WeightRepr")]
+pub enum Weight {
+    /// This weight.
+    Fixed(f64),
+    /// The grid's best on held-out training points.
+    Auto,
+}
+
+/// How a [`Weight`] is written in JSON.
+#[derive(Clone, Serialize, Deserialize)]
+#[serde(untagged)]
+enum WeightRepr {
+    Number(f64),
+    Word(String),
+}
+
+impl TryFrom<WeightRepr> for Weight {
+    type Error = String;
+    fn try_from(r: WeightRepr) -> std::result::Result<Self, String> {
+        match r {
+            WeightRepr::Number(w) if w.is_finite() && w >= 0.0 => Ok(Weight::Fixed(w)),
+            WeightRepr::Word(w) if w == "auto" => Ok(Weight::Auto),
+            WeightRepr::Number(w) => Err(format!("the weight {w} must be finite and non-negative")),
+            WeightRepr::Word(w) => {
+                Err(format!("the weight `{w}` is neither a number nor \"auto\""))
+            }
+        }
+    }
+}
+
+impl From<Weight> for WeightRepr {
+    fn from(w: Weight) -> Self {
+        match w {
+            Weight::Fixed(w) => WeightRepr::Number(w),
+            Weight::Auto => WeightRepr::Word("auto".into()),
+        }
+    }
+}
+
 /// Which loss weight is searched.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]

@@ -10,7 +10,7 @@ mod alignment;
 mod novel_points;
 
 pub use alignment::{AlignModel, AlignReg, MeshAlignmentJob, mesh_alignment};
-pub use novel_points::{NovelPointsJob, Weight, novel_points};
+pub use novel_points::{NovelPointsJob, novel_points};
 
 use std::path::{Path, PathBuf};
 
@@ -26,7 +26,7 @@ use crate::experiments::{Experiment, RowReg};
 use crate::field::model::ModelName;
 use crate::metrics::chamfer_with_normals;
 
-/// Chamfer distances are reported ×1e4 (REFERENCE §7).
+/// Chamfer distances are reported ×1e4 (docs/reference.md §7).
 pub const CD_SCALE: f64 = 1e4;
 /// STD(E) and STD(V) are reported ×1e3: millimetres for data in metres, as in Tab. 3.
 pub const STD_SCALE: f64 = 1e3;

@@ -1,8 +1,6 @@
 //! `novel_points` (after Tab. 1): fit on 25 % of an animated mesh's vertices, predict the
 //! other 75 %; EPE, and CD/CDN of the warped canonical mesh.
 
-use serde::{Deserialize, Serialize};
-
 use super::{CD_SCALE, MeshRecord, mesh_chamfer_with};
 use crate::backend::BackendKind;
 use crate::checkpoint::Precision;
@@ -17,7 +15,7 @@ use crate::field::model::{Model, ModelConfig, ModelName};
 use crate::jacobian::JacobianKind;
 use crate::metrics::{EPE_SCALE, evaluate_epe};
 use crate::prelude::*;
-use crate::train::select::{Penalty, WeightChoice, WeightSearch, choose_weight};
+use crate::train::select::{Penalty, Weight, WeightChoice, WeightSearch, choose_weight};
 use crate::train::{FitConfig, Fitted, Trainer};
 use crate::warp::warp_points;
 use crate::{DomaError, Result};
@@ -53,50 +51,6 @@ pub struct NovelPointsJob {
     pub e_weight: Weight,
     /// How an `auto` weight is searched.
     pub search: WeightSearch,
-}
-
-/// A regulariser's weight: given, or chosen by validation on the training points
-/// ([`crate::train::select::choose_weight`]).
-///
-/// In JSON (a batch manifest): a number, or the string `"auto"`.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(try_from = "WeightRepr", into = "WeightRepr")]
-pub enum Weight {
-    /// This weight.
-    Fixed(f64),
-    /// The grid's best on held-out training points.
-    Auto,
-}
-
-/// How a [`Weight`] is written in JSON.
-#[derive(Clone, Serialize, Deserialize)]
-#[serde(untagged)]
-enum WeightRepr {
-    Number(f64),
-    Word(String),
-}
-
-impl TryFrom<WeightRepr> for Weight {
-    type Error = String;
-    fn try_from(r: WeightRepr) -> std::result::Result<Self, String> {
-        match r {
-            WeightRepr::Number(w) if w.is_finite() && w >= 0.0 => Ok(Weight::Fixed(w)),
-            WeightRepr::Word(w) if w == "auto" => Ok(Weight::Auto),
-            WeightRepr::Number(w) => Err(format!("the weight {w} must be finite and non-negative")),
-            WeightRepr::Word(w) => {
-                Err(format!("the weight `{w}` is neither a number nor \"auto\""))
-            }
-        }
-    }
-}
-
-impl From<Weight> for WeightRepr {
-    fn from(w: Weight) -> Self {
-        match w {
-            Weight::Fixed(w) => WeightRepr::Number(w),
-            Weight::Auto => WeightRepr::Word("auto".into()),
-        }
-    }
 }
 
 /// Runs `novel_points`: one record per model and regulariser, `on_run` after each.

@@ -1,0 +1,448 @@
+//! The glTF document and its binary container: buffers and accessors, a primitive per
+//! part with a morph target per frame, and the animation of the morph weights.
+
+use std::path::Path;
+
+use gltf_json as json;
+use json::validation::{Checked::Valid, USize64};
+
+use crate::data::mesh::vertex_normals;
+use crate::data::textured::{Material, Part, TexturedMesh};
+use crate::{DomaError, Result};
+
+/// The binary buffer being filled and the accessors that describe it.
+struct Builder {
+    root: json::Root,
+    bin: Vec<u8>,
+}
+
+impl Builder {
+    /// Appends `bytes` as a buffer view (4-byte aligned).
+    fn view(
+        &mut self,
+        bytes: &[u8],
+        target: Option<json::buffer::Target>,
+    ) -> json::Index<json::buffer::View> {
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
+        }
+        let offset = self.bin.len();
+        self.bin.extend_from_slice(bytes);
+        self.root.push(json::buffer::View {
+            buffer: json::Index::new(0),
+            byte_length: USize64::from(bytes.len()),
+            byte_offset: Some(USize64::from(offset)),
+            byte_stride: None,
+            name: None,
+            target: target.map(Valid),
+            extensions: None,
+            extras: Default::default(),
+        })
+    }
+
+    /// An accessor over `values` (`n` components each); `bounds` adds its min and max.
+    fn floats(
+        &mut self,
+        values: &[f32],
+        n: usize,
+        type_: json::accessor::Type,
+        bounds: bool,
+        target: Option<json::buffer::Target>,
+    ) -> json::Index<json::Accessor> {
+        let view = self.view(bytemuck::cast_slice(values), target);
+        let (min, max) = if bounds {
+            let mut lo = vec![f32::INFINITY; n];
+            let mut hi = vec![f32::NEG_INFINITY; n];
+            for v in values.chunks_exact(n) {
+                for c in 0..n {
+                    lo[c] = lo[c].min(v[c]);
+                    hi[c] = hi[c].max(v[c]);
+                }
+            }
+            (Some(json::Value::from(lo)), Some(json::Value::from(hi)))
+        } else {
+            (None, None)
+        };
+        self.root.push(json::Accessor {
+            buffer_view: Some(view),
+            byte_offset: None,
+            count: USize64::from(values.len() / n),
+            component_type: Valid(json::accessor::GenericComponentType(
+                json::accessor::ComponentType::F32,
+            )),
+            extensions: None,
+            extras: Default::default(),
+            type_: Valid(type_),
+            min,
+            max,
+            name: None,
+            normalized: false,
+            sparse: None,
+        })
+    }
+
+    fn indices(&mut self, triangles: &[[u32; 3]]) -> json::Index<json::Accessor> {
+        let flat: &[u32] = triangles.as_flattened();
+        let view = self.view(
+            bytemuck::cast_slice(flat),
+            Some(json::buffer::Target::ElementArrayBuffer),
+        );
+        self.root.push(json::Accessor {
+            buffer_view: Some(view),
+            byte_offset: None,
+            count: USize64::from(flat.len()),
+            component_type: Valid(json::accessor::GenericComponentType(
+                json::accessor::ComponentType::U32,
+            )),
+            extensions: None,
+            extras: Default::default(),
+            type_: Valid(json::accessor::Type::Scalar),
+            min: None,
+            max: None,
+            name: None,
+            normalized: false,
+            sparse: None,
+        })
+    }
+
+    fn material(
+        &mut self,
+        material: Option<&Material>,
+        base: &Path,
+        vertex_colors: bool,
+    ) -> json::Index<json::Material> {
+        let mut m = json::Material {
+            double_sided: true,
+            ..Default::default()
+        };
+        m.name = material.map(|m| m.name.clone());
+        m.pbr_metallic_roughness.metallic_factor = json::material::StrengthFactor(0.0);
+        m.pbr_metallic_roughness.roughness_factor = json::material::StrengthFactor(0.9);
+        let kd = material
+            .and_then(|m| m.diffuse)
+            .filter(|_| !vertex_colors)
+            .unwrap_or([0.8, 0.8, 0.8]);
+        m.pbr_metallic_roughness.base_color_factor =
+            json::material::PbrBaseColorFactor([kd[0], kd[1], kd[2], 1.0]);
+        if vertex_colors {
+            m.pbr_metallic_roughness.base_color_factor =
+                json::material::PbrBaseColorFactor([1.0; 4]);
+        }
+        if let Some(texture) = material
+            .and_then(|m| m.diffuse_texture.as_deref())
+            .and_then(|t| self.texture(base, t))
+        {
+            m.pbr_metallic_roughness.base_color_texture = Some(json::texture::Info {
+                index: texture,
+                tex_coord: 0,
+                extensions: None,
+                extras: Default::default(),
+            });
+            m.pbr_metallic_roughness.base_color_factor =
+                json::material::PbrBaseColorFactor([1.0; 4]);
+        }
+        self.root.push(m)
+    }
+
+    /// Embeds a PNG or JPEG texture (by its magic bytes); other files are left out.
+    fn texture(&mut self, base: &Path, name: &str) -> Option<json::Index<json::Texture>> {
+        let bytes = std::fs::read(base.join(name)).ok()?;
+        let mime = if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+            "image/png"
+        } else if bytes.starts_with(&[0xFF, 0xD8, 0xFF]) {
+            "image/jpeg"
+        } else {
+            return None;
+        };
+        let view = self.view(&bytes, None);
+        let image = self.root.push(json::Image {
+            buffer_view: Some(view),
+            mime_type: Some(json::image::MimeType(mime.into())),
+            name: Some(name.into()),
+            uri: None,
+            extensions: None,
+            extras: Default::default(),
+        });
+        let sampler = self.root.push(json::texture::Sampler::default());
+        Some(self.root.push(json::Texture {
+            name: None,
+            sampler: Some(sampler),
+            source: image,
+            extensions: None,
+            extras: Default::default(),
+        }))
+    }
+}
+
+/// The `.glb` of `shape` moving through `frames` (each `[V, 3]` over all parts, in the
+/// data's units): one primitive per part with a morph target per frame
+/// ([`part_primitive`]), one node, and the animation of its weights ([`morph_animation`]).
+pub(super) fn build_glb(
+    shape: &TexturedMesh,
+    frames: &[Vec<[f32; 3]>],
+    colors: Option<&[[f32; 3]]>,
+    fps: f32,
+) -> Result<Vec<u8>> {
+    let mut b = Builder {
+        root: json::Root {
+            asset: json::Asset {
+                generator: Some(format!("doma {}", env!("CARGO_PKG_VERSION"))),
+                version: "2.0".into(),
+                ..Default::default()
+            },
+            ..Default::default()
+        },
+        bin: Vec::new(),
+    };
+    let base_dir = shape.path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let mut primitives = Vec::new();
+    let mut offset = 0;
+    for part in &shape.parts {
+        let material = part.material.map(|m| &shape.materials[m]);
+        let colors = colors.map(|c| &c[offset..offset + part.positions.len()]);
+        primitives.push(part_primitive(
+            &mut b, part, offset, frames, colors, material, &base_dir,
+        ));
+        offset += part.positions.len();
+    }
+    let t = frames.len();
+    let mesh = b.root.push(json::Mesh {
+        extensions: None,
+        extras: Default::default(),
+        name: Some("doma motion".into()),
+        primitives,
+        weights: Some(vec![0.0; t]),
+    });
+    let node = b.root.push(json::Node {
+        mesh: Some(mesh),
+        name: Some("doma motion".into()),
+        ..Default::default()
+    });
+    let scene = b.root.push(json::Scene {
+        extensions: None,
+        extras: Default::default(),
+        name: None,
+        nodes: vec![node],
+    });
+    b.root.scene = Some(scene);
+    if t > 1 {
+        morph_animation(&mut b, node, t, fps);
+    }
+    while !b.bin.len().is_multiple_of(4) {
+        b.bin.push(0);
+    }
+    b.root.push(json::Buffer {
+        byte_length: USize64::from(b.bin.len()),
+        name: None,
+        uri: None,
+        extensions: None,
+        extras: Default::default(),
+    });
+    let text = json::serialize::to_string(&b.root)
+        .map_err(|e| DomaError::InvalidData(format!("cannot serialise the glTF document: {e}")))?;
+    Ok(glb(text.into_bytes(), b.bin))
+}
+
+/// One part of the shape as a primitive: its first frame's positions (and normals, UVs,
+/// colours) as the base, and one morph target per frame holding the displacements from
+/// it. The part's vertices are `offset..offset + n` of each frame.
+fn part_primitive(
+    b: &mut Builder,
+    part: &Part,
+    offset: usize,
+    frames: &[Vec<[f32; 3]>],
+    colors: Option<&[[f32; 3]]>,
+    material: Option<&Material>,
+    base_dir: &Path,
+) -> json::mesh::Primitive {
+    use json::accessor::Type;
+    use json::buffer::Target;
+    let n = part.positions.len();
+    let slice = |f: &Vec<[f32; 3]>| f[offset..offset + n].to_vec();
+    let base = slice(&frames[0]);
+    let points = part.triangles.is_empty();
+    let normals_of = |v: &[[f32; 3]]| vertex_normals(v, &part.triangles);
+    let base_normals = (!points).then(|| normals_of(&base));
+    let vec3 = |b: &mut Builder, v: &[f32], bounds: bool| {
+        b.floats(v, 3, Type::Vec3, bounds, Some(Target::ArrayBuffer))
+    };
+    let mut attributes = std::collections::BTreeMap::new();
+    attributes.insert(
+        Valid(json::mesh::Semantic::Positions),
+        vec3(b, base.as_flattened(), true),
+    );
+    if let Some(nrm) = &base_normals {
+        attributes.insert(
+            Valid(json::mesh::Semantic::Normals),
+            vec3(b, nrm.as_flattened(), false),
+        );
+    }
+    if let Some(uv) = &part.texcoords {
+        // OBJ's v runs up, glTF's down.
+        let flipped: Vec<f32> = uv.iter().flat_map(|t| [t[0], 1.0 - t[1]]).collect();
+        attributes.insert(
+            Valid(json::mesh::Semantic::TexCoords(0)),
+            b.floats(&flipped, 2, Type::Vec2, false, Some(Target::ArrayBuffer)),
+        );
+    }
+    if let Some(c) = colors {
+        attributes.insert(
+            Valid(json::mesh::Semantic::Colors(0)),
+            vec3(b, c.as_flattened(), false),
+        );
+    }
+    let difference = |a: &[[f32; 3]], o: &[[f32; 3]]| -> Vec<f32> {
+        a.iter()
+            .zip(o)
+            .flat_map(|(a, o)| [a[0] - o[0], a[1] - o[1], a[2] - o[2]])
+            .collect()
+    };
+    let mut targets = Vec::with_capacity(frames.len());
+    for frame in frames {
+        let moved = slice(frame);
+        let positions = Some(vec3(b, &difference(&moved, &base), true));
+        let normals = base_normals
+            .as_ref()
+            .map(|bn| vec3(b, &difference(&normals_of(&moved), bn), false));
+        targets.push(json::mesh::MorphTarget {
+            positions,
+            normals,
+            tangents: None,
+        });
+    }
+    let indices = (!points).then(|| b.indices(&part.triangles));
+    let material = b.material(material, base_dir, colors.is_some());
+    json::mesh::Primitive {
+        attributes,
+        extensions: None,
+        extras: Default::default(),
+        indices,
+        material: Some(material),
+        mode: Valid(if points {
+            json::mesh::Mode::Points
+        } else {
+            json::mesh::Mode::Triangles
+        }),
+        targets: Some(targets),
+    }
+}
+
+/// The animation of `node`'s `t` morph weights: keyframe `k` at `k / fps` seconds is
+/// one-hot on target `k`, linearly interpolated in between.
+fn morph_animation(b: &mut Builder, node: json::Index<json::Node>, t: usize, fps: f32) {
+    use json::accessor::Type;
+    let times: Vec<f32> = (0..t).map(|k| k as f32 / fps).collect();
+    let input = b.floats(&times, 1, Type::Scalar, true, None);
+    let mut weights = vec![0f32; t * t];
+    for k in 0..t {
+        weights[k * t + k] = 1.0;
+    }
+    let output = b.floats(&weights, 1, Type::Scalar, false, None);
+    let sampler = json::animation::Sampler {
+        extensions: None,
+        extras: Default::default(),
+        input,
+        interpolation: Valid(json::animation::Interpolation::Linear),
+        output,
+    };
+    b.root.push(json::Animation {
+        extensions: None,
+        extras: Default::default(),
+        channels: vec![json::animation::Channel {
+            sampler: json::Index::new(0),
+            target: json::animation::Target {
+                extensions: None,
+                extras: Default::default(),
+                node,
+                path: Valid(json::animation::Property::MorphTargetWeights),
+            },
+            extensions: None,
+            extras: Default::default(),
+        }],
+        name: Some("motion".into()),
+        samplers: vec![sampler],
+    });
+}
+
+/// The GLB container (glTF 2.0 §4.4): a 12-byte header, the JSON chunk padded with spaces
+/// and the binary chunk padded with zeros, each to 4 bytes.
+fn glb(mut json: Vec<u8>, bin: Vec<u8>) -> Vec<u8> {
+    while !json.len().is_multiple_of(4) {
+        json.push(b' ');
+    }
+    let total = 12 + 8 + json.len() + 8 + bin.len();
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&json);
+    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&bin);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::export::single_part;
+
+    #[test]
+    fn a_glb_has_the_header_and_both_chunks_aligned() {
+        let out = glb(b"{\"a\":1}".to_vec(), vec![1, 2, 3, 4]);
+        assert_eq!(&out[..4], b"glTF");
+        assert_eq!(
+            u32::from_le_bytes(out[8..12].try_into().unwrap()) as usize,
+            out.len()
+        );
+        let json_len = u32::from_le_bytes(out[12..16].try_into().unwrap()) as usize;
+        assert_eq!(json_len % 4, 0);
+        assert_eq!(&out[20..20 + 7], b"{\"a\":1}");
+        assert_eq!(&out[20 + json_len + 4..20 + json_len + 8], b"BIN\0");
+    }
+
+    #[test]
+    fn the_document_lists_one_target_per_frame_and_one_hot_weights() {
+        let shape = single_part(
+            vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            vec![[0, 1, 2]],
+            Path::new("x.obj"),
+        );
+        let frames: Vec<Vec<[f32; 3]>> = (0..3)
+            .map(|k| {
+                shape
+                    .positions()
+                    .iter()
+                    .map(|p| [p[0] + k as f32, p[1], p[2]])
+                    .collect()
+            })
+            .collect();
+        let bytes = build_glb(&shape, &frames, None, 10.0).unwrap();
+        let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        let doc: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+        assert_eq!(
+            doc["meshes"][0]["primitives"][0]["targets"]
+                .as_array()
+                .unwrap()
+                .len(),
+            3
+        );
+        assert_eq!(doc["meshes"][0]["weights"].as_array().unwrap().len(), 3);
+        let channel = &doc["animations"][0]["channels"][0]["target"];
+        assert_eq!(channel["path"], "weights");
+        // Frame 2's target moves every vertex by +2 in x: its POSITION bounds say so.
+        let target = doc["meshes"][0]["primitives"][0]["targets"][2]["POSITION"]
+            .as_u64()
+            .unwrap();
+        assert_eq!(doc["accessors"][target as usize]["min"][0], 2.0);
+        assert_eq!(doc["accessors"][target as usize]["max"][0], 2.0);
+        // The keyframe times: 0, 0.1, 0.2 s.
+        let input = doc["animations"][0]["samplers"][0]["input"]
+            .as_u64()
+            .unwrap();
+        let max = doc["accessors"][input as usize]["max"][0].as_f64().unwrap();
+        assert!((max - 0.2).abs() < 1e-6);
+    }
+}
