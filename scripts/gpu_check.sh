@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
-# The GPU figures of the README in one short run, for a machine with a real GPU (wgpu:
+# The GPU figures of docs/speed.md in one short run, for a machine with a real GPU (wgpu:
 # Vulkan, Metal or DX12). Everything it measures lands in $OUT (default: ./gpu-figures):
 #   bench.json        doma bench --backend all (flex, ndarray, wgpu; both Jacobian methods)
 #   synthetic.json    one full Affinity-H fit on wgpu (1000 iterations, rotation), its EPE
-#                     and seconds: the goal is < 15 s (the paper: 96 s, TITAN RTX)
+#                     and seconds: the goal is < 15 s (the paper: 96 s, TITAN RTX)
 #   tests.log         the wgpu tests (kernels against their reference, Analytic against
 #                     Autodiff, wgpu against flex, no host read inside a step), with CI=true
 #                     so that a missing adapter fails
@@ -23,6 +23,6 @@ nvidia-smi -L > "$OUT/gpu.txt" 2>&1 || true
 "$DOMA" synthetic --motion rotation --variant affinity --reg h --backend wgpu \
   --json "$OUT/synthetic.json" 2>&1 | tee "$OUT/synthetic.log"
 if [ -z "${1:-}" ]; then
-  CI=true cargo test --release --test analytic --test analytic_kernels --test fit --test host_sync \
+  CI=true cargo test --release --test numerics --test fitting --test host_sync \
     2>&1 | tee "$OUT/tests.log"
 fi

@@ -6,6 +6,8 @@
 pub mod oracle;
 pub mod png;
 
+use std::ffi::OsStr;
+use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard, OnceLock};
 
 use burn::tensor::{Device, FloatDType, Tensor, TensorData};
@@ -26,6 +28,54 @@ pub fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f64> {
 
 pub fn tensor2(values: Vec<f64>, shape: [usize; 2], device: &Device) -> Tensor<2> {
     Tensor::from_data(TensorData::new(values, shape), device)
+}
+
+/// A scratch path inside a fresh temporary folder (`tempfile`), removed with everything in
+/// it when dropped. Reads as a `Path`.
+pub struct Scratch {
+    _root: tempfile::TempDir,
+    path: PathBuf,
+}
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl AsRef<OsStr> for Scratch {
+    fn as_ref(&self) -> &OsStr {
+        self.path.as_os_str()
+    }
+}
+
+fn temp_root(prefix: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("{prefix}-"))
+        .tempdir()
+        .expect("a temporary folder")
+}
+
+/// A fresh, empty folder named after `prefix`.
+pub fn scratch(prefix: &str) -> Scratch {
+    let root = temp_root(prefix);
+    let path = root.path().to_path_buf();
+    Scratch { _root: root, path }
+}
+
+/// A path that does not exist yet, in a fresh folder named after `prefix` (for outputs
+/// that a command must create itself).
+pub fn scratch_path(prefix: &str) -> Scratch {
+    let root = temp_root(prefix);
+    let path = root.path().join("out");
+    Scratch { _root: root, path }
 }
 
 /// `‖a − b‖ / ‖b‖` (Euclidean over all entries), guarded against a zero reference.

@@ -2,6 +2,7 @@
 //! edges, surface sampling, and the mesh metrics (CD, CDN, STD(E), STD(V)) on hand-built
 //! meshes with known answers.
 
+use crate::common;
 use std::path::PathBuf;
 
 use doma::DomaError;
@@ -12,11 +13,8 @@ use doma::data::mesh::{
 };
 use doma::metrics::{chamfer, chamfer_with_normals, std_edges, std_vertices};
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("doma-mesh-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn temp_dir(tag: &str) -> common::Scratch {
+    common::scratch(&format!("doma-mesh-{tag}"))
 }
 
 /// A unit square in the z = 0 plane as two counter-clockwise triangles (normal +z).
@@ -321,9 +319,7 @@ fn std_e_and_std_v_on_hand_built_sequences() {
 
 #[test]
 fn obj_folders_are_read_in_natural_order() {
-    let dir = std::env::temp_dir().join(format!("doma-natural-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-natural");
     // frame_10 sorts before frame_2 as plain text; its x is 10.
     for k in [1, 2, 10] {
         let obj = format!("v {k} 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n");
@@ -332,5 +328,4 @@ fn obj_folders_are_read_in_natural_order() {
     let (t, _) = read_obj_sequence(&dir).unwrap();
     let xs: Vec<f32> = (0..3).map(|k| t.frame(k)[0]).collect();
     assert_eq!(xs, vec![1.0, 2.0, 10.0]);
-    std::fs::remove_dir_all(&dir).ok();
 }

@@ -4,7 +4,7 @@
 //! quads, negative indices, groups and a material library through every frame with its
 //! UVs intact. Bad input gets one line naming the file.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -23,11 +23,8 @@ const PNG: &[u8] = &[
     0x4E, 0x44, 0xAE, 0x42, 0x60, 0x82,
 ];
 
-fn temp(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("doma-export-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn temp(tag: &str) -> common::Scratch {
+    common::scratch(&format!("doma-export-{tag}"))
 }
 
 fn doma(args: &[&str]) -> (Option<i32>, String) {

@@ -5,6 +5,9 @@
 //!
 //! One test in its own binary, so that the allocator counts this reader alone.
 
+#[path = "../common/mod.rs"]
+mod common;
+
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -122,8 +125,7 @@ fn refused(path: &Path, what: &str) -> (String, usize) {
 
 #[test]
 fn hostile_npz_archives_are_refused_within_a_bounded_memory() {
-    let dir = std::env::temp_dir().join(format!("doma-bombs-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-bombs");
     let write = |name: &str, bytes: &[u8]| {
         let path = dir.join(name);
         std::fs::write(&path, bytes).unwrap();
@@ -196,5 +198,4 @@ fn hostile_npz_archives_are_refused_within_a_bounded_memory() {
         array / MB,
         peak as f64 / MB as f64
     );
-    std::fs::remove_dir_all(&dir).ok();
 }

@@ -2,7 +2,7 @@
 //! non-finite loss leaves the last good checkpoint in place, and eval / warp / info read a
 //! finished run.
 
-mod common;
+use crate::common;
 
 use doma::prelude::*;
 use std::path::PathBuf;
@@ -22,10 +22,15 @@ fn faerie() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/md2_faerie.traj")
 }
 
-fn temp(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("doma-run-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
+/// A run folder that does not exist yet, and the scratch folder that holds it.
+fn run_dir(tag: &str) -> (common::Scratch, RunDir) {
+    let dir = temp(tag);
+    let run = RunDir::new(dir.to_path_buf());
+    (dir, run)
+}
+
+fn temp(tag: &str) -> common::Scratch {
+    common::scratch_path(&format!("doma-run-{tag}"))
 }
 
 fn config() -> RunConfig {
@@ -52,12 +57,12 @@ fn a_resumed_fit_equals_an_uninterrupted_one_bit_exactly() {
     let _g = backward_lock();
     let device = Device::flex();
     let never = AtomicBool::new(false);
-    let whole = RunDir::new(temp("whole"));
+    let (_whole_dir, whole) = run_dir("whole");
     let outcome = fit_run(&whole, Some(config()), &device, &never, None, false).unwrap();
     assert!(matches!(outcome, FitOutcome::Finished(_)));
 
     // Interrupted after 3 iterations (between two checkpoints), then resumed twice over.
-    let parts = RunDir::new(temp("parts"));
+    let (_parts_dir, parts) = run_dir("parts");
     let outcome = fit_run(&parts, Some(config()), &device, &never, Some(3), false).unwrap();
     assert_eq!(outcome, FitOutcome::Interrupted { iterations_done: 3 });
     assert!(
@@ -105,7 +110,7 @@ fn a_non_finite_loss_keeps_the_last_good_checkpoint() {
     let _g = backward_lock();
     let device = Device::flex();
     let never = AtomicBool::new(false);
-    let run = RunDir::new(temp("nan"));
+    let (_run_dir, run) = run_dir("nan");
     fit_run(&run, Some(config()), &device, &never, Some(2), false).unwrap();
     let good = std::fs::read(run.resume()).unwrap();
     // Make the continuation diverge: an absurd learning rate overflows the outputs.
@@ -129,7 +134,7 @@ fn eval_warp_and_info_read_a_finished_run() {
     let _g = backward_lock();
     let device = Device::flex();
     let never = AtomicBool::new(false);
-    let run = RunDir::new(temp("done"));
+    let (_run_dir, run) = run_dir("done");
     // Trans: `y = x + o` starts near the identity, so even a short fit keeps the shape.
     let mut c = config();
     c.fit = FitConfig::doma(DomaFieldConfig::new(Variant::Trans).with_hidden(32))
@@ -147,7 +152,8 @@ fn eval_warp_and_info_read_a_finished_run() {
     let again = eval_run(&run, None, &device).unwrap();
     assert_eq!(again.epe_x1e4, report.epe_x1e4);
     // On the whole sequence's first 6 frames of the clip, as new data: all 366 points.
-    let clip = temp("clip").with_extension("traj");
+    let clip_dir = temp("clip");
+    let clip = clip_dir.with_extension("traj");
     let seq = doma::data::traj::read_traj(faerie()).unwrap();
     doma::data::traj::write_traj(&clip, &seq.select_frames(112..118, 1).unwrap()).unwrap();
     let on_new = eval_run(&run, Some(&clip), &device).unwrap();
@@ -237,7 +243,7 @@ fn an_unfinished_run_is_read_in_memory_without_writing_into_its_folder() {
     let _g = backward_lock();
     let device = Device::flex();
     let never = AtomicBool::new(false);
-    let run = RunDir::new(temp("unfinished"));
+    let (_run_dir, run) = run_dir("unfinished");
     fit_run(&run, Some(config()), &device, &never, Some(2), false).unwrap();
     let listing = |dir: &std::path::Path| -> Vec<String> {
         let mut names: Vec<String> = std::fs::read_dir(dir)
@@ -281,7 +287,7 @@ fn nan_weights_are_blamed_on_model_bpk_not_on_the_data() {
     let _g = backward_lock();
     let device = Device::flex();
     let never = AtomicBool::new(false);
-    let run = RunDir::new(temp("poison"));
+    let (_run_dir, run) = run_dir("poison");
     let mut c = config();
     c.fit = c.fit.with_iterations(1);
     fit_run(&run, Some(c.clone()), &device, &never, None, false).unwrap();

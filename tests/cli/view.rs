@@ -3,9 +3,9 @@
 //! pixels: the object covers a region around the centre, it is coloured by error, and two
 //! frames differ. For a run with a mesh and for a point cloud.
 
-mod common;
+use crate::common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use common::png::{Image, decode};
@@ -15,11 +15,8 @@ const FLUID: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/data/taichi_mpm3d_flui
 const BACKGROUND: [u8; 3] = [27, 29, 34];
 const CHROMIUM: &str = "/usr/bin/chromium";
 
-fn temp(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("doma-view-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn temp(tag: &str) -> common::Scratch {
+    common::scratch(&format!("doma-view-{tag}"))
 }
 
 fn doma(args: &[&str]) {

@@ -2,6 +2,7 @@
 //! and rerun, failures recorded without stopping the shard, `--collect`, and the Slurm and
 //! Kubernetes recipes in docs/batch/ checked against the binary.
 
+use crate::common;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -12,11 +13,8 @@ use serde_json::Value;
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 const FAERIE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
 
-fn temp(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("doma-batch-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn temp(tag: &str) -> common::Scratch {
+    common::scratch(&format!("doma-batch-{tag}"))
 }
 
 fn doma() -> Command {

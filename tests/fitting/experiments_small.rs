@@ -1,6 +1,7 @@
 //! The 2-D image and fluid experiments' building blocks on hand-computed values, and tiny
 //! end-to-end runs that check their records.
 
+use crate::common;
 use doma::backend::BackendKind;
 use doma::data::Trajectories;
 use doma::experiments::Experiment;
@@ -76,7 +77,7 @@ fn mean_motion_and_the_fluid_table_by_hand() {
 
 #[test]
 fn a_tiny_image2d_run_writes_its_pictures() {
-    let dir = std::env::temp_dir().join(format!("doma-i2d-{}", std::process::id()));
+    let dir = common::scratch_path("doma-i2d");
     let job = Image2dJob {
         resolution: 16,
         frames: 4,
@@ -87,7 +88,7 @@ fn a_tiny_image2d_run_writes_its_pictures() {
         backend: BackendKind::Flex,
         seed: 0,
         quiet: true,
-        png_dir: Some(dir.clone()),
+        png_dir: Some(dir.to_path_buf()),
     };
     let records = image2d::run(&job, |_| {}).unwrap();
     assert_eq!(records.len(), 2);
@@ -124,8 +125,7 @@ fn a_tiny_fluid_run_records_its_learning_curve() {
             pos.extend([r * (phi + a).cos(), r * (phi + a).sin(), 0.01 * i as f32]);
         }
     }
-    let dir = std::env::temp_dir().join(format!("doma-fluid-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-fluid");
     let data = dir.join("ring.traj");
     doma::data::traj::write_traj(&data, &Trajectories::new(frames, n, pos).unwrap()).unwrap();
     let job = fluid::FluidJob {
@@ -168,7 +168,6 @@ fn a_tiny_fluid_run_records_its_learning_curve() {
     let pngs = fluid::curve_plots(&records, &dir.join("curves")).unwrap();
     assert_eq!(pngs, vec![dir.join("curves/fluid_clip0_16d.png")]);
     assert_eq!(&std::fs::read(&pngs[0]).unwrap()[..4], b"\x89PNG");
-    std::fs::remove_dir_all(&dir).ok();
     assert_eq!(skips, vec![4]);
     assert_eq!((runs, records.len()), (2, 2));
     for r in &records {

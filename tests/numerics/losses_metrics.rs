@@ -1,6 +1,6 @@
 //! Losses and metrics on hand-computed values.
 
-mod common;
+use crate::common;
 
 use burn::tensor::{Device, Tensor, TensorData};
 use common::{tensor2, to_vec};

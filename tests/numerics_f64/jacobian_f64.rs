@@ -3,7 +3,7 @@
 //! smoothness (and elasticity) loss. Its own test binary, because a device's float
 //! type is set once per process.
 
-mod common;
+use crate::common;
 
 use common::oracle::{
     N, Output, autodiff_theta_grad, check_against_reverse, fd_jacobian, fd_theta_grad,

@@ -1,4 +1,4 @@
-//! The SIREN initialiser against REFERENCE §1, and the parameter counts.
+//! The SIREN initialiser against docs/reference.md §1, and the parameter counts.
 
 use doma::field::{DomaFieldConfig, MotionField, Variant};
 use doma::prelude::*;

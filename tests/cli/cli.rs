@@ -1,6 +1,7 @@
 //! The `doma` binary: bad flags are refused with a clear message, and a tiny run
 //! prints the table and writes one JSON record per run.
 
+use crate::common;
 use doma::prelude::*;
 use std::process::Command;
 
@@ -66,8 +67,7 @@ fn a_missing_json_folder_is_refused_before_fitting() {
 
 #[test]
 fn a_tiny_run_prints_the_table_and_writes_json() {
-    let dir = std::env::temp_dir().join(format!("doma-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-cli");
     let json = dir.join("runs.json");
     let (ok, stdout, stderr) = doma(&[
         "synthetic",
@@ -108,13 +108,11 @@ fn a_tiny_run_prints_the_table_and_writes_json() {
     assert_eq!(r["jacobian"], "analytic");
     assert_eq!(r["steps"], 40);
     assert!(r["epe_x1e4"].as_f64().unwrap() > 0.0);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn bench_prints_the_table_and_writes_exactly_the_record_fields() {
-    let dir = std::env::temp_dir().join(format!("doma-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-bench");
     let json = dir.join("bench.json");
     let (ok, stdout, stderr) = doma(&[
         "bench",
@@ -177,13 +175,11 @@ fn bench_prints_the_table_and_writes_exactly_the_record_fields() {
     // A missing interpreter for the PyTorch comparison is named, not a panic.
     let (ok, _, err) = doma(&["bench", "--compare-torch", "/nonexistent/python3"]);
     assert!(!ok && err.contains("/nonexistent/python3"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn mesh_experiments_refuse_bad_flags_and_bad_data_naming_the_file() {
-    let dir = std::env::temp_dir().join(format!("doma-cli-mesh-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-cli-mesh");
     let no_faces = dir.join("points.npy");
     std::fs::write(
         &no_faces,
@@ -245,8 +241,7 @@ fn mesh_experiments_refuse_bad_flags_and_bad_data_naming_the_file() {
 
 #[test]
 fn a_tiny_novel_points_run_writes_its_records() {
-    let dir = std::env::temp_dir().join(format!("doma-cli-np-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-cli-np");
     let json = dir.join("np.json");
     let faerie = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
     let (ok, out, err) = doma(&[
@@ -305,9 +300,7 @@ fn doma_code(args: &[&str]) -> (Option<i32>, String) {
 
 #[test]
 fn the_user_subcommands_refuse_bad_input_with_one_line_naming_the_file() {
-    let dir = std::env::temp_dir().join(format!("doma-cli-bad-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-cli-bad");
     let p = |name: &str| dir.join(name).to_str().unwrap().to_string();
     std::fs::write(p("cut.traj"), b"TRAJ\x01\x00\x00\x00\x02\x00").unwrap();
     std::fs::write(
@@ -434,8 +427,7 @@ fn the_user_subcommands_refuse_bad_input_with_one_line_naming_the_file() {
 
 #[test]
 fn ctrl_c_saves_a_checkpoint_and_the_fit_resumes() {
-    let dir = std::env::temp_dir().join(format!("doma-cli-sigint-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = common::scratch_path("doma-cli-sigint");
     let faerie = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
     let run = dir.join("run");
     let child = Command::new(env!("CARGO_BIN_EXE_doma"))
@@ -536,9 +528,7 @@ fn the_supplement_experiments_refuse_bad_flags() {
 
 #[test]
 fn fit_reads_a_config_file_and_flags_override_it() {
-    let dir = std::env::temp_dir().join(format!("doma-cli-config-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-cli-config");
     let config = dir.join("fit.json");
     // A FitConfig as a run's config.json holds it: Scaled SE(3), width 16, 50 iterations.
     let fit = doma::train::FitConfig::doma(
@@ -631,9 +621,7 @@ fn fit_reads_a_config_file_and_flags_override_it() {
 
 #[test]
 fn fit_chooses_its_smoothness_weight_by_validation_and_plots_the_grid() {
-    let dir = std::env::temp_dir().join(format!("doma-cli-auto-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-cli-auto");
     let run = dir.join("run");
     let faerie = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
     let (ok, _, err) = doma(&[
@@ -670,7 +658,6 @@ fn fit_chooses_its_smoothness_weight_by_validation_and_plots_the_grid() {
     assert_eq!(saved["fit"]["loss"]["smoothness_weight"], best["weight"]);
     let (ok, _, err) = doma(&["plot", run.to_str().unwrap()]);
     assert!(ok && err.contains("weight_search.png"), "{err}");
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]

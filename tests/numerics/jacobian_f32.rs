@@ -1,6 +1,6 @@
 //! The `Autodiff` Jacobian in f32 against Burn's reverse mode (1e-3 relative).
 
-mod common;
+use crate::common;
 
 use burn::tensor::Device;
 use common::oracle::{

@@ -1,16 +1,14 @@
 //! The `.traj` format: round trips, the shipped real sequence, and every kind of bad file
 //! refused with an error naming the file and the problem.
 
-use std::path::PathBuf;
+use crate::common;
 
 use doma::DomaError;
 use doma::data::Trajectories;
 use doma::data::traj::{encode_traj, parse_traj, read_traj, write_traj};
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("doma-traj-{tag}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn temp_dir(tag: &str) -> common::Scratch {
+    common::scratch(&format!("doma-traj-{tag}"))
 }
 
 fn sample() -> Trajectories {
@@ -41,7 +39,6 @@ fn a_file_round_trips_bit_exactly() {
         .map(|e| e.unwrap().file_name())
         .collect();
     assert_eq!(names, vec![std::ffi::OsString::from("a.traj")]);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -136,5 +133,4 @@ fn file_errors_name_the_file() {
     let unwritable = dir.join("no-such-folder").join("out.traj");
     let msg = write_traj(&unwritable, &sample()).unwrap_err().to_string();
     assert!(msg.contains("out.traj"), "{msg}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }

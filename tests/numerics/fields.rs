@@ -1,6 +1,6 @@
 //! The heads against closed-form motions, and Gram–Schmidt's properties.
 
-mod common;
+use crate::common;
 
 use burn::tensor::{Device, Tensor};
 use common::{random_points, tensor2, to_vec};
@@ -50,7 +50,7 @@ fn assert_close(a: &[f64], b: &[f64], tol: f64, what: &str) {
 }
 
 /// The 6-D representation of a rotation: the first two columns of R, as a 3×2
-/// matrix read row-major (REFERENCE §2.1).
+/// matrix read row-major (docs/reference.md §2.1).
 fn six_d(r: &[[f64; 3]; 3]) -> [f64; 6] {
     [r[0][0], r[0][1], r[1][0], r[1][1], r[2][0], r[2][1]]
 }

@@ -1,4 +1,4 @@
-//! The fit loop makes no host sync inside a step (issue 13): `Trainer::step` reads nothing
+//! The fit loop makes no host sync inside a step: `Trainer::step` reads nothing
 //! back, and `Trainer::iteration` reads once, its losses, after its last step. Counted by
 //! `doma::readback::reads`, through which the crate makes every device → host read
 //! (clippy refuses Burn's read methods elsewhere in `src/`). On flex and on wgpu (lavapipe
@@ -7,6 +7,7 @@
 //!
 //! One test function: the counter is per process, and tests of one binary run in parallel.
 
+#[path = "../common/mod.rs"]
 mod common;
 
 use burn::tensor::Device;

@@ -2,7 +2,8 @@
 //! (big-endian, Fortran order, integers), and every kind of bad file refused with an error
 //! naming the file.
 
-use std::path::{Path, PathBuf};
+use crate::common;
+use std::path::Path;
 
 use doma::DomaError;
 use doma::data::Trajectories;
@@ -11,10 +12,8 @@ use doma::data::npy::{
     read_npz_trajectories, write_npy_trajectories, write_npz,
 };
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("doma-npy-{tag}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn temp_dir(tag: &str) -> common::Scratch {
+    common::scratch(&format!("doma-npy-{tag}"))
 }
 
 fn sample() -> Trajectories {

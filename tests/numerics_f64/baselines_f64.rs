@@ -2,7 +2,7 @@
 //! the DCT basis and RBF skinning) against f64 central differences. Its own process: the
 //! f64 device is configured once.
 
-mod common;
+use crate::common;
 
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData};

@@ -3,7 +3,7 @@
 //! Jacobian vs finite differences), checkpoints (bit-exact round trip, f16, bad files), and
 //! a short Eq. 12 registration.
 
-mod common;
+use crate::common;
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
@@ -110,7 +110,7 @@ fn the_chamfer_weight_follows_the_authors_schedule() {
 fn dpf_stacks_one_net_per_frame() {
     let device = Device::flex();
     let config = DpfConfig::new(30).with_n_hidden(3);
-    // Per frame: 3·128+128 + 3·(128·128+128) + 128·3+3 = 50,435 (REFERENCE §2: T nets).
+    // Per frame: 3·128+128 + 3·(128·128+128) + 128·3+3 = 50,435 (docs/reference.md §2: T nets).
     assert_eq!(config.siren().num_params(), 50_435);
     let dpf = config.init(0, &device);
     assert_eq!(dpf.param_count(), 30 * 50_435);
@@ -212,8 +212,7 @@ fn dpf_value_path_through_the_fused_sine_layers_matches_the_plain_one_with_its_g
 #[test]
 fn checkpoints_round_trip_bit_exactly_and_in_f16() {
     let device = Device::flex();
-    let dir = std::env::temp_dir().join(format!("doma-ckpt-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-ckpt");
     let config = DomaFieldConfig::new(Variant::Affinity).with_n_hidden(3);
     let field = config.init(3, &device);
     let path = dir.join("model.bpk");
@@ -264,8 +263,7 @@ fn checkpoints_round_trip_bit_exactly_and_in_f16() {
 #[test]
 fn bad_checkpoints_are_refused_naming_the_file() {
     let device = Device::flex();
-    let dir = std::env::temp_dir().join(format!("doma-badckpt-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-badckpt");
     let garbage = dir.join("garbage.bpk");
     std::fs::write(&garbage, b"not a burnpack at all").unwrap();
     let config = DomaFieldConfig::new(Variant::Trans);

@@ -1,6 +1,7 @@
 //! DeformingThings4D `.anime`: round trips on files we write (the dataset cannot be
 //! downloaded here), the documented layout, and bad files refused with the reason.
 
+use crate::common;
 use doma::data::Trajectories;
 use doma::data::anime::{AnimatedMesh, encode_anime, parse_anime, read_anime, write_anime};
 
@@ -33,13 +34,11 @@ fn words(bytes: &[u8]) -> Vec<[u8; 4]> {
 
 #[test]
 fn a_mesh_round_trips() {
-    let dir = std::env::temp_dir().join(format!("doma-anime-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-anime");
     let path = dir.join("tetra.anime");
     let mesh = tetra();
     write_anime(&path, &mesh).unwrap();
     assert_eq!(read_anime(&path).unwrap(), mesh);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -116,8 +115,7 @@ fn bad_files_are_refused_with_the_reason() {
 
 #[test]
 fn file_errors_name_the_file() {
-    let dir = std::env::temp_dir().join(format!("doma-anime-bad-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("doma-anime-bad");
     let path = dir.join("cut.anime");
     std::fs::write(&path, &encode_anime(&tetra()).unwrap()[..20]).unwrap();
     let msg = read_anime(&path).unwrap_err().to_string();
@@ -125,5 +123,4 @@ fn file_errors_name_the_file() {
         msg.contains("cut.anime") && msg.contains("truncated"),
         "{msg}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }

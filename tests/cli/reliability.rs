@@ -2,17 +2,15 @@
 //! exit and one line naming the file and the reason, no panic, no half-made output, and no
 //! folder left locked. (The `.npz` bombs are in `npz_bombs.rs`.)
 
+use crate::common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
 const FAERIE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
 
-fn temp(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("doma-rel-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn temp(tag: &str) -> common::Scratch {
+    common::scratch(&format!("doma-rel-{tag}"))
 }
 
 fn doma(args: &[&str]) -> (Option<i32>, String, String) {
@@ -62,7 +60,8 @@ fn finished_run(tag: &str) -> PathBuf {
 
 #[test]
 fn a_run_folder_has_one_writer_and_sigterm_checkpoints_like_ctrl_c() {
-    let run = temp("lock").join("run");
+    let lock_dir = temp("lock");
+    let run = lock_dir.join("run");
     let child = Command::new(env!("CARGO_BIN_EXE_doma"))
         .args([
             "fit", FAERIE, "--frames", "112..118", "--iters", "100000", "--quiet",

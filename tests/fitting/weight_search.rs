@@ -2,7 +2,7 @@
 //! grid's minimum, the validation points are training points (the test points never reach
 //! the search), and bad search settings are refused naming their flag.
 
-mod common;
+use crate::common;
 
 use burn::tensor::Device;
 use common::backward_lock;

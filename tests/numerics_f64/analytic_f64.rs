@@ -1,9 +1,9 @@
 //! The `Analytic` Jacobian in f64 against central finite differences, to 1e-6 relative
-//! (DESIGN §2): J of the raw outputs and of the warp, and the gradient of every parameter
+//! (docs/design.md §2): J of the raw outputs and of the warp, and the gradient of every parameter
 //! θ of `L_H + L_E` for every variant. Its own test binary, because a device's float type
 //! is set once per process.
 
-mod common;
+use crate::common;
 
 use common::oracle::{
     N, Output, all_parameters, fd_jacobian, fd_theta_grad_at, method_jacobian, method_outputs,

@@ -1,10 +1,10 @@
 //! The `Analytic` Jacobian (hand-written backward) against `Autodiff` in f32 (1e-3
-//! relative, DESIGN §2): the outputs, J of the raw outputs and of the warp, and the
+//! relative, docs/design.md §2): the outputs, J of the raw outputs and of the warp, and the
 //! gradient of every parameter θ of `L_H` and of `L_H + L_E`, for every variant, on
 //! flex, ndarray and wgpu (skipped
 //! without an adapter, except under CI, where that fails).
 
-mod common;
+use crate::common;
 
 use burn::tensor::Device;
 use common::oracle::{

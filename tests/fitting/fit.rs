@@ -1,7 +1,7 @@
 //! The fit loop: it learns, it is deterministic, it stops on a non-finite loss, and
 //! every backend runs the same function to the same result.
 
-mod common;
+use crate::common;
 
 use burn::tensor::Device;
 use common::{backward_lock, rel_err, to_vec};

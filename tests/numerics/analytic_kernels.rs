@@ -4,11 +4,11 @@
 //! without a wgpu adapter,
 //! except under CI (`CI` set), where that fails.
 
-mod common;
+use crate::common;
 
 use burn::tensor::{Device, Tensor, TensorData};
 use common::{random_points, rel_err, to_vec};
-use doma::jacobian::analytic::{Activation, activation, kernel};
+use doma::jacobian::analytic::{SineKernel, activation, kernel_launches};
 
 fn tensor(values: &[f64], shape: Vec<usize>, device: &Device) -> Tensor<2> {
     let data = TensorData::new(values.iter().map(|&v| v as f32).collect::<Vec<_>>(), shape);
@@ -16,17 +16,17 @@ fn tensor(values: &[f64], shape: Vec<usize>, device: &Device) -> Tensor<2> {
 }
 
 /// Rows of `zs` (`z_v` for the input layer's passes) and of `g` for `n` points.
-fn rows(which: Activation, n: usize) -> (usize, usize) {
+fn rows(which: SineKernel, n: usize) -> (usize, usize) {
     match which {
-        Activation::DualForward | Activation::DualBackward => (4 * n, 4 * n),
-        Activation::Forward | Activation::Backward => (n, n),
-        Activation::DualInputForward | Activation::DualInputBackward => (n, 4 * n),
+        SineKernel::DualForward | SineKernel::DualBackward => (4 * n, 4 * n),
+        SineKernel::Forward | SineKernel::Backward => (n, n),
+        SineKernel::DualInputForward | SineKernel::DualInputBackward => (n, 4 * n),
     }
 }
 
 /// The pass `which` on `device` for `n` points: `zs` and `g` (see [`rows`]), the bias `b`
 /// (`[d]`) and `W` (`[4, d]`).
-fn run(which: Activation, device: &Device, inputs: [&[f64]; 4], n: usize, d: usize) -> Vec<f64> {
+fn run(which: SineKernel, device: &Device, inputs: [&[f64]; 4], n: usize, d: usize) -> Vec<f64> {
     let [zs, b, g, w] = inputs;
     let (zs_rows, g_rows) = rows(which, n);
     let bias = tensor(b, vec![1, d], device).reshape([d]);
@@ -58,12 +58,12 @@ fn every_sine_kernel_matches_the_primitive_reference() {
 
 fn check_every_kernel(flex: &Device, wgpu: &Device, n: usize, d: usize) {
     for which in [
-        Activation::DualForward,
-        Activation::DualBackward,
-        Activation::Forward,
-        Activation::Backward,
-        Activation::DualInputForward,
-        Activation::DualInputBackward,
+        SineKernel::DualForward,
+        SineKernel::DualBackward,
+        SineKernel::Forward,
+        SineKernel::Backward,
+        SineKernel::DualInputForward,
+        SineKernel::DualInputBackward,
     ] {
         let (zs_rows, g_rows) = rows(which, n);
         // random_points gives 3 values per point in [-1, 1]; scale zs like a layer's S W.
@@ -87,16 +87,16 @@ fn check_every_kernel(flex: &Device, wgpu: &Device, n: usize, d: usize) {
             .take(4 * d)
             .map(|v| 0.25 * v)
             .collect();
-        let before = kernel::launches();
+        let before = kernel_launches();
         let reference = run(which, flex, [&zs, &b, &g, &w], n, d);
         assert_eq!(
-            kernel::launches(),
+            kernel_launches(),
             before,
             "flex runs the reference, not a kernel"
         );
         let kernel = run(which, wgpu, [&zs, &b, &g, &w], n, d);
         assert_eq!(
-            kernel::launches(),
+            kernel_launches(),
             before + 1,
             "{which:?}: wgpu launched its CubeCL kernel once"
         );

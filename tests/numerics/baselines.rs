@@ -2,7 +2,7 @@
 //! identity at their initial state, closed-form motions, and `L_H` in the common fit loop
 //! (the Jacobians against finite differences are in `baselines_f64.rs`).
 
-mod common;
+use crate::common;
 
 use burn::module::Param;
 use burn::tensor::{Device, Tensor, TensorData};

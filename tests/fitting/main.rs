@@ -1,0 +1,11 @@
+//! Fitting: the trainer and its recipes, run folders (resume, eval, locks), guided
+//! alignment, the experiments at small sizes, and regulariser weights by validation.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod alignment;
+mod experiments_small;
+mod fit;
+mod run;
+mod weight_search;
