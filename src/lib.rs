@@ -40,7 +40,7 @@
 //! 2. [`warp`] (meshes through fields, above `data` and `field`);
 //! 3. [`experiments`] (the paper's tables), [`run`] (run folders for users' data) and
 //!    [`plot`];
-//! 4. [`cli`], the command line that the `doma` binary and the examples parse.
+//! 4. [`cli`], the command line that the `doma` binary parses.
 //!
 //! Equation numbers refer to the CVPR 2024 paper (main text): Eq. 1 SIREN, Eq. 2 DPF,
 //! Eq. 4 the affinity field, Eq. 6 the SIREN Jacobian, Eq. 10–12 the Trans, SE(3) and

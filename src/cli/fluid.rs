@@ -6,7 +6,7 @@ use crate::cli::{AlignModelArgs, ExperimentArgs, check_widths, non_negative};
 use crate::experiments::fluid::{self, FluidJob, FluidRecord};
 use crate::{DomaError, Result};
 
-/// The flags of `doma fluid` (and `cargo run --example fluid`).
+/// The flags of `doma fluid`.
 #[derive(clap::Parser, Debug, Clone)]
 #[command(about = "DPF vs Trans vs Affinity on 10-frame clips of a fluid simulation (Tab. A8)")]
 pub struct FluidArgs {

@@ -7,7 +7,7 @@ use crate::cli::{ExperimentArgs, check_widths};
 use crate::experiments::image2d::{self, Image2dJob, Motion2d};
 use crate::field::Variant;
 
-/// The flags of `doma image2d` (and `cargo run --example image2d`).
+/// The flags of `doma image2d`.
 #[derive(clap::Parser, Debug, Clone)]
 #[command(about = "Trans vs Affinity on a deforming 2-D pixel grid at widths 32/64/128 (Tab. A7)")]
 pub struct Image2dArgs {

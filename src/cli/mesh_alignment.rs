@@ -7,7 +7,7 @@ use crate::jacobian::JacobianKind;
 use crate::prelude::*;
 use crate::register::RegistrationConfig;
 
-/// The flags of `doma mesh-alignment` (and `cargo run --example mesh_alignment`).
+/// The flags of `doma mesh-alignment`.
 #[derive(clap::Parser, Debug, Clone)]
 #[command(
     about = "Align the frame-0 template to every frame with guidance keypoints (paper Tab. 3)"

@@ -8,7 +8,7 @@ use crate::field::Variant;
 use crate::field::baselines::Baseline;
 use crate::jacobian::JacobianKind;
 
-/// The flags of `doma novel-points` (and `cargo run --example novel_points`).
+/// The flags of `doma novel-points`.
 #[derive(clap::Parser, Debug, Clone)]
 #[command(about = "Fit 25 % of an animated mesh's vertices, predict the rest (paper Tab. 1)")]
 pub struct NovelPointsArgs {
