@@ -61,7 +61,7 @@ pub fn wgpu_available() -> bool {
 ///
 /// A training step allocates and frees tensors of a few MB each; with glibc's defaults
 /// each one is a fresh `mmap` whose pages fault in on first touch, which measured 10–30 %
-/// of an `Analytic` step on flex (README, speed section). Process-wide, so it is for
+/// of an `Analytic` step on flex (docs/speed.md). Process-wide, so it is for
 /// binaries to call at start-up (the `doma` CLI, the examples and benches do); a library
 /// that embeds doma decides for itself.
 pub fn tune_allocator() {
@@ -105,8 +105,7 @@ pub fn runs_on_cpu(device: &Device) -> bool {
 /// Why: the CPU backends (flex's ops, its GEMM, the fused SIREN op) split their work with
 /// rayon. Called from outside the pool, every parallel region hands its work to the pool
 /// and parks the caller on a latch: a wake-up and a park per region, dozens per training
-/// step, which measured about a tenth of an `Analytic` step on flex (README, speed
-/// section). Called from a pool thread, a region starts on that thread and the others
+/// step, which measured about a tenth of an `Analytic` step on flex (docs/speed.md). Called from a pool thread, a region starts on that thread and the others
 /// join by work stealing. Runs `f` here when already on a pool thread, and when `device`
 /// is not a CPU backend ([`runs_on_cpu`]): wgpu's fusion streams are per thread, and moving
 /// a step between threads would move it between streams.

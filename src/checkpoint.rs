@@ -1,6 +1,6 @@
 //! Checkpoints: a fitted field's parameters as a burnpack (`.bpk`) file, written atomically
 //! (to a temporary file in the same folder, then renamed), optionally in `f16`, next to the
-//! `config.json` that rebuilds the module (DESIGN §5). Tab. 3 reports their size.
+//! `config.json` that rebuilds the module (docs/design.md §5). Tab. 3 reports their size.
 
 use std::path::Path;
 

@@ -1,4 +1,4 @@
-//! Forward-mode automatic differentiation with dual tensors (DESIGN §2, "Autodiff").
+//! Forward-mode automatic differentiation with dual tensors (docs/design.md §2, "Autodiff").
 //!
 //! A [`Dual`] holds a value `[N, C]` and, optionally, its tangents with respect to
 //! the three spatial inputs, `[3, N, C]`. Every operation below applies the chain rule

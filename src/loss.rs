@@ -1,17 +1,17 @@
-//! The losses of a DOMA fit (DESIGN §3, REFERENCE §4). Each returns a one-element
+//! The losses of a DOMA fit (docs/design.md §3, docs/reference.md §4). Each returns a one-element
 //! tensor, so that it can be summed and differentiated.
 
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
-/// The trajectory (reconstruction) loss, REFERENCE §4.1: the mean absolute error over
+/// The trajectory (reconstruction) loss, docs/reference.md §4.1: the mean absolute error over
 /// all `N × 3` coordinates of `predicted` and `target` (`[N, 3]`). It divides by `3N`,
 /// whereas the EPE metric sums over the three coordinates.
 pub fn trajectory_l1(predicted: Tensor<2>, target: Tensor<2>) -> Tensor<1> {
     (predicted - target).abs().mean()
 }
 
-/// How the smoothness loss `L_H` treats each Jacobian entry (REFERENCE §4.2).
+/// How the smoothness loss `L_H` treats each Jacobian entry (docs/reference.md §4.2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum SmoothnessNorm {
@@ -23,7 +23,7 @@ pub enum SmoothnessNorm {
     Charbonnier,
 }
 
-/// The smoothness loss `L_H` (Eq. 13, in the authors' form; REFERENCE §4.2): the
+/// The smoothness loss `L_H` (Eq. 13, in the authors' form; docs/reference.md §4.2): the
 /// per-point penalty of the raw-output Jacobian, averaged over the `P` points.
 /// `tangent` is `[3, P, O]` (`∂o/∂x` as the tangents of a [`crate::jacobian::Dual`]).
 pub fn smoothness(tangent: Tensor<3>, norm: SmoothnessNorm) -> Tensor<1> {
@@ -36,7 +36,7 @@ pub fn smoothness(tangent: Tensor<3>, norm: SmoothnessNorm) -> Tensor<1> {
     per_entry.sum().div_scalar(points)
 }
 
-/// The scale `c` of the elasticity robustifier (REFERENCE §4.3).
+/// The scale `c` of the elasticity robustifier (docs/reference.md §4.3).
 pub const ELASTIC_SCALE: f64 = 0.03;
 
 /// Keeps `p` of the eigenvalue formula away from zero, so that an isotropic
@@ -84,7 +84,7 @@ pub fn singular_values_3x3(columns: [Tensor<2>; 3]) -> [Tensor<2>; 3] {
     lambda.map(|l| l.clamp_min(EIGEN_FLOOR).sqrt())
 }
 
-/// The elasticity loss "-E" (Nerfies; REFERENCE §4.3) on the Jacobian of the whole
+/// The elasticity loss "-E" (Nerfies; docs/reference.md §4.3) on the Jacobian of the whole
 /// warp, `tangent: [3, N, 3]` (`tangent[k, n, i] = ∂y_i/∂x_k`):
 /// `q = Σ_j log² σ_j(∂y/∂x)` per point, then the authors' robustifier
 /// `ρ(q) = 2 (q/c)² / ((q/c)² + 4)` with `c = 0.03` (applied to `q` itself, which is
@@ -103,8 +103,8 @@ pub fn elastic_robustifier(q: Tensor<2>) -> Tensor<2> {
     z.clone().mul_scalar(2.0) / z.add_scalar(4.0)
 }
 
-/// The neighbourhoods of the as-isometric-as-possible loss (AIAP, DPF Eq. 13; REFERENCE
-/// §4.4), computed once on the canonical points: each point's `K` nearest neighbours
+/// The neighbourhoods of the as-isometric-as-possible loss (AIAP, DPF Eq. 13;
+/// docs/reference.md §4.4), computed once on the canonical points: each point's `K` nearest neighbours
 /// (itself included) from a k-d tree, and their pairwise canonical distances.
 #[derive(Clone, Debug)]
 pub struct AiapNeighbourhoods {
@@ -164,7 +164,7 @@ impl AiapNeighbourhoods {
 /// Keeps the distance's derivative finite when two neighbours coincide.
 const AIAP_EPS: f64 = 1e-12;
 
-/// The AIAP loss (DPF Eq. 13, REFERENCE §4.4): the mean absolute difference between the
+/// The AIAP loss (DPF Eq. 13, docs/reference.md §4.4): the mean absolute difference between the
 /// pairwise distances inside each canonical neighbourhood and the same distances after the
 /// warp, over all `N × K × K` entries. `deformed` is `[N, 3]`, the warped canonical points
 /// in the order of `neighbourhoods`. The diagonal entries are zero on both sides and the
@@ -229,7 +229,7 @@ fn chamfer_one_way(from: Tensor<2>, to: Tensor<2>) -> Tensor<1> {
     total.expect("a non-empty cloud").div_scalar(n as f64)
 }
 
-/// The Chamfer loss (`L_CD` of Eq. 3 and Eq. 14, REFERENCE §4.5) between `a` (`[N, 3]`, e.g. warped canonical
+/// The Chamfer loss (`L_CD` of Eq. 3 and Eq. 14, docs/reference.md §4.5) between `a` (`[N, 3]`, e.g. warped canonical
 /// samples) and `b` (`[M, 3]`, target samples): the mean squared nearest-neighbour distance
 /// from `a` to `b` plus from `b` to `a`. On the device, differentiable, and blocked so that
 /// it never holds an `N × M` matrix at once.

@@ -1,4 +1,4 @@
-//! Evaluation metrics (REFERENCE §7).
+//! Evaluation metrics (docs/reference.md §7).
 
 use burn::tensor::Device;
 
@@ -12,7 +12,7 @@ pub const EPE_SCALE: f64 = 1e4;
 
 /// The end-point error per frame: for every point and frame `k`,
 /// `‖(ŷ_k − x_0) − (y_k − x_0)‖₁ = ‖ŷ_k − y_k‖₁` (summed over x, y, z), averaged over
-/// the points. Frame 0 is included, as in the authors' code (REFERENCE §7).
+/// the points. Frame 0 is included, as in the authors' code (docs/reference.md §7).
 pub fn epe_per_frame(predicted: &Trajectories, truth: &Trajectories) -> Result<Vec<f64>> {
     if predicted.frames() != truth.frames() || predicted.points() != truth.points() {
         return Err(DomaError::InvalidData(format!(
@@ -36,7 +36,7 @@ pub fn epe_per_frame(predicted: &Trajectories, truth: &Trajectories) -> Result<V
         .collect())
 }
 
-/// The EPE (REFERENCE §7): [`epe_per_frame`] averaged over all frames, raw (multiply by
+/// The EPE (docs/reference.md §7): [`epe_per_frame`] averaged over all frames, raw (multiply by
 /// [`EPE_SCALE`] for the paper's tables).
 pub fn epe(predicted: &Trajectories, truth: &Trajectories) -> Result<f64> {
     let per_frame = epe_per_frame(predicted, truth)?;
@@ -179,7 +179,7 @@ fn check_clouds(a: &[[f32; 3]], b: &[[f32; 3]]) -> Result<()> {
     Ok(())
 }
 
-/// The Chamfer distance (REFERENCE §4.5, pytorch3d's default): the mean squared distance
+/// The Chamfer distance (docs/reference.md §4.5, pytorch3d's default): the mean squared distance
 /// from each point of `a` to its nearest in `b`, plus the same from `b` to `a`. Exact,
 /// through k-d trees; tables report it ×1e4.
 pub fn chamfer(a: &[[f32; 3]], b: &[[f32; 3]]) -> Result<f64> {
@@ -187,7 +187,7 @@ pub fn chamfer(a: &[[f32; 3]], b: &[[f32; 3]]) -> Result<f64> {
     Ok(chamfer_direction(a, None, b, None)?.0 + chamfer_direction(b, None, a, None)?.0)
 }
 
-/// The Chamfer distance and the normal Chamfer distance (REFERENCE §4.5): for each point,
+/// The Chamfer distance and the normal Chamfer distance (docs/reference.md §4.5): for each point,
 /// `1 − |cos|` between its normal and its nearest neighbour's in the other cloud, averaged
 /// per direction and summed over both. Returns `(CD, CDN)`.
 pub fn chamfer_with_normals(
@@ -225,7 +225,7 @@ fn distance(a: &[f32], b: &[f32]) -> f64 {
         .sqrt()
 }
 
-/// STD(E) (REFERENCE §7): each edge's length in every frame of the warped template, its
+/// STD(E) (docs/reference.md §7): each edge's length in every frame of the warped template, its
 /// unbiased standard deviation over time, and the maximum over edges. Low means the
 /// surface stretches little. Needs at least two frames and one edge.
 pub fn std_edges(frames: &Trajectories, edges: &[[u32; 2]]) -> Result<f64> {
@@ -258,7 +258,7 @@ pub fn std_edges(frames: &Trajectories, edges: &[[u32; 2]]) -> Result<f64> {
     Ok(worst)
 }
 
-/// STD(V) (REFERENCE §7): each vertex's displacement norm between consecutive frames,
+/// STD(V) (docs/reference.md §7): each vertex's displacement norm between consecutive frames,
 /// its unbiased standard deviation over time, and the mean over vertices. Low means the
 /// vertices move smoothly (no jitter). Needs at least three frames.
 pub fn std_vertices(frames: &Trajectories) -> Result<f64> {

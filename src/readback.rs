@@ -6,8 +6,8 @@
 //! refuses Burn's read methods anywhere else in the crate (`disallowed-methods` in
 //! `clippy.toml`; the tests, examples and benchmarks may read freely).
 //!
-//! [`reads`] counts the reads this process has made. `tests/host_sync.rs` uses it to show
-//! what the fit loop promises (issue 13): [`crate::train::Trainer::step`] reads nothing,
+//! [`reads`] counts the reads this process has made. `tests/process/host_sync.rs` uses it to
+//! show what the fit loop promises: [`crate::train::Trainer::step`] reads nothing,
 //! and [`crate::train::Trainer::iteration`] reads once, its losses, after its last step.
 //!
 //! What the counter does not see: reads inside Burn itself. Burn's record machinery reads

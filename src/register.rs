@@ -1,10 +1,10 @@
 //! Guided mesh alignment (Sec. 4.2): the objective of Eq. 14, DPF's Eq. 3 plus the
-//! smoothness term `L_H` (DESIGN and the issues call it Eq. 12). A motion field warps a
+//! smoothness term `L_H`. A motion field warps a
 //! template's surface samples onto each frame's target cloud (no correspondence, like
 //! scans), steered by sparse guidance keypoints whose correspondence is known (like
 //! SMPL-X vertices).
 //!
-//! Per step (one frame, frames in a fresh random order each iteration; REFERENCE §5.1):
+//! Per step (one frame, frames in a fresh random order each iteration; docs/reference.md §5.1):
 //! `w_V · L1(y(keypoints), keypoints_k) + w_CD(it) · CD(y(X), S_k) + w_A · AIAP(y(X), X)
 //! + w_H · L_H(keypoints + 0.1ε)`, where `X` are fixed samples of the template surface
 //! (their AIAP neighbourhoods are found once) and `S_k` are points drawn afresh on frame
@@ -34,7 +34,7 @@ use crate::train::{
 };
 use crate::{DomaError, Result};
 
-/// The weights and sizes of a guided alignment (REFERENCE §5.1 unless stated).
+/// The weights and sizes of a guided alignment (docs/reference.md §5.1 unless stated).
 #[derive(Config, Debug)]
 pub struct RegistrationConfig {
     /// Iterations (the authors run 2000) and Adam's base rate; the learning rate decays

@@ -2,7 +2,7 @@
 //!
 //! Layers `i = 0..=n` are sine layers `h_{i+1} = sin(ω (h_i W_i + b_i))`, and the
 //! output layer is linear, `o = h_{n+1} W_o + b_o` (the "outermost linear" form).
-//! `ω` multiplies the bias too (REFERENCE §1).
+//! `ω` multiplies the bias too (docs/reference.md §1).
 
 use burn::config::Config;
 use burn::module::{Module, Param};
@@ -126,7 +126,7 @@ pub struct LayerWeights {
     pub bias: Vec<f64>,
 }
 
-/// Which kind of layer a weight bound is for (REFERENCE §1).
+/// Which kind of layer a weight bound is for (docs/reference.md §1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LayerRole {
     /// The first sine layer, fed `[x, t]`.
@@ -137,7 +137,7 @@ pub enum LayerRole {
     Output,
 }
 
-/// The SIREN initialisation of the authors' code (REFERENCE §1):
+/// The SIREN initialisation of the authors' code (docs/reference.md §1):
 /// - first layer `W ~ U(±1/fan_in)`;
 /// - hidden and output layers `W ~ U(±√(6/fan_in)/ω₀)`;
 /// - every bias `U(±1/√fan_in)` (PyTorch's `nn.Linear` default, never re-initialised).
@@ -263,7 +263,7 @@ impl Siren {
     }
 
     /// The network on duals: the tangents of the input are pushed through every
-    /// layer (`ż_i = ω ḣ_i W_i`, `ḣ_{i+1} = cos z_i ⊙ ż_i`, `J = ḣ_{n+1} W_o`; DESIGN §2).
+    /// layer (`ż_i = ω ḣ_i W_i`, `ḣ_{i+1} = cos z_i ⊙ ż_i`, `J = ḣ_{n+1} W_o`; docs/design.md §2).
     pub fn forward_dual(&self, input: Dual) -> Dual {
         let mut h = input;
         for layer in &self.sine {

@@ -14,7 +14,7 @@ use crate::field::MotionField;
 /// fused SIREN op's workspaces (each sine layer's pre-activation and output, kept for a
 /// backward) plus the head's temporaries: about `chunk × 4 B × (2 · layers · hidden + 64)`,
 /// i.e. 55 MB for the paper's SIREN (3 sine layers, 128 wide), whatever the number of
-/// points (`tests/bounded_memory.rs` measures it).
+/// points (`tests/process/bounded_memory.rs` measures it).
 pub const WARP_CHUNK: usize = 16_384;
 
 /// Warps `points` (`[V, 3]`) through `field` at normalised time `t`, in chunks of

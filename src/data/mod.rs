@@ -30,7 +30,7 @@ pub fn parse_frame_range(s: &str) -> std::result::Result<std::ops::Range<usize>,
     Ok(a..end)
 }
 
-/// The normalised time of frame `k` of `frames`: `t_k = −1 + 2k/(T−1)` (REFERENCE §1),
+/// The normalised time of frame `k` of `frames`: `t_k = −1 + 2k/(T−1)` (docs/reference.md §1),
 /// so the canonical frame 0 is `t = −1` and the last frame `t = 1`. A single frame is
 /// at `t = −1`.
 pub fn normalized_time(k: usize, frames: usize) -> f64 {
@@ -197,7 +197,7 @@ impl Trajectories {
     }
 
     /// Splits the points into the first `n_train` and the rest (the authors' split of
-    /// i.i.d. synthetic points, REFERENCE §6.1).
+    /// i.i.d. synthetic points, docs/reference.md §6.1).
     pub fn split_first(&self, n_train: usize) -> Result<(Self, Self)> {
         if n_train == 0 || n_train >= self.points {
             return Err(DomaError::InvalidData(format!(

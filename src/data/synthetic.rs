@@ -1,4 +1,4 @@
-//! The synthetic benchmark of the paper's Tab. 2 (REFERENCE, "Synthetic protocol").
+//! The synthetic benchmark of the paper's Tab. 2 (docs/reference.md §6.1).
 //!
 //! Four 3-D sequences of `T = 20` frames share one draw of `N = 3000` points from
 //! `U[−1, 1]³`: rotation, scaling, shearing and translation. The first 750 points

@@ -1,7 +1,7 @@
 //! The 2-D image deformation experiment (supplement, Tab. A7): the pixels of an image on a
 //! grid in `[−1, 1]²` (y up) move through `T = 30` frames of rotation (`2π/T` per frame),
 //! scaling (`linspace(0.5, 1.5, T)`), shearing (`x' = x + s y`, `s = linspace(0, 1.5, T)`)
-//! and translation (`linspace(−1, 1, T)` added to both coordinates; REFERENCE §6.2). A seeded
+//! and translation (`linspace(−1, 1, T)` added to both coordinates; docs/reference.md §6.2). A seeded
 //! 25 % of the pixels train Trans and Affinity at hidden widths 32, 64 and 128 (no
 //! regulariser); the EPE ×1e-4 is on the other 75 %.
 //!

@@ -1,7 +1,7 @@
 //! DOMA-Affinity (Eq. 4): `y = A(x, t) x + u(x, t)` with a free 3×3 `A`; 12 raw outputs.
 //!
 //! `A` is `o[0..9]` read row-major and `u = o[9..12]`. As in the authors' code, no
-//! identity is added to `A`: the network has to learn `A ≈ I` (REFERENCE §2).
+//! identity is added to `A`: the network has to learn `A ≈ I` (docs/reference.md §2).
 
 use super::LocalAffine;
 use crate::dual::Dual;

@@ -1,4 +1,4 @@
-//! The frame-wise DPF baseline (DESIGN §1, REFERENCE §2): one 3-D-input SIREN per frame,
+//! The frame-wise DPF baseline (docs/design.md §1, docs/reference.md §2): one 3-D-input SIREN per frame,
 //! `g_k(x) = x + u_k(x)`, with no time input and nothing shared between frames.
 //!
 //! The `T` networks live in one module, one [`Siren`] per frame. A fit step on
@@ -9,7 +9,7 @@
 //! matmul per layer. The parameter count grows as `O(T)`, which is what Tab. 3 compares.
 //! Like the authors' code, it has `T` nets (frame 0 too; the paper says `T − 1`).
 //!
-//! Why not one stacked `[T, fan_in, fan_out]` parameter per layer (DESIGN §1): then every
+//! Why not one stacked `[T, fan_in, fan_out]` parameter per layer (docs/design.md §1): then every
 //! step's gradient covers all frames, zero outside frame `k`, and Adam's momentum keeps
 //! moving the other frames' weights after each of their steps, `T − 1` extra updates per
 //! real one. That is a different (and, measured, a much faster-converging) baseline than
@@ -56,7 +56,7 @@ impl DpfConfig {
     }
 
     /// A model whose frame nets are drawn, one after another, by the authors' SIREN
-    /// initialiser (REFERENCE §1) from one stream seeded by `seed`.
+    /// initialiser (docs/reference.md §1) from one stream seeded by `seed`.
     ///
     /// # Panics
     /// If `frames` is 0 (a programming error; the callers check their data).

@@ -1,5 +1,5 @@
 //! The 6-D rotation representation (Zhou et al. 2019) and its Gram–Schmidt map to SO(3),
-//! with the exact layout of the authors' code (REFERENCE §2.1), written on duals so
+//! with the exact layout of the authors' code (docs/reference.md §2.1), written on duals so
 //! that its Jacobian comes out in forward mode.
 
 use crate::dual::Dual;

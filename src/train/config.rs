@@ -142,7 +142,7 @@ pub struct SmoothnessSampling {
 }
 
 impl SmoothnessSampling {
-    /// The authors' choice for `variant` (REFERENCE §4.2): Affinity uses a random subset
+    /// The authors' choice for `variant` (docs/reference.md §4.2): Affinity uses a random subset
     /// of at most 1024 training points jittered by `σ = 0.1`; the other variants use every
     /// training point, unjittered.
     pub fn authors(variant: Variant) -> Self {

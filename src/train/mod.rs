@@ -1,4 +1,4 @@
-//! Fitting a motion field (REFERENCE §5): the recipe ([`FitConfig`]) and the one loop that
+//! Fitting a motion field (docs/reference.md §5): the recipe ([`FitConfig`]) and the one loop that
 //! runs it ([`Trainer`]).
 //!
 //! One *iteration* is one pass over all `T` frames in a fresh random order; each frame is

@@ -43,7 +43,7 @@ pub trait Objective<M>: Send {
     ) -> Result<(Tensor<1>, Tensor<1>)>;
 }
 
-/// Fitting trajectories (Sec. 3; REFERENCE §5): the trajectory L1 of the training points
+/// Fitting trajectories (Sec. 3; docs/reference.md §5): the trajectory L1 of the training points
 /// in frame `k`, plus `w_H · L_H` (Eq. 13) and `w_E ·` elasticity.
 pub struct TrajectoryObjective<'a> {
     data: &'a Trajectories,

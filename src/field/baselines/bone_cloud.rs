@@ -1,4 +1,4 @@
-//! The BoneCloud baseline of Tab. 1 (REFERENCE §2.2): `K = 1024` bones with learnable
+//! The BoneCloud baseline of Tab. 1 (docs/reference.md §2.2): `K = 1024` bones with learnable
 //! canonical positions `v_k`, and per frame a rigid transform per bone (6-D rotation,
 //! initialised to the identity, and a translation, initialised to 0), blended by RBF
 //! skinning weights `w_k(x) ∝ exp(−σ‖x − v_k‖)` (σ = 10, plain distance, normalised to 1):

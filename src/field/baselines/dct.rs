@@ -1,5 +1,5 @@
-//! The DCT-NeRF baseline of Tab. 1 (Wang et al. 2021, "Neural trajectory fields"; REFERENCE
-//! §2: not in the authors' release). An MLP-ReLU of the canonical position alone (no time
+//! The DCT-NeRF baseline of Tab. 1 (Wang et al. 2021, "Neural trajectory fields";
+//! docs/reference.md §2.2: not in the authors' release). An MLP-ReLU of the canonical position alone (no time
 //! input, no positional encoding, 6 × 128) outputs `K` coefficients per coordinate of a
 //! trajectory in the orthonormal DCT-II basis over the `T` frames:
 //!

@@ -1,4 +1,4 @@
-//! The MLP-ReLU baselines of Tab. 1 (REFERENCE §2: not in the authors' release): 6 hidden
+//! The MLP-ReLU baselines of Tab. 1 (docs/reference.md §2: not in the authors' release): 6 hidden
 //! layers × 128, ReLU, input `[x, t]`, output a displacement, `y = x + o`. With
 //! `pe_octaves = 6` the input first goes through NeRF's Fourier features ("PE.6"):
 //! `γ(p) = [p, sin(2⁰πp), cos(2⁰πp), …, sin(2⁵πp), cos(2⁵πp)]` on each of the four inputs.

@@ -53,7 +53,7 @@ impl Baseline {
         }
     }
 
-    /// Adam's learning rate (REFERENCE §5: 1e-3 for BoneCloud, 1e-4 otherwise).
+    /// Adam's learning rate (docs/reference.md §5: 1e-3 for BoneCloud, 1e-4 otherwise).
     pub fn learning_rate(self) -> f64 {
         match self {
             Baseline::BoneCloud => 1e-3,
