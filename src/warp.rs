@@ -68,7 +68,7 @@ pub fn warp_frames(
 
 /// The canonical mesh warped to every frame of a `frames`-frame sequence: `[T, V, 3]`
 /// (all of it in memory; [`warp_frames`] streams instead).
-/// Normals for any frame follow from [`vertex_normals`].
+/// Normals for any frame follow from [`crate::data::mesh::vertex_normals`].
 pub fn warp_mesh_sequence(
     field: &dyn MotionField,
     canonical: &TriMesh,

@@ -4,7 +4,7 @@
 //! |---|---|
 //! | `config.json` | [`RunConfig`]: the data, the split, the normalisation and the [`FitConfig`] |
 //! | `resume.ckpt` | the last checkpoint: parameters, Adam's state, the random stream, the history |
-//! | `history.json` | one [`IterationRecord`] per finished iteration |
+//! | `history.json` | one [`crate::train::IterationRecord`] per finished iteration |
 //! | `model.bpk` | the fitted field's parameters (burnpack), once the fit is done |
 //! | `report.json` | [`Report`]: the metrics on the held-out points |
 //!

@@ -34,7 +34,7 @@ pub struct Fitted<M> {
     pub steps: usize,
 }
 
-/// How [`Trainer::run_with`] ended.
+/// How [`super::Trainer::run_with`] ended.
 #[derive(Debug)]
 pub enum Outcome<M> {
     /// Every iteration ran.
@@ -82,7 +82,7 @@ impl RngState {
     }
 }
 
-/// A fit's resumable state ([`Trainer::snapshot`]): with the config and the data, all a
+/// A fit's resumable state ([`super::Trainer::snapshot`]): with the config and the data, all a
 /// resumed fit needs to reach the same weights as an uninterrupted one.
 #[derive(Clone, Debug)]
 pub struct TrainerSnapshot {

@@ -4,8 +4,8 @@
 //!
 //! FLOPs count the matmuls only (`2·m·k·n` each), the same for both methods: the useful
 //! work of a SIREN with stacked tangents, not what a method happens to execute. The steps
-//! themselves are in [`steps`], the PyTorch side in [`torch`]; docs/speed.md says how the
-//! figures are read.
+//! themselves are [`JacobianStep`], [`FitStep`] and [`WarpStep`], the PyTorch side is
+//! [`compare_torch`]; docs/speed.md says how the figures are read.
 
 mod steps;
 mod torch;
