@@ -144,7 +144,7 @@ pub fn save_json<T: Serialize>(config: &T, path: &Path) -> Result<()> {
 
 /// Reads JSON from `path`; a parse error is [`DomaError::Malformed`] naming the file.
 pub fn load_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| DomaError::io(path, e))?;
+    let text = crate::io::read_input_text(path, crate::io::InputKind::Config)?;
     serde_json::from_str(&text).map_err(|e| DomaError::Malformed {
         path: path.to_path_buf(),
         reason: e.to_string(),

@@ -1,8 +1,13 @@
-//! Writing files atomically: to a temporary file beside the target, then a rename, so
-//! that an interrupted run never leaves a half-written output.
+//! Files in and out. Out: atomically, to a temporary file beside the target, then a
+//! rename, so that an interrupted run never leaves a half-written output. In: through
+//! [`read_input`] for a file the user named (a regular file, read up to a bound for its
+//! kind, so that a FIFO cannot hang a run and a device cannot fill memory), and through
+//! [`read_named`] for a file that another file names (an `.mtl`, a texture): resolved
+//! against the naming file's folder and refused unless, symbolic links resolved, it lies
+//! inside the folder the user pointed at.
 
-use std::io::Write;
-use std::path::Path;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
 
 use crate::{DomaError, Result};
 
@@ -11,12 +16,43 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic_with(path, |w| w.write_all(bytes))
 }
 
-/// Like [`write_atomic`], but `write` streams the contents into a buffered writer of the
-/// temporary file, so that a large file is never held in memory whole.
-pub fn write_atomic_with(
-    path: &Path,
-    write: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
-) -> Result<()> {
+/// Writes several files, each atomically, and all or none of them: every file goes to its
+/// temporary first, and only when all are written are they renamed into place.
+pub fn write_atomic_all(files: &[(&Path, &[u8])]) -> Result<()> {
+    // A rename cannot replace a folder: refuse before anything is renamed into place.
+    if let Some((path, _)) = files.iter().find(|(p, _)| p.is_dir()) {
+        return Err(DomaError::Io {
+            path: path.to_path_buf(),
+            error: std::io::Error::new(std::io::ErrorKind::IsADirectory, "a folder is in the way"),
+        });
+    }
+    let mut temporaries = Vec::with_capacity(files.len());
+    let written = files.iter().try_for_each(|(path, bytes)| {
+        let tmp = temporary_for(path)?;
+        temporaries.push(tmp.clone());
+        std::fs::write(&tmp, bytes)
+            .and_then(|()| std::fs::File::open(&tmp)?.sync_all())
+            .map_err(|e| DomaError::io(path, e))
+    });
+    let renamed = written.and_then(|()| {
+        files
+            .iter()
+            .zip(&temporaries)
+            .try_for_each(|((path, _), tmp)| {
+                std::fs::rename(tmp, path).map_err(|e| DomaError::io(path, e))
+            })
+    });
+    if renamed.is_err() {
+        for tmp in &temporaries {
+            let _ = std::fs::remove_file(tmp);
+        }
+    }
+    renamed
+}
+
+/// The temporary name [`write_atomic`] writes `path` under: hidden, beside it, with this
+/// process's id.
+fn temporary_for(path: &Path) -> Result<PathBuf> {
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -24,11 +60,20 @@ pub fn write_atomic_with(
     let name = path.file_name().ok_or_else(|| {
         DomaError::InvalidConfig(format!("{} is not a file path", path.display()))
     })?;
-    let tmp = dir.join(format!(
+    Ok(dir.join(format!(
         ".{}.tmp{}",
         name.to_string_lossy(),
         std::process::id()
-    ));
+    )))
+}
+
+/// Like [`write_atomic`], but `write` streams the contents into a buffered writer of the
+/// temporary file, so that a large file is never held in memory whole.
+pub fn write_atomic_with(
+    path: &Path,
+    write: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
+) -> Result<()> {
+    let tmp = temporary_for(path)?;
     let result = (|| {
         let mut w = std::io::BufWriter::with_capacity(1 << 16, std::fs::File::create(&tmp)?);
         write(&mut w)?;
@@ -40,6 +85,161 @@ pub fn write_atomic_with(
         let _ = std::fs::remove_file(&tmp);
         DomaError::io(path, e)
     })
+}
+
+/// What an input file is, which bounds how much of it is read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InputKind {
+    /// A mesh (OBJ) for display or warping.
+    Mesh,
+    /// A material library (`.mtl`).
+    Material,
+    /// A texture image.
+    Texture,
+    /// A JSON config or record (`--config`, a run's `config.json` and `history.json`).
+    Config,
+    /// A batch manifest.
+    Manifest,
+}
+
+impl InputKind {
+    /// The largest file of this kind that is read: far above any real one, far below
+    /// what would exhaust memory.
+    pub fn max_bytes(self) -> u64 {
+        match self {
+            InputKind::Mesh => 1 << 30,
+            InputKind::Material => 16 << 20,
+            InputKind::Texture => 256 << 20,
+            InputKind::Config => 16 << 20,
+            InputKind::Manifest => 64 << 20,
+        }
+    }
+
+    fn noun(self) -> &'static str {
+        match self {
+            InputKind::Mesh => "mesh",
+            InputKind::Material => "material library",
+            InputKind::Texture => "texture",
+            InputKind::Config => "config",
+            InputKind::Manifest => "manifest",
+        }
+    }
+}
+
+/// Reads a file the user named: it must be a regular file (a FIFO would block the read,
+/// a device never end) of at most [`InputKind::max_bytes`]. The error names the file.
+pub fn read_input(path: &Path, kind: InputKind) -> Result<Vec<u8>> {
+    let len = check_input(path, kind)?;
+    let max = kind.max_bytes();
+    let refuse = |reason: String| DomaError::Malformed {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let file = std::fs::File::open(path).map_err(|e| DomaError::io(path, e))?;
+    let mut bytes = Vec::with_capacity(len as usize);
+    // A file that grows while it is read is still cut at the bound.
+    file.take(max + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| DomaError::io(path, e))?;
+    if bytes.len() as u64 > max {
+        return Err(refuse(format!(
+            "it grew past the {} MiB bound while read",
+            max >> 20
+        )));
+    }
+    Ok(bytes)
+}
+
+/// What [`read_input`] checks before it opens `path`: a regular file of at most
+/// [`InputKind::max_bytes`]. Returns its length.
+pub fn check_input(path: &Path, kind: InputKind) -> Result<u64> {
+    let refuse = |reason: String| DomaError::Malformed {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let meta = std::fs::metadata(path).map_err(|e| DomaError::io(path, e))?;
+    if !meta.is_file() {
+        return Err(refuse(format!(
+            "the {} is not a regular file (a folder, a FIFO, a socket or a device)",
+            kind.noun()
+        )));
+    }
+    let max = kind.max_bytes();
+    if meta.len() > max {
+        return Err(refuse(format!(
+            "{} bytes, more than the {} MiB a {} may have",
+            meta.len(),
+            max >> 20,
+            kind.noun()
+        )));
+    }
+    Ok(meta.len())
+}
+
+/// [`read_input`] as UTF-8 text.
+pub fn read_input_text(path: &Path, kind: InputKind) -> Result<String> {
+    String::from_utf8(read_input(path, kind)?).map_err(|_| DomaError::Malformed {
+        path: path.to_path_buf(),
+        reason: format!("the {} is not UTF-8 text", kind.noun()),
+    })
+}
+
+/// Where `name`, written inside `referrer`, points: `name` joined to `referrer`'s folder,
+/// with symbolic links resolved, which must lie inside `root` (the folder the user
+/// pointed at, itself resolved). An absolute name, a `..`, or a link that leads outside
+/// is refused naming `referrer` and `name`. Returns the resolved path and the path relative to the
+/// resolved root.
+pub fn resolve_named(root: &Path, referrer: &Path, name: &str) -> Result<(PathBuf, PathBuf)> {
+    let refuse = |reason: &str| DomaError::Malformed {
+        path: referrer.to_path_buf(),
+        reason: format!("`{name}`: {reason}"),
+    };
+    let rel = Path::new(name);
+    if name.is_empty() || rel.is_absolute() || rel.has_root() {
+        return Err(refuse(
+            "an absolute path; only paths relative to the file are read",
+        ));
+    }
+    if rel
+        .components()
+        .any(|c| c == std::path::Component::ParentDir)
+    {
+        return Err(refuse(
+            "`..` in a path; only files in the file's folder or below are read",
+        ));
+    }
+    let base = referrer.parent().unwrap_or(Path::new("."));
+    let base = if base.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        base
+    };
+    let joined = base.join(rel);
+    let resolved = std::fs::canonicalize(&joined).map_err(|e| DomaError::Malformed {
+        path: referrer.to_path_buf(),
+        reason: match e.kind() {
+            std::io::ErrorKind::NotFound => format!("`{name}`, which it names, is missing"),
+            _ => format!("`{name}`: {e}"),
+        },
+    })?;
+    let root = std::fs::canonicalize(root).map_err(|e| DomaError::io(root, e))?;
+    let inside = resolved
+        .strip_prefix(&root)
+        .map_err(|_| {
+            refuse(&format!(
+                "leads outside {} (symbolic links resolved); only files inside it are read",
+                root.display()
+            ))
+        })?
+        .to_path_buf();
+    Ok((resolved, inside))
+}
+
+/// Reads a file that `referrer` names (see [`resolve_named`]) as a [`read_input`] of
+/// `kind`.
+pub fn read_named(root: &Path, referrer: &Path, name: &str, kind: InputKind) -> Result<Vec<u8>> {
+    let (resolved, _) = resolve_named(root, referrer, name)?;
+    read_input(&resolved, kind)
 }
 
 /// Removes the temporary files that [`write_atomic`] left in `dir` when a process was

@@ -21,7 +21,7 @@ use crate::{DomaError, Result};
 /// Reads an OBJ mesh (vertex order preserved).
 pub fn read_obj(path: impl AsRef<Path>) -> Result<TriMesh> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
+    let bytes = crate::io::read_input(path, crate::io::InputKind::Mesh)?;
     let malformed = |reason| DomaError::Malformed {
         path: path.to_path_buf(),
         reason,

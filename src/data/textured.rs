@@ -12,6 +12,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use crate::io::{InputKind, check_input, read_input, read_named, resolve_named};
 use crate::{DomaError, Result};
 
 /// One part of a [`TexturedMesh`] (an `o`/`g` group), with its own vertices.
@@ -36,7 +37,8 @@ pub struct Material {
     pub name: String,
     /// `Kd`, the diffuse colour.
     pub diffuse: Option<[f32; 3]>,
-    /// `map_Kd`, the diffuse texture, relative to the `.mtl` file.
+    /// `map_Kd`, the diffuse texture, relative to the OBJ's folder (the `.mtl` writes it
+    /// relative to itself).
     pub diffuse_texture: Option<String>,
 }
 
@@ -54,10 +56,14 @@ pub struct TexturedMesh {
 }
 
 impl TexturedMesh {
-    /// Reads `path`. A malformed OBJ, or a `.mtl` that it names and that is missing or
-    /// malformed, is an error naming the file.
+    /// Reads `path` (a regular file, bounded: [`crate::io::read_input`]). A malformed OBJ,
+    /// or a `.mtl` that it names and that is missing, malformed, or outside the OBJ's
+    /// folder once links are resolved ([`crate::io::read_named`]), is an error naming the
+    /// file. Each material's texture is kept relative to the OBJ's folder (it is written
+    /// relative to its `.mtl`).
     pub fn read(path: &Path) -> Result<TexturedMesh> {
-        let text = std::fs::read_to_string(path).map_err(|e| DomaError::io(path, e))?;
+        let bytes = read_input(path, InputKind::Mesh)?;
+        let text = String::from_utf8_lossy(&bytes);
         let malformed = |reason: String| DomaError::Malformed {
             path: path.to_path_buf(),
             reason,
@@ -68,23 +74,50 @@ impl TexturedMesh {
             .filter(|rest| rest.starts_with(char::is_whitespace))
             .map(|rest| rest.trim().to_string())
             .collect();
-        let (models, materials) = tobj::load_obj(path, &tobj::GPU_LOAD_OPTIONS)
-            .map_err(|e| malformed(format!("not a readable OBJ: {e}")))?;
-        let materials = match (materials, mtllibs.first()) {
-            (Ok(m), _) => m,
-            (Err(e), Some(lib)) => {
-                let mtl = path.parent().unwrap_or(Path::new(".")).join(lib);
-                let reason = if mtl.is_file() {
-                    format!("not a readable material library: {e}")
-                } else {
-                    format!(
-                        "the material library that {} names is missing",
-                        path.display()
-                    )
-                };
-                return Err(DomaError::Malformed { path: mtl, reason });
+        let root = path.parent().unwrap_or(Path::new("."));
+        let root = if root.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            root
+        };
+        // tobj asks for each `mtllib`; the first refusal is kept and reported as ours.
+        let refused: std::cell::RefCell<Option<DomaError>> = Default::default();
+        let load_mtl = |name: &Path| -> tobj::MTLLoadResult {
+            let name = name.to_string_lossy();
+            let loaded = read_named(root, path, &name, InputKind::Material).and_then(|b| {
+                let mtl = root.join(name.as_ref());
+                tobj::load_mtl_buf(&mut b.as_slice()).map_err(|e| DomaError::Malformed {
+                    path: mtl,
+                    reason: format!("not a readable material library: {e}"),
+                })
+            });
+            match loaded {
+                Ok((mut materials, names)) => {
+                    // A texture is named relative to its `.mtl`; keep it relative to the OBJ.
+                    let dir = Path::new(name.as_ref()).parent().unwrap_or(Path::new(""));
+                    for m in &mut materials {
+                        if let Some(t) = &m.diffuse_texture {
+                            m.diffuse_texture = Some(dir.join(t).to_string_lossy().into_owned());
+                        }
+                    }
+                    Ok((materials, names))
+                }
+                Err(e) => {
+                    refused.borrow_mut().get_or_insert(e);
+                    Err(tobj::LoadError::OpenFileFailed)
+                }
             }
-            (Err(_), None) => Vec::new(),
+        };
+        let (models, materials) =
+            tobj::load_obj_buf(&mut bytes.as_slice(), &tobj::GPU_LOAD_OPTIONS, load_mtl)
+                .map_err(|e| malformed(format!("not a readable OBJ: {e}")))?;
+        if let Some(e) = refused.into_inner() {
+            return Err(e);
+        }
+        let materials = match materials {
+            Ok(m) => m,
+            Err(_) if mtllibs.is_empty() => Vec::new(),
+            Err(e) => return Err(malformed(format!("its materials: {e}"))),
         };
         let mut parts = Vec::with_capacity(models.len());
         for model in models {
@@ -227,33 +260,45 @@ impl TexturedMesh {
         Ok(())
     }
 
-    /// Copies the material libraries, and the textures they name by relative paths, next
-    /// to frames written into `out`, so that the frames' `mtllib` lines resolve there.
+    /// The material libraries and the textures they name, each resolved as
+    /// [`crate::io::read_named`] resolves it (inside the OBJ's folder, links resolved) and
+    /// checked to be a regular file within its bound: `(resolved path, name, kind)`. A
+    /// refusal is an error naming the file that names it.
+    pub fn material_files(&self) -> Result<Vec<(PathBuf, String, InputKind)>> {
+        let root = self.path.parent().unwrap_or(Path::new("."));
+        let root = if root.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            root
+        };
+        let libraries = self.mtllibs.iter().map(|m| (m, InputKind::Material));
+        let textures = self
+            .materials
+            .iter()
+            .filter_map(|m| m.diffuse_texture.as_ref())
+            .map(|t| (t, InputKind::Texture));
+        libraries
+            .chain(textures)
+            .map(|(name, kind)| {
+                let (from, _) = resolve_named(root, &self.path, name)?;
+                check_input(&from, kind)?;
+                Ok((from, name.clone(), kind))
+            })
+            .collect()
+    }
+
+    /// Copies [`TexturedMesh::material_files`] next to frames written into `out`, so that
+    /// the frames' `mtllib` lines resolve there.
     pub fn copy_materials(&self, out: &Path) -> Result<()> {
-        let src = self.path.parent().unwrap_or(Path::new("."));
-        let mut files: Vec<String> = self.mtllibs.clone();
-        files.extend(
-            self.materials
-                .iter()
-                .filter_map(|m| m.diffuse_texture.clone()),
-        );
-        for name in files {
-            let rel = Path::new(&name);
-            if rel.is_absolute()
-                || rel
-                    .components()
-                    .any(|c| c == std::path::Component::ParentDir)
-            {
+        for (from, name, kind) in self.material_files()? {
+            let to = out.join(&name);
+            if std::fs::canonicalize(&to).is_ok_and(|t| t == from) {
                 continue;
             }
-            let (from, to) = (src.join(rel), out.join(rel));
-            if !from.is_file() || from == to {
-                continue;
-            }
+            let bytes = read_input(&from, kind)?;
             if let Some(dir) = to.parent() {
                 std::fs::create_dir_all(dir).map_err(|e| DomaError::io(dir, e))?;
             }
-            let bytes = std::fs::read(&from).map_err(|e| DomaError::io(&from, e))?;
             crate::io::write_atomic(&to, &bytes)?;
         }
         Ok(())

@@ -8,6 +8,7 @@ use json::validation::{Checked::Valid, USize64};
 
 use crate::data::mesh::vertex_normals;
 use crate::data::textured::{Material, Part, TexturedMesh};
+use crate::io::{InputKind, read_named};
 use crate::{DomaError, Result};
 
 /// The binary buffer being filled and the accessors that describe it.
@@ -108,9 +109,9 @@ impl Builder {
     fn material(
         &mut self,
         material: Option<&Material>,
-        base: &Path,
+        mesh: &Path,
         vertex_colors: bool,
-    ) -> json::Index<json::Material> {
+    ) -> Result<json::Index<json::Material>> {
         let mut m = json::Material {
             double_sided: true,
             ..Default::default()
@@ -128,10 +129,11 @@ impl Builder {
             m.pbr_metallic_roughness.base_color_factor =
                 json::material::PbrBaseColorFactor([1.0; 4]);
         }
-        if let Some(texture) = material
-            .and_then(|m| m.diffuse_texture.as_deref())
-            .and_then(|t| self.texture(base, t))
-        {
+        let texture = match material.and_then(|m| m.diffuse_texture.as_deref()) {
+            Some(t) => self.texture(mesh, t)?,
+            None => None,
+        };
+        if let Some(texture) = texture {
             m.pbr_metallic_roughness.base_color_texture = Some(json::texture::Info {
                 index: texture,
                 tex_coord: 0,
@@ -141,18 +143,24 @@ impl Builder {
             m.pbr_metallic_roughness.base_color_factor =
                 json::material::PbrBaseColorFactor([1.0; 4]);
         }
-        self.root.push(m)
+        Ok(self.root.push(m))
     }
 
-    /// Embeds a PNG or JPEG texture (by its magic bytes); other files are left out.
-    fn texture(&mut self, base: &Path, name: &str) -> Option<json::Index<json::Texture>> {
-        let bytes = std::fs::read(base.join(name)).ok()?;
+    /// Embeds a PNG or JPEG texture (by its magic bytes; other formats are left out),
+    /// named relative to the mesh's folder and read only from inside it
+    /// ([`crate::io::read_named`]); a missing or refused texture is an error.
+    fn texture(&mut self, mesh: &Path, name: &str) -> Result<Option<json::Index<json::Texture>>> {
+        let root = match mesh.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        let bytes = read_named(root, mesh, name, InputKind::Texture)?;
         let mime = if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
             "image/png"
         } else if bytes.starts_with(&[0xFF, 0xD8, 0xFF]) {
             "image/jpeg"
         } else {
-            return None;
+            return Ok(None);
         };
         let view = self.view(&bytes, None);
         let image = self.root.push(json::Image {
@@ -164,13 +172,13 @@ impl Builder {
             extras: Default::default(),
         });
         let sampler = self.root.push(json::texture::Sampler::default());
-        Some(self.root.push(json::Texture {
+        Ok(Some(self.root.push(json::Texture {
             name: None,
             sampler: Some(sampler),
             source: image,
             extensions: None,
             extras: Default::default(),
-        }))
+        })))
     }
 }
 
@@ -194,15 +202,20 @@ pub(super) fn build_glb(
         },
         bin: Vec::new(),
     };
-    let base_dir = shape.path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let mut primitives = Vec::new();
     let mut offset = 0;
     for part in &shape.parts {
         let material = part.material.map(|m| &shape.materials[m]);
         let colors = colors.map(|c| &c[offset..offset + part.positions.len()]);
         primitives.push(part_primitive(
-            &mut b, part, offset, frames, colors, material, &base_dir,
-        ));
+            &mut b,
+            part,
+            offset,
+            frames,
+            colors,
+            material,
+            &shape.path,
+        )?);
         offset += part.positions.len();
     }
     let t = frames.len();
@@ -253,8 +266,8 @@ fn part_primitive(
     frames: &[Vec<[f32; 3]>],
     colors: Option<&[[f32; 3]]>,
     material: Option<&Material>,
-    base_dir: &Path,
-) -> json::mesh::Primitive {
+    mesh: &Path,
+) -> Result<json::mesh::Primitive> {
     use json::accessor::Type;
     use json::buffer::Target;
     let n = part.positions.len();
@@ -311,8 +324,8 @@ fn part_primitive(
         });
     }
     let indices = (!points).then(|| b.indices(&part.triangles));
-    let material = b.material(material, base_dir, colors.is_some());
-    json::mesh::Primitive {
+    let material = b.material(material, mesh, colors.is_some())?;
+    Ok(json::mesh::Primitive {
         attributes,
         extensions: None,
         extras: Default::default(),
@@ -324,7 +337,7 @@ fn part_primitive(
             json::mesh::Mode::Triangles
         }),
         targets: Some(targets),
-    }
+    })
 }
 
 /// The animation of `node`'s `t` morph weights: keyframe `k` at `k / fps` seconds is

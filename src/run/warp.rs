@@ -31,6 +31,12 @@ pub fn warp_run(
         frames: range,
     } = run.open(frames, device)?;
     let total = own.trajectories.frames();
+    // The mesh and every file it names are checked before the output folder is made, so
+    // that a refusal leaves nothing behind.
+    let canonical = canonical_mesh(mesh)?;
+    if let Canonical::Textured(textured) = &canonical {
+        textured.material_files()?;
+    }
     std::fs::create_dir_all(out).map_err(|e| DomaError::io(out, e))?;
     let to_norm =
         |v: &[f32; 3]| -> [f32; 3] { std::array::from_fn(|c| (v[c] - own.center[c]) / own.scale) };
@@ -52,7 +58,7 @@ pub fn warp_run(
     let frame_path = |k: usize| out.join(format!("frame_{k:04}.obj"));
     // One frame at a time, each streamed to its file: memory holds the mesh, one warped
     // frame and its normals, whatever the number of frames.
-    match canonical_mesh(mesh)? {
+    match canonical {
         // A user's textured mesh: any OBJ, its UVs and materials kept (`data::textured`).
         Canonical::Textured(textured) => {
             let norm: Vec<[f32; 3]> = textured.positions().iter().map(to_norm).collect();
@@ -104,7 +110,7 @@ fn canonical_mesh(mesh: Option<&Path>) -> Result<Canonical> {
     let Some(path) = mesh else {
         return Ok(Canonical::Own);
     };
-    let text = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
+    let text = crate::io::read_input(path, crate::io::InputKind::Mesh)?;
     let textured = text.split(|&b| b == b'\n').any(|line| {
         let line = line.trim_ascii_start();
         line.starts_with(b"vt ") || line.starts_with(b"vt\t") || line.starts_with(b"mtllib")

@@ -12,10 +12,10 @@ use std::process::Command;
 use doma::data::textured::TexturedMesh;
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
-const FAERIE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
+pub(crate) const FAERIE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
 const FLUID: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/data/taichi_mpm3d_fluid.traj");
 /// A 1×1 PNG.
-const PNG: &[u8] = &[
+pub(crate) const PNG: &[u8] = &[
     0x89, 0x50, 0x4E, 0x47, 0x0D, 0x0A, 0x1A, 0x0A, 0x00, 0x00, 0x00, 0x0D, 0x49, 0x48, 0x44, 0x52,
     0x00, 0x00, 0x00, 0x01, 0x00, 0x00, 0x00, 0x01, 0x08, 0x06, 0x00, 0x00, 0x00, 0x1F, 0x15, 0xC4,
     0x89, 0x00, 0x00, 0x00, 0x0D, 0x49, 0x44, 0x41, 0x54, 0x78, 0xDA, 0x63, 0xFC, 0xCF, 0xC0, 0xF0,
@@ -27,7 +27,7 @@ fn temp(tag: &str) -> common::Scratch {
     common::scratch(&format!("doma-export-{tag}"))
 }
 
-fn doma(args: &[&str]) -> (Option<i32>, String) {
+pub(crate) fn doma(args: &[&str]) -> (Option<i32>, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_doma"))
         .args(args)
         .output()
@@ -38,12 +38,12 @@ fn doma(args: &[&str]) -> (Option<i32>, String) {
     )
 }
 
-fn s(p: &Path) -> &str {
+pub(crate) fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
 /// A short fit: the faerie clip (mesh), or the fluid's first frames (points).
-fn fitted(dir: &Path, data: &str, frames: &str) -> PathBuf {
+pub(crate) fn fitted(dir: &Path, data: &str, frames: &str) -> PathBuf {
     let run = dir.join("run");
     let (code, err) = doma(&[
         "fit",
@@ -62,7 +62,7 @@ fn fitted(dir: &Path, data: &str, frames: &str) -> PathBuf {
 
 /// A textured OBJ near the faerie (its units): a box of quads in two groups, written with
 /// negative (relative) indices, normals, UVs and a material library with a PNG texture.
-fn textured_box(dir: &Path) -> PathBuf {
+pub(crate) fn textured_box(dir: &Path) -> PathBuf {
     let (lo, hi) = ([-10.0f32, -8.0, -20.0], [2.0f32, 8.0, 20.0]);
     let corner = |i: usize| {
         [
@@ -114,7 +114,7 @@ fn textured_box(dir: &Path) -> PathBuf {
 
 /// The JSON chunk of a `.glb` (glTF 2.0 §4.4: it follows the 12-byte header and its own
 /// 8-byte chunk header).
-fn glb_json(path: &Path) -> serde_json::Value {
+pub(crate) fn glb_json(path: &Path) -> serde_json::Value {
     let bytes = std::fs::read(path).unwrap();
     assert_eq!(&bytes[..4], b"glTF");
     let len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
