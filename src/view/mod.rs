@@ -161,9 +161,27 @@ pub fn view_html(
     };
     let json = serde_json::to_string(&data)
         .map_err(|e| DomaError::InvalidData(format!("cannot serialise the view: {e}")))?;
-    // `</` cannot appear inside the script: JSON strings may hold a `/`, escaped here.
-    let json = json.replace("</", "<\\/");
-    Ok(TEMPLATE.replacen(SLOT, &json, 1))
+    Ok(TEMPLATE.replacen(SLOT, &script_json(&json), 1))
+}
+
+/// JSON made safe to embed in an HTML `<script>` element: `<`, `>` and `&` as `\u003c`,
+/// `\u003e` and `\u0026` (so that no `</script>`, `<!--` or `<script` in a name can close
+/// the element or switch the parser into its escaped states), and U+2028/U+2029 escaped for
+/// older JavaScript parsers. The escapes stay valid JSON and denote the same strings;
+/// serde writes these characters only inside strings.
+pub fn script_json(json: &str) -> String {
+    let mut out = String::with_capacity(json.len());
+    for c in json.chars() {
+        match c {
+            '<' => out.push_str("\\u003c"),
+            '>' => out.push_str("\\u003e"),
+            '&' => out.push_str("\\u0026"),
+            '\u{2028}' => out.push_str("\\u2028"),
+            '\u{2029}' => out.push_str("\\u2029"),
+            c => out.push(c),
+        }
+    }
+    out
 }
 
 /// Writes [`view_html`] to `out`, atomically.
@@ -185,5 +203,17 @@ mod tests {
     #[test]
     fn the_template_has_one_data_slot() {
         assert_eq!(super::TEMPLATE.matches(super::SLOT).count(), 1);
+    }
+
+    #[test]
+    fn embedded_json_cannot_close_the_script_and_keeps_its_strings() {
+        let hostile = "<!--<script>x</script>&amp;\u{2028}\u{2029}\"'";
+        let json = serde_json::to_string(&serde_json::json!({ "name": hostile })).unwrap();
+        let safe = super::script_json(&json);
+        for bad in ['<', '>', '&', '\u{2028}', '\u{2029}'] {
+            assert!(!safe.contains(bad), "{bad:?} left in {safe}");
+        }
+        let back: serde_json::Value = serde_json::from_str(&safe).unwrap();
+        assert_eq!(back["name"], hostile);
     }
 }

@@ -1,7 +1,8 @@
 //! `doma view` in a real browser: headless Chromium (Debian's package; `.ci/run` installs
 //! it) opens the page from a file, with no network, and the test reads the screenshots'
 //! pixels: the object covers a region around the centre, it is coloured by error, and two
-//! frames differ. For a run with a mesh and for a point cloud.
+//! frames differ. For a run with a mesh, for a point cloud, and for a run whose folder's
+//! name is hostile HTML.
 
 use crate::common;
 
@@ -134,12 +135,19 @@ fn the_viewer_renders_a_mesh_run_and_a_point_run_in_chromium() {
         return;
     }
     let dir = temp("chromium");
+    // The third run's folder name would keep the page's script element open to the end
+    // of the file if it reached the page unescaped (`<!--<script>`): the viewer must run.
+    let hostile = "<!--<script>x";
     for (name, data, frames, last) in [
         ("mesh", FAERIE, "112..120", 7),
         ("points", FLUID, "0..30", 29),
+        (hostile, FAERIE, "112..120", 7),
     ] {
         let run = dir.join(name);
-        let page = dir.join(format!("{name}.html"));
+        let page = dir.join(format!(
+            "{}.html",
+            if name == hostile { "hostile" } else { name }
+        ));
         let (run_s, page_s) = (run.to_str().unwrap(), page.to_str().unwrap());
         doma(&[
             "fit", data, "--frames", frames, "--iters", "3", "--quiet", "--out", run_s,
@@ -148,6 +156,10 @@ fn the_viewer_renders_a_mesh_run_and_a_point_run_in_chromium() {
         let html = std::fs::read_to_string(&page).unwrap();
         // Self-contained: nothing is fetched.
         assert!(!html.contains("http://") && !html.contains("https://") && !html.contains("src="));
+        assert!(
+            !html.contains(hostile),
+            "the run's name reached the page unescaped"
+        );
         check_page(&page, &dir, last);
     }
 }
