@@ -50,14 +50,24 @@ pub struct BatchItem {
 #[serde(deny_unknown_fields)]
 struct File {
     #[serde(default)]
-    defaults: RunSpec,
+    defaults: Option<Value>,
     sequences: Vec<Value>,
+}
+
+/// `frames` may be written as the CLI writes it, `"A..B"` (or `"A..=B"`), as well as
+/// `[A, B]`: the string becomes the pair.
+fn frames_as_pair(fields: &mut serde_json::Map<String, Value>) -> std::result::Result<(), String> {
+    if let Some(Value::String(text)) = fields.get("frames") {
+        let range = crate::data::parse_frame_range(text).map_err(|e| format!("`frames`: {e}"))?;
+        fields.insert("frames".into(), serde_json::json!([range.start, range.end]));
+    }
+    Ok(())
 }
 
 impl Manifest {
     /// Reads and checks the manifest at `path`. Errors name the file and the entry.
     pub fn load(path: &Path) -> Result<Manifest> {
-        let text = std::fs::read_to_string(path).map_err(|e| DomaError::io(path, e))?;
+        let text = crate::io::read_input_text(path, crate::io::InputKind::Manifest)?;
         let base = std::path::absolute(path)
             .map_err(|e| DomaError::io(path, e))?
             .parent()
@@ -74,9 +84,20 @@ impl Manifest {
         if file.sequences.is_empty() {
             return Err("`sequences` lists no sequence".into());
         }
-        if file.defaults.data.is_some() {
+        let defaults: RunSpec = match file.defaults {
+            None => RunSpec::default(),
+            Some(Value::Object(mut fields)) => {
+                frames_as_pair(&mut fields).map_err(|e| format!("`defaults`: {e}"))?;
+                serde_json::from_value(Value::Object(fields))
+                    .map_err(|e| format!("`defaults`: {e}"))?
+            }
+            Some(other) => return Err(format!("`defaults` {other} is not a JSON object")),
+        };
+        if defaults.data.is_some() {
             return Err("`defaults` cannot name the data; each sequence names its own".into());
         }
+        // Names compared without case: `Run` and `run` are one folder on a
+        // case-insensitive file system.
         let mut names = BTreeSet::new();
         let mut items = Vec::with_capacity(file.sequences.len());
         for (i, entry) in file.sequences.into_iter().enumerate() {
@@ -89,9 +110,10 @@ impl Manifest {
                 Some(Value::String(s)) => Some(s),
                 Some(other) => return Err(at(format!("`name` {other} is not a string"))),
             };
+            frames_as_pair(&mut fields).map_err(at)?;
             let spec: RunSpec =
                 serde_json::from_value(Value::Object(fields)).map_err(|e| at(e.to_string()))?;
-            let spec = spec.or(&file.defaults).relative_to(base);
+            let spec = spec.or(&defaults).relative_to(base);
             let data = spec.data.as_deref().ok_or_else(|| at("no `data`".into()))?;
             let name = match name {
                 Some(n) => n,
@@ -101,9 +123,10 @@ impl Manifest {
                     .ok_or_else(|| at("`data` has no file name; give a `name`".into()))?,
             };
             check_name(&name).map_err(at)?;
-            if !names.insert(name.clone()) {
+            if !names.insert(name.to_lowercase()) {
                 return Err(at(format!(
-                    "the name `{name}` is taken by an earlier sequence; give each a distinct `name`"
+                    "the name `{name}` is taken by an earlier sequence (names are compared \
+                     without case); give each a distinct `name`"
                 )));
             }
             items.push(BatchItem { name, spec });
@@ -112,8 +135,25 @@ impl Manifest {
     }
 }
 
-/// A run folder's name: letters, digits, `.`, `_`, `-`, `+`, `=`; not starting with `.`.
-fn check_name(name: &str) -> std::result::Result<(), String> {
+/// The longest run folder name: far below a file system's 255 bytes.
+pub const MAX_NAME: usize = 128;
+
+/// A run folder's name: letters, digits, `.`, `_`, `-`, `+`, `=`; not starting with `.`;
+/// at most [`MAX_NAME`] characters; none of the batch folder's own files.
+pub fn check_name(name: &str) -> std::result::Result<(), String> {
+    if name.len() > MAX_NAME {
+        return Err(format!(
+            "the name `{}…` has {} characters, more than {MAX_NAME}",
+            &name[..name.floor_char_boundary(24)],
+            name.chars().count()
+        ));
+    }
+    if super::RESERVED.iter().any(|r| r.eq_ignore_ascii_case(name)) {
+        return Err(format!(
+            "the name `{name}` is one of the batch folder's own files ({})",
+            super::RESERVED.join(", ")
+        ));
+    }
     let ok = !name.is_empty()
         && !name.starts_with('.')
         && name
@@ -193,5 +233,51 @@ mod tests {
             let err = Manifest::parse(text, Path::new("/")).unwrap_err();
             assert!(err.contains(needle), "{text}: {err}");
         }
+    }
+
+    #[test]
+    fn names_that_collide_with_the_batch_or_each_other_or_run_long_are_refused() {
+        let long = "n".repeat(300);
+        let cases = [
+            (
+                r#"{"sequences": [{"data": "a.traj", "name": "batch-manifest.json"}]}"#.to_string(),
+                "the batch folder's own files",
+            ),
+            (
+                r#"{"sequences": [{"data": "a.traj", "name": "Summary.JSON"}]}"#.into(),
+                "the batch folder's own files",
+            ),
+            (
+                r#"{"sequences": [{"data": "a.traj", "name": "Run"}, {"data": "b.traj", "name": "run"}]}"#.into(),
+                "sequence 1: the name `run` is taken",
+            ),
+            (
+                format!(r#"{{"sequences": [{{"data": "a.traj", "name": "{long}"}}]}}"#),
+                "sequence 0: the name `nnnn",
+            ),
+        ];
+        for (text, needle) in cases {
+            let err = Manifest::parse(&text, Path::new("/")).unwrap_err();
+            assert!(err.contains(needle), "{text}: {err}");
+        }
+        let at_bound = "n".repeat(MAX_NAME);
+        let text = format!(r#"{{"sequences": [{{"data": "a.traj", "name": "{at_bound}"}}]}}"#);
+        assert!(Manifest::parse(&text, Path::new("/")).is_ok());
+    }
+
+    #[test]
+    fn frames_take_the_clis_spelling_too() {
+        let text = r#"{"defaults": {"frames": "0..=9"},
+            "sequences": [{"data": "a.traj", "frames": "95..112"}, {"data": "b.traj"},
+                          {"data": "c.traj", "frames": [3, 7]}]}"#;
+        let m = Manifest::parse(text, Path::new("/")).unwrap();
+        let frames: Vec<_> = m.items.iter().map(|i| i.spec.frames).collect();
+        assert_eq!(frames, [Some([95, 112]), Some([0, 10]), Some([3, 7])]);
+        let err = Manifest::parse(
+            r#"{"sequences": [{"data": "a.traj", "frames": "9..3"}]}"#,
+            Path::new("/"),
+        )
+        .unwrap_err();
+        assert!(err.contains("sequence 0: `frames`"), "{err}");
     }
 }

@@ -26,7 +26,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{load_json, save_json};
-use crate::io::write_atomic;
 use crate::run::{FitOutcome, Report, RunDir, RunSpec, fit_run};
 use crate::train::IterationRecord;
 use crate::train::select::WeightSearch;
@@ -34,6 +33,9 @@ use crate::{DomaError, Result};
 
 /// The file under the batch folder that keeps the manifest's resolved entries.
 pub const MANIFEST_COPY: &str = "batch-manifest.json";
+
+/// The batch folder's own files, which no entry may be named.
+pub const RESERVED: [&str; 3] = [MANIFEST_COPY, "summary.json", "summary.csv"];
 /// A run folder's record of its last failure.
 pub const ERROR_FILE: &str = "error.json";
 
@@ -183,17 +185,22 @@ fn run_item(
         Err(DomaError::Busy { holder, .. }) => return Ok(Some(ItemOutcome::Busy { holder })),
         Err(e) => e.to_string(),
     };
-    std::fs::create_dir_all(&run.dir).map_err(|e| DomaError::io(&run.dir, e))?;
     let unix_seconds = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());
-    save_json(
-        &Failure {
-            error: error.clone(),
-            unix_seconds,
-        },
-        &run.dir.join(ERROR_FILE),
-    )?;
+    let failure = Failure {
+        error: error.clone(),
+        unix_seconds,
+    };
+    // A failure is reported even when its folder cannot hold `error.json` (a file of the
+    // run's name, say), and the shard goes on.
+    let recorded = std::fs::create_dir_all(&run.dir)
+        .map_err(|e| DomaError::io(&run.dir, e))
+        .and_then(|()| save_json(&failure, &run.dir.join(ERROR_FILE)));
+    let error = match recorded {
+        Ok(()) => error,
+        Err(e) => format!("{error} (and the failure could not be recorded: {e})"),
+    };
     Ok(Some(ItemOutcome::Failed { error }))
 }
 
@@ -275,7 +282,15 @@ pub fn collect(out: &Path) -> Result<Vec<SummaryRow>> {
     let copy = out.join(MANIFEST_COPY);
     let names: Vec<String> = if copy.is_file() {
         let manifest: Manifest = load_json(&copy)?;
-        manifest.items.into_iter().map(|i| i.name).collect()
+        let names: Vec<String> = manifest.items.into_iter().map(|i| i.name).collect();
+        // Only folders inside the batch folder are read: a name is a plain folder name.
+        for name in &names {
+            manifest::check_name(name).map_err(|reason| DomaError::Malformed {
+                path: copy.clone(),
+                reason,
+            })?;
+        }
+        names
     } else {
         let mut names = Vec::new();
         for entry in std::fs::read_dir(out).map_err(|e| DomaError::io(out, e))? {
@@ -291,8 +306,12 @@ pub fn collect(out: &Path) -> Result<Vec<SummaryRow>> {
         .into_iter()
         .map(|name| summary_row(&RunDir::new(out.join(&name)), name))
         .collect::<Result<Vec<_>>>()?;
-    save_json(&rows, &out.join("summary.json"))?;
-    write_atomic(&out.join("summary.csv"), to_csv(&rows).as_bytes())?;
+    let json = serde_json::to_vec_pretty(&rows)
+        .map_err(|e| DomaError::InvalidData(format!("cannot serialise the summary: {e}")))?;
+    crate::io::write_atomic_all(&[
+        (&out.join("summary.json"), &json),
+        (&out.join("summary.csv"), to_csv(&rows).as_bytes()),
+    ])?;
     Ok(rows)
 }
 

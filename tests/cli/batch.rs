@@ -233,6 +233,70 @@ fn a_failed_entry_is_recorded_and_the_shard_goes_on() {
 }
 
 #[test]
+fn a_folder_taken_by_a_file_is_a_recorded_failure_and_collect_stays_inside() {
+    let dir = temp("taken");
+    let mut blocked = faerie("blocked", 0);
+    blocked["iterations"] = serde_json::json!(3);
+    let mut good = faerie("good", 0);
+    good["iterations"] = serde_json::json!(3);
+    let m = manifest(&dir, &[blocked, good]);
+    let out = dir.join("out");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("blocked"), "a file where the run folder would go").unwrap();
+    let run = doma()
+        .arg("batch")
+        .arg(&m)
+        .arg("--out")
+        .arg(&out)
+        .arg("--quiet")
+        .output()
+        .unwrap();
+    let err = text(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{err}");
+    let r = report(&run);
+    assert_eq!(with_status(&r, "failed"), ["blocked"], "{r}");
+    assert_eq!(with_status(&r, "fitted"), ["good"], "{r}");
+    collect(&out);
+
+    // Both summaries or neither: summary.csv cannot be replaced, so summary.json is not
+    // written either.
+    std::fs::remove_file(out.join("summary.json")).unwrap();
+    std::fs::remove_file(out.join("summary.csv")).unwrap();
+    std::fs::create_dir_all(out.join("summary.csv/x")).unwrap();
+    let failed = doma()
+        .arg("batch")
+        .arg("--collect")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(failed.status.code(), Some(1), "{}", text(&failed.stderr));
+    assert!(
+        !out.join("summary.json").exists(),
+        "one summary without the other"
+    );
+    std::fs::remove_dir_all(out.join("summary.csv")).unwrap();
+
+    // A name in the batch's copy of the manifest that leads outside is refused.
+    let copy = out.join("batch-manifest.json");
+    let edited = std::fs::read_to_string(&copy)
+        .unwrap()
+        .replace("\"good\"", "\"../elsewhere\"");
+    std::fs::write(&copy, edited).unwrap();
+    let outside = doma()
+        .arg("batch")
+        .arg("--collect")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = text(&outside.stderr);
+    assert_eq!(outside.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("batch-manifest.json") && err.contains("../elsewhere"),
+        "{err}"
+    );
+}
+
+#[test]
 fn bad_manifests_and_flags_are_refused_with_the_file_named() {
     let dir = temp("bad");
     let m = dir.join("m.json");
