@@ -241,9 +241,11 @@ impl FitConfig {
     /// Reads a fit config from a JSON file that may give only some fields: the model
     /// defaults to DOMA-Affinity with the analytic Jacobian (what `doma fit` fits), the
     /// `L_H` sampling to the authors' for the file's variant, and every other missing field
-    /// to its default. Errors name the file.
+    /// to its default. A field that no fit config has (a typo, or a config of another
+    /// layout) is refused, so that nothing in the file is silently ignored. Errors name the
+    /// file and the field.
     pub fn load_partial(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| DomaError::io(path, e))?;
+        let text = crate::io::read_input_text(path, crate::io::InputKind::Config)?;
         let malformed = |reason: String| DomaError::Malformed {
             path: path.to_path_buf(),
             reason,
@@ -258,6 +260,13 @@ impl FitConfig {
                 .map_err(|e| malformed(format!("model: {e}")))?,
             None => ModelConfig::doma(Variant::Affinity),
         };
+        if let Some(m) = fields.get("model") {
+            let known = serde_json::to_value(&model)
+                .map_err(|e| malformed(format!("cannot serialise the model: {e}")))?;
+            if let Some(field) = unknown_field(m, &known, "model") {
+                return Err(malformed(format!("no fit config has the field `{field}`")));
+            }
+        }
         let base = match &model {
             ModelConfig::Doma(field) => FitConfig::doma(field.clone()),
             other => FitConfig::new(other.clone()),
@@ -269,12 +278,35 @@ impl FitConfig {
         if let Value::Object(g) = &mut given {
             g.remove("model");
         }
+        if let Some(field) = unknown_field(&given, &merged, "") {
+            return Err(malformed(format!("no fit config has the field `{field}`")));
+        }
         merge(&mut merged, given);
         let config: FitConfig =
             serde_json::from_value(merged).map_err(|e| malformed(e.to_string()))?;
         config.validate().map_err(|e| malformed(e.to_string()))?;
         Ok(config)
     }
+}
+
+/// The first field of `given` (as a dotted path below `at`) that `known`, a full config of
+/// the same kind, does not have. Objects are compared key by key; a field whose known
+/// value is not an object (a number, or `null` for an unset option) is not looked into.
+fn unknown_field(given: &Value, known: &Value, at: &str) -> Option<String> {
+    let (Value::Object(given), Value::Object(known)) = (given, known) else {
+        return None;
+    };
+    given.iter().find_map(|(key, value)| {
+        let path = if at.is_empty() {
+            key.clone()
+        } else {
+            format!("{at}.{key}")
+        };
+        match known.get(key) {
+            None => Some(path),
+            Some(k) => unknown_field(value, k, &path),
+        }
+    })
 }
 
 /// A partial model config filled from its kind's defaults: `{"doma": {"variant": "trans"}}`

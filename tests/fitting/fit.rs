@@ -216,3 +216,43 @@ fn an_observed_fit_sees_every_kth_iteration_and_the_last_and_ends_where_a_plain_
         .run_observed(1, |_, _| Err(DomaError::InvalidConfig("stop".into())));
     assert!(matches!(err, Err(DomaError::InvalidConfig(_))));
 }
+
+#[test]
+fn a_config_file_with_a_field_no_fit_config_has_is_refused_naming_it() {
+    let dir = common::scratch("doma-fit-config");
+    let write = |name: &str, text: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    // An earlier flat layout (every field of it unknown: the first in key order is
+    // named), a typo, and a misplaced model field.
+    for (name, text, field) in [
+        (
+            "flat.json",
+            r#"{"iterations": 0, "learning_rate": -1, "field": {"hidden": 100000}}"#,
+            "`field`",
+        ),
+        (
+            "typo.json",
+            r#"{"schedule": {"iterations": 5, "learnig_rate": 0.1}}"#,
+            "`schedule.learnig_rate`",
+        ),
+        (
+            "model.json",
+            r#"{"model": {"doma": {"variant": "trans", "hiden": 16}}}"#,
+            "`model.doma.hiden`",
+        ),
+    ] {
+        let path = write(name, text);
+        let err = FitConfig::load_partial(&path).unwrap_err().to_string();
+        assert!(err.contains(name) && err.contains(field), "{name}: {err}");
+    }
+    // A partial file of known fields still takes the defaults for the rest.
+    let path = write(
+        "partial.json",
+        r#"{"model": {"doma": {"variant": "trans"}}, "schedule": {"iterations": 200}}"#,
+    );
+    let config = FitConfig::load_partial(&path).unwrap();
+    assert_eq!(config.schedule.iterations, 200);
+}
