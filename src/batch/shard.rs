@@ -79,7 +79,16 @@ impl Shard {
                     "$SLURM_ARRAY_TASK_ID {id} is below $SLURM_ARRAY_TASK_MIN {min}"
                 ))
             })?;
-            return Shard::new(offset / step, n).map(Some);
+            return Shard::new(offset / step, n).map(Some).map_err(|e| {
+                DomaError::Usage(format!(
+                    "from $SLURM_ARRAY_TASK_ID {id} (min {min}, step {step}) and {}: {e}",
+                    if count.is_some() {
+                        "--shard-count".to_string()
+                    } else {
+                        format!("$SLURM_ARRAY_TASK_COUNT {n}")
+                    }
+                ))
+            });
         }
         if let Some(index) = number("JOB_COMPLETION_INDEX")? {
             let n = count.ok_or_else(|| {
@@ -88,7 +97,11 @@ impl Shard {
                         .into(),
                 )
             })?;
-            return Shard::new(index, n).map(Some);
+            return Shard::new(index, n).map(Some).map_err(|e| {
+                DomaError::Usage(format!(
+                    "from $JOB_COMPLETION_INDEX {index} and --shard-count {n}: {e}"
+                ))
+            });
         }
         Ok(None)
     }
@@ -127,6 +140,25 @@ mod tests {
         let s = Shard::parse("1/3").unwrap();
         let mine: Vec<usize> = (0..8).filter(|&i| s.owns(i)).collect();
         assert_eq!(mine, [1, 4, 7]);
+    }
+
+    #[test]
+    fn an_index_out_of_range_says_which_variables_gave_it() {
+        let slurm = env(&[
+            ("SLURM_ARRAY_TASK_ID", "9"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+        ]);
+        let err = Shard::from_env(slurm, None).unwrap_err().to_string();
+        assert!(
+            err.contains("$SLURM_ARRAY_TASK_ID 9") && err.contains("$SLURM_ARRAY_TASK_COUNT 4"),
+            "{err}"
+        );
+        let k8s = env(&[("JOB_COMPLETION_INDEX", "5")]);
+        let err = Shard::from_env(k8s, Some(2)).unwrap_err().to_string();
+        assert!(
+            err.contains("$JOB_COMPLETION_INDEX 5") && err.contains("--shard-count 2"),
+            "{err}"
+        );
     }
 
     #[test]

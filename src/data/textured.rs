@@ -178,7 +178,15 @@ impl TexturedMesh {
             });
         }
         if parts.is_empty() {
-            return Err(malformed("no vertices".into()));
+            let vertices = text
+                .lines()
+                .filter(|l| l.trim_start().starts_with("v "))
+                .count();
+            return Err(malformed(if vertices == 0 {
+                "no vertices".into()
+            } else {
+                format!("{vertices} vertices but no faces; a mesh needs faces")
+            }));
         }
         Ok(TexturedMesh {
             path: path.to_path_buf(),

@@ -253,7 +253,7 @@ pub(super) fn build_glb(
     });
     let text = json::serialize::to_string(&b.root)
         .map_err(|e| DomaError::InvalidData(format!("cannot serialise the glTF document: {e}")))?;
-    Ok(glb(text.into_bytes(), b.bin))
+    glb(text.into_bytes(), b.bin)
 }
 
 /// One part of the shape as a primitive: its first frame's positions (and normals, UVs,
@@ -377,24 +377,40 @@ fn morph_animation(b: &mut Builder, node: json::Index<json::Node>, t: usize, fps
     });
 }
 
+/// The GLB's total, JSON-chunk and binary-chunk lengths for chunks of these (padded)
+/// sizes, each a `u32`, or an error when any is 4 GiB or more.
+fn glb_lengths(json: usize, bin: usize) -> Result<[u32; 3]> {
+    let total = (12 + 8 + 8usize).saturating_add(json).saturating_add(bin);
+    let fit = |n: usize| {
+        u32::try_from(n).map_err(|_| {
+            DomaError::InvalidData(format!(
+                "the glTF would be {total} bytes; a .glb holds less than 4 GiB (fewer frames or \
+                 vertices, or --frames, make it fit)"
+            ))
+        })
+    };
+    Ok([fit(total)?, fit(json)?, fit(bin)?])
+}
+
 /// The GLB container (glTF 2.0 §4.4): a 12-byte header, the JSON chunk padded with spaces
-/// and the binary chunk padded with zeros, each to 4 bytes.
-fn glb(mut json: Vec<u8>, bin: Vec<u8>) -> Vec<u8> {
+/// and the binary chunk padded with zeros, each to 4 bytes. Its lengths are 32-bit: a scene
+/// of 4 GiB or more is refused rather than written with wrapped lengths.
+fn glb(mut json: Vec<u8>, bin: Vec<u8>) -> Result<Vec<u8>> {
     while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
-    let total = 12 + 8 + json.len() + 8 + bin.len();
-    let mut out = Vec::with_capacity(total);
+    let [total32, json32, bin32] = glb_lengths(json.len(), bin.len())?;
+    let mut out = Vec::with_capacity(total32 as usize);
     out.extend_from_slice(b"glTF");
     out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    out.extend_from_slice(&total32.to_le_bytes());
+    out.extend_from_slice(&json32.to_le_bytes());
     out.extend_from_slice(b"JSON");
     out.extend_from_slice(&json);
-    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(&bin32.to_le_bytes());
     out.extend_from_slice(b"BIN\0");
     out.extend_from_slice(&bin);
-    out
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -403,8 +419,20 @@ mod tests {
     use crate::export::single_part;
 
     #[test]
+    fn a_scene_of_4_gib_is_refused_not_wrapped() {
+        assert_eq!(glb_lengths(8, 4).unwrap(), [40, 8, 4]);
+        let four_gib = 1usize << 32;
+        assert!(glb_lengths(8, four_gib).is_err());
+        assert!(
+            glb_lengths(8, four_gib - 28).is_err(),
+            "the total crosses 4 GiB"
+        );
+        assert!(glb_lengths(8, four_gib - 37).is_ok());
+    }
+
+    #[test]
     fn a_glb_has_the_header_and_both_chunks_aligned() {
-        let out = glb(b"{\"a\":1}".to_vec(), vec![1, 2, 3, 4]);
+        let out = glb(b"{\"a\":1}".to_vec(), vec![1, 2, 3, 4]).unwrap();
         assert_eq!(&out[..4], b"glTF");
         assert_eq!(
             u32::from_le_bytes(out[8..12].try_into().unwrap()) as usize,

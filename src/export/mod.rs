@@ -131,9 +131,12 @@ pub fn export_gltf(
             .collect::<Vec<[f32; 3]>>()
     });
     let fps = options.fps.unwrap_or(24.0);
-    if !(fps.is_finite() && fps > 0.0) {
+    // The last key time, (T − 1) / fps, must be a finite f32: `--fps 1e-45` is not.
+    let last = (frames.len().saturating_sub(1)) as f32 / fps;
+    if !(fps.is_finite() && fps > 0.0 && last.is_finite()) {
         return Err(DomaError::InvalidConfig(format!(
-            "{fps} frames per second must be positive"
+            "--fps {fps}: the frames per second must be positive and large enough that \
+             every key time is a finite number"
         )));
     }
     let glb = build_glb(&shape, &frames, colors.as_deref(), fps)?;

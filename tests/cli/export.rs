@@ -344,3 +344,64 @@ fn bad_meshes_and_outputs_are_refused_naming_the_file() {
     }
     assert!(!glb.exists(), "a refused export left a file");
 }
+
+#[test]
+fn the_files_an_obj_names_are_read_from_where_it_says_and_checked() {
+    let dir = temp("named");
+    let tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n";
+    let write = |name: &str, text: &str| {
+        let path = dir.join(name);
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    // Every `mtllib` is read: a missing second library is refused, naming it.
+    write("a.mtl", "newmtl a\nKd 1 0 0\n");
+    let two = write(
+        "two.obj",
+        &format!("mtllib a.mtl\nmtllib gone.mtl\n{tri}usemtl a\nf 1/1 2/2 3/3\n"),
+    );
+    let err = TexturedMesh::read(&two).unwrap_err().to_string();
+    assert!(err.contains("gone.mtl") && err.contains("missing"), "{err}");
+    // A `.mtl` in a subfolder names its texture relative to itself.
+    write("sub/m.mtl", "newmtl m\nmap_Kd t.png\n");
+    std::fs::write(dir.join("sub/t.png"), PNG).unwrap();
+    let sub = write(
+        "sub.obj",
+        &format!("mtllib sub/m.mtl\n{tri}usemtl m\nf 1/1 2/2 3/3\n"),
+    );
+    let mesh = TexturedMesh::read(&sub).unwrap();
+    assert_eq!(
+        mesh.materials[0].diffuse_texture.as_deref(),
+        Some("sub/t.png")
+    );
+    let files = mesh.material_files().unwrap();
+    assert_eq!(files[1].0, dir.join("sub/t.png").canonicalize().unwrap());
+    // Vertices without faces are not "no vertices".
+    let bare = write("bare.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n");
+    let err = TexturedMesh::read(&bare).unwrap_err().to_string();
+    assert!(err.contains("3 vertices but no faces"), "{err}");
+    // A material library past its bound is refused before it is read.
+    let big = dir.join("big.mtl");
+    std::fs::File::create(&big)
+        .unwrap()
+        .set_len(64 << 20)
+        .unwrap();
+    let heavy = write(
+        "heavy.obj",
+        &format!("mtllib big.mtl\n{tri}f 1/1 2/2 3/3\n"),
+    );
+    let err = TexturedMesh::read(&heavy).unwrap_err().to_string();
+    assert!(err.contains("big.mtl") && err.contains("16 MiB"), "{err}");
+}
+
+#[test]
+fn a_frame_rate_whose_key_times_overflow_is_refused() {
+    let dir = temp("fps");
+    let run = fitted(&dir, FAERIE, "112..116");
+    let glb = dir.join("out.glb");
+    let (code, err) = doma(&["export", s(&run), "--gltf", s(&glb), "--fps", "1e-45"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--fps"), "{err}");
+    assert!(!glb.exists());
+}
