@@ -1,6 +1,6 @@
 //! The file formats of doma as pure functions over bytes and text: `.traj` ([`traj`]),
 //! DeformingThings4D `.anime` ([`anime`]), NumPy `.npy` ([`npy`]) and `.npz` ([`npz`]),
-//! and OBJ meshes ([`obj`]).
+//! OBJ meshes ([`obj`]), and any OBJ with its materials for display ([`textured`]).
 //!
 //! This crate has no Burn dependency, so that the readers can be fuzzed (`fuzz/` in the
 //! doma repository) without building a deep-learning framework under coverage
@@ -13,6 +13,7 @@ pub mod anime;
 pub mod npy;
 pub mod npz;
 pub mod obj;
+pub mod textured;
 pub mod traj;
 
 /// Checked point positions: `frames × points` points, `[T, N, 3]` frame-major.

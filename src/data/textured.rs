@@ -12,35 +12,12 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use doma_formats::textured::{TexturedError, parse_textured};
+
 use crate::io::{InputKind, check_input, read_input, read_named, resolve_named};
 use crate::{DomaError, Result};
 
-/// One part of a [`TexturedMesh`] (an `o`/`g` group), with its own vertices.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Part {
-    /// The group's name.
-    pub name: String,
-    /// Positions, `[V, 3]`.
-    pub positions: Vec<[f32; 3]>,
-    /// Texture coordinates per vertex, if the file has them.
-    pub texcoords: Option<Vec<[f32; 2]>>,
-    /// Triangles (indices into this part's vertices).
-    pub triangles: Vec<[u32; 3]>,
-    /// The material's index into [`TexturedMesh::materials`], if any.
-    pub material: Option<usize>,
-}
-
-/// A material of the OBJ's material library, as far as doma carries it.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Material {
-    /// Its `newmtl` name (what `usemtl` refers to).
-    pub name: String,
-    /// `Kd`, the diffuse colour.
-    pub diffuse: Option<[f32; 3]>,
-    /// `map_Kd`, the diffuse texture, relative to the OBJ's folder (the `.mtl` writes it
-    /// relative to itself).
-    pub diffuse_texture: Option<String>,
-}
+pub use doma_formats::textured::{Material, Part};
 
 /// An OBJ with everything a viewer needs to show it textured.
 #[derive(Clone, Debug, PartialEq)]
@@ -63,143 +40,31 @@ impl TexturedMesh {
     /// relative to its `.mtl`).
     pub fn read(path: &Path) -> Result<TexturedMesh> {
         let bytes = read_input(path, InputKind::Mesh)?;
-        let text = String::from_utf8_lossy(&bytes);
-        let malformed = |reason: String| DomaError::Malformed {
-            path: path.to_path_buf(),
-            reason,
-        };
-        let mtllibs: Vec<String> = text
-            .lines()
-            .filter_map(|l| l.trim().strip_prefix("mtllib"))
-            .filter(|rest| rest.starts_with(char::is_whitespace))
-            .map(|rest| rest.trim().to_string())
-            .collect();
         let root = path.parent().unwrap_or(Path::new("."));
         let root = if root.as_os_str().is_empty() {
             Path::new(".")
         } else {
             root
         };
-        // tobj asks for each `mtllib`; the first refusal is kept and reported as ours.
-        let refused: std::cell::RefCell<Option<DomaError>> = Default::default();
-        let load_mtl = |name: &Path| -> tobj::MTLLoadResult {
-            let name = name.to_string_lossy();
-            let loaded = read_named(root, path, &name, InputKind::Material).and_then(|b| {
-                let mtl = root.join(name.as_ref());
-                tobj::load_mtl_buf(&mut b.as_slice()).map_err(|e| DomaError::Malformed {
-                    path: mtl,
-                    reason: format!("not a readable material library: {e}"),
-                })
-            });
-            match loaded {
-                Ok((mut materials, names)) => {
-                    // A texture is named relative to its `.mtl`; keep it relative to the OBJ.
-                    let dir = Path::new(name.as_ref()).parent().unwrap_or(Path::new(""));
-                    for m in &mut materials {
-                        if let Some(t) = &m.diffuse_texture {
-                            m.diffuse_texture = Some(dir.join(t).to_string_lossy().into_owned());
-                        }
-                    }
-                    Ok((materials, names))
-                }
-                Err(e) => {
-                    refused.borrow_mut().get_or_insert(e);
-                    Err(tobj::LoadError::OpenFileFailed)
-                }
-            }
-        };
-        let (models, materials) =
-            tobj::load_obj_buf(&mut bytes.as_slice(), &tobj::GPU_LOAD_OPTIONS, load_mtl)
-                .map_err(|e| malformed(format!("not a readable OBJ: {e}")))?;
-        if let Some(e) = refused.into_inner() {
-            return Err(e);
-        }
-        let materials = match materials {
-            Ok(m) => m,
-            Err(_) if mtllibs.is_empty() => Vec::new(),
-            Err(e) => return Err(malformed(format!("its materials: {e}"))),
-        };
-        let mut parts = Vec::with_capacity(models.len());
-        for model in models {
-            let m = model.mesh;
-            let positions: Vec<[f32; 3]> = m
-                .positions
-                .chunks_exact(3)
-                .map(|c| [c[0], c[1], c[2]])
-                .collect();
-            if let Some(i) = positions
-                .iter()
-                .position(|p| p.iter().any(|c| !c.is_finite()))
-            {
-                return Err(malformed(format!(
-                    "group `{}`: vertex {i} has a coordinate that is not finite",
-                    model.name
-                )));
-            }
-            let texcoords = (!m.texcoords.is_empty()).then(|| {
-                m.texcoords
-                    .chunks_exact(2)
-                    .map(|c| [c[0], c[1]])
-                    .collect::<Vec<_>>()
-            });
-            if texcoords
-                .as_ref()
-                .is_some_and(|t| t.len() != positions.len())
-            {
-                return Err(malformed(format!(
-                    "group `{}`: texture coordinates do not match the vertices",
-                    model.name
-                )));
-            }
-            let triangles: Vec<[u32; 3]> = m
-                .indices
-                .chunks_exact(3)
-                .map(|c| [c[0], c[1], c[2]])
-                .collect();
-            if triangles
-                .iter()
-                .flatten()
-                .any(|&i| i as usize >= positions.len())
-            {
-                return Err(malformed(format!(
-                    "group `{}`: a face refers to a vertex that does not exist",
-                    model.name
-                )));
-            }
-            if positions.is_empty() {
-                continue;
-            }
-            parts.push(Part {
-                name: model.name,
-                positions,
-                texcoords,
-                triangles,
-                material: m.material_id.filter(|&i| i < materials.len()),
-            });
-        }
-        if parts.is_empty() {
-            let vertices = text
-                .lines()
-                .filter(|l| l.trim_start().starts_with("v "))
-                .count();
-            return Err(malformed(if vertices == 0 {
-                "no vertices".into()
-            } else {
-                format!("{vertices} vertices but no faces; a mesh needs faces")
-            }));
-        }
+        let parsed = parse_textured(&bytes, |name| {
+            read_named(root, path, name, InputKind::Material)
+        })
+        .map_err(|e| match e {
+            TexturedError::Load(e) => e,
+            TexturedError::Material { name, reason } => DomaError::Malformed {
+                path: root.join(name),
+                reason,
+            },
+            TexturedError::Obj(reason) => DomaError::Malformed {
+                path: path.to_path_buf(),
+                reason,
+            },
+        })?;
         Ok(TexturedMesh {
             path: path.to_path_buf(),
-            parts,
-            materials: materials
-                .into_iter()
-                .map(|m| Material {
-                    name: m.name,
-                    diffuse: m.diffuse,
-                    diffuse_texture: m.diffuse_texture,
-                })
-                .collect(),
-            mtllibs,
+            parts: parsed.parts,
+            materials: parsed.materials,
+            mtllibs: parsed.mtllibs,
         })
     }
 
