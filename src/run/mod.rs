@@ -121,7 +121,11 @@ impl RunConfig {
 
     /// The training and held-out points of `data` (a seeded split).
     pub fn split(&self, data: &Trajectories) -> Result<(Trajectories, Trajectories)> {
-        let (train, test) = split_indices(data.points(), 1.0 - self.test_fraction, self.fit.seed)?;
+        let (train, test) = split_indices(data.points(), 1.0 - self.test_fraction, self.fit.seed)
+            .map_err(|e| DomaError::Malformed {
+            path: self.data.clone(),
+            reason: format!("{e} (--test-fraction {})", self.test_fraction),
+        })?;
         Ok((data.select_points(&train)?, data.select_points(&test)?))
     }
 }
@@ -204,6 +208,19 @@ impl RunDir {
             });
         }
         let config: RunConfig = crate::checkpoint::load_json(&path)?;
+        // A field that no run config has (an edit with a typo, another layout) is refused
+        // rather than ignored.
+        let given: serde_json::Value = crate::checkpoint::load_json(&path)?;
+        let known = serde_json::to_value(&config).map_err(|e| DomaError::Malformed {
+            path: path.clone(),
+            reason: e.to_string(),
+        })?;
+        if let Some(field) = crate::train::unknown_field(&given, &known, "") {
+            return Err(DomaError::Malformed {
+                path,
+                reason: format!("no run config has the field `{field}`"),
+            });
+        }
         config.validate().map_err(|e| DomaError::Malformed {
             path,
             reason: e.to_string(),
@@ -221,7 +238,10 @@ impl RunDir {
             let bytes = std::fs::read(&path).map_err(|e| DomaError::io(&path, e))?;
             return fresh.decode(&bytes).map_err(|e| DomaError::Malformed {
                 path,
-                reason: e.to_string(),
+                reason: format!(
+                    "does not hold the model that {} describes: {e}",
+                    self.config().display()
+                ),
             });
         }
         let snapshot = self.read_resume()?;

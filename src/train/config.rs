@@ -292,7 +292,7 @@ impl FitConfig {
 /// The first field of `given` (as a dotted path below `at`) that `known`, a full config of
 /// the same kind, does not have. Objects are compared key by key; a field whose known
 /// value is not an object (a number, or `null` for an unset option) is not looked into.
-fn unknown_field(given: &Value, known: &Value, at: &str) -> Option<String> {
+pub(crate) fn unknown_field(given: &Value, known: &Value, at: &str) -> Option<String> {
     let (Value::Object(given), Value::Object(known)) = (given, known) else {
         return None;
     };

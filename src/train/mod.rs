@@ -15,6 +15,7 @@ mod record;
 pub mod select;
 mod trainer;
 
+pub(crate) use config::unknown_field;
 pub use config::{
     FitConfig, LossConfig, ScheduleConfig, SmoothnessSampling, WithSchedule, check_weights,
     default_adam,

@@ -155,6 +155,7 @@ pub struct WeightChoice {
 pub fn validation_split(n: usize, fraction: f64, seed: u64) -> Result<(Vec<usize>, Vec<usize>)> {
     // Its own stream, so that it is not the train/test split's.
     split_indices(n, 1.0 - fraction, seed ^ 0x5E1E_C7ED)
+        .map_err(|e| DomaError::Usage(format!("--validation-fraction {fraction}: {e}")))
 }
 
 /// Searches `penalty`'s weight for `base` (its other settings, seed included) on the

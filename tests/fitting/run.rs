@@ -301,3 +301,47 @@ fn nan_weights_are_blamed_on_model_bpk_not_on_the_data() {
         other => panic!("{other:?}"),
     }
 }
+
+#[test]
+fn a_sequence_too_small_to_split_names_its_file() {
+    let one_point = doma::data::Trajectories::new(3, 1, vec![0.0; 9]).unwrap();
+    let fit = FitConfig::doma(DomaFieldConfig::new(Variant::Trans));
+    let run = RunConfig::new(PathBuf::from("/data/one_point.traj"), fit);
+    let err = run.split(&one_point).unwrap_err().to_string();
+    assert!(
+        err.contains("one_point.traj") && err.contains("--test-fraction"),
+        "{err}"
+    );
+}
+
+#[test]
+fn an_edited_config_json_is_refused_naming_the_field_or_both_files() {
+    let _g = backward_lock();
+    let device = Device::flex();
+    let never = AtomicBool::new(false);
+    let (_run_dir, run) = run_dir("edited");
+    let mut c = config();
+    c.fit = FitConfig::doma(DomaFieldConfig::new(Variant::Trans).with_hidden(16))
+        .with_iterations(2)
+        .with_jacobian(JacobianKind::Analytic);
+    fit_run(&run, Some(c), &device, &never, None, false).unwrap();
+    let original = std::fs::read_to_string(run.config()).unwrap();
+    let mut value: serde_json::Value = serde_json::from_str(&original).unwrap();
+    // A field that no run config has: refused, not ignored.
+    value["fit"]["schedule"]["iterationz"] = serde_json::json!(0);
+    std::fs::write(run.config(), value.to_string()).unwrap();
+    let err = eval_run(&run, None, &device).unwrap_err().to_string();
+    assert!(
+        err.contains("config.json") && err.contains("fit.schedule.iterationz"),
+        "{err}"
+    );
+    // A model that model.bpk does not hold: both files are named.
+    let mut value: serde_json::Value = serde_json::from_str(&original).unwrap();
+    value["fit"]["model"]["doma"]["shape"]["hidden"] = serde_json::json!(32);
+    std::fs::write(run.config(), value.to_string()).unwrap();
+    let err = eval_run(&run, None, &device).unwrap_err().to_string();
+    assert!(
+        err.contains("model.bpk") && err.contains("config.json"),
+        "{err}"
+    );
+}

@@ -125,3 +125,10 @@ fn bad_search_settings_are_refused_naming_the_flag() {
         assert!(err.contains(flag), "{err}");
     }
 }
+
+#[test]
+fn a_validation_fraction_that_leaves_no_search_points_names_the_flag() {
+    let err = validation_split(10, 0.999, 0).unwrap_err().to_string();
+    assert!(err.contains("--validation-fraction 0.999"), "{err}");
+    assert!(validation_split(10, 0.2, 0).is_ok());
+}
