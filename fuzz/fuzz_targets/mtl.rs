@@ -1,6 +1,7 @@
 //! A material library never panics the display-mesh reader: the input is the library that
 //! a one-triangle OBJ names. An accepted mesh's material index exists, and a texture name
-//! comes back relative to the OBJ's folder (below the library's folder).
+//! comes back below the library's folder, or absolute as written (which the containment
+//! check of doma's reader then refuses).
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 
@@ -19,7 +20,10 @@ fuzz_target!(|data: &[u8]| {
         }
         for m in &mesh.materials {
             if let Some(t) = &m.diffuse_texture {
-                assert!(t.starts_with("lib"), "{t}");
+                assert!(
+                    t.starts_with("lib") || std::path::Path::new(t).has_root(),
+                    "{t}"
+                );
             }
         }
     }
