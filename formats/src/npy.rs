@@ -3,9 +3,9 @@
 //!
 //! `.npy` (NumPy's format spec, versions 1–3): the magic `\x93NUMPY`, a version, a header
 //! length, then a Python-literal dict `{'descr': '<f8', 'fortran_order': False,
-//! 'shape': (T, N, 3), }` and the raw values. The reader takes floats (`f2` is refused,
-//! `f4`, `f8`) and integers (1–8 bytes), either byte order, C or Fortran order, and returns
-//! the values in C order as `f64`.
+//! 'shape': (T, N, 3), }` and the raw values. The reader takes floats (`f2`, `f4`, `f8`),
+//! integers (1–8 bytes) and bools (`b1`, read as 0 or 1), either byte order, C or Fortran
+//! order, and returns the values in C order as `f32`.
 //!
 //! Written by hand, not through `npyz`: that crate's header parser pulls in a dependency tree
 //! whose features would rebuild all of Burn here. Every defect (truncated, oversized, a bad
@@ -52,12 +52,15 @@ enum Dtype {
     Float(usize),
     Int(usize),
     Uint(usize),
+    /// NumPy's `?` (`|b1`): one byte, 0 or not; read as 0.0 or 1.0 (visibility masks).
+    Bool,
 }
 
 impl Dtype {
     fn size(self) -> usize {
         match self {
             Dtype::Float(s) | Dtype::Int(s) | Dtype::Uint(s) => s,
+            Dtype::Bool => 1,
         }
     }
 
@@ -67,8 +70,10 @@ impl Dtype {
         le[..b.len()].copy_from_slice(b);
         let raw = u64::from_le_bytes(le);
         match self {
+            Dtype::Float(2) => f16_to_f32(raw as u16),
             Dtype::Float(4) => f32::from_bits(raw as u32),
             Dtype::Float(_) => f64::from_bits(raw) as f32,
+            Dtype::Bool => f32::from(u8::from(raw != 0)),
             Dtype::Uint(_) => raw as f32,
             Dtype::Int(s) => {
                 // Sign-extend from `s` bytes.
@@ -79,8 +84,27 @@ impl Dtype {
     }
 }
 
+/// An IEEE half (`f2`, as PointOdyssey stores its tracks) as `f32`, exactly: every half
+/// is a float; infinities and NaN stay so.
+fn f16_to_f32(h: u16) -> f32 {
+    let sign = u32::from(h >> 15) << 31;
+    let exp = u32::from((h >> 10) & 0x1f);
+    let man = u32::from(h & 0x3ff);
+    let bits = match (exp, man) {
+        (0, 0) => sign,
+        // Subnormal: man · 2⁻²⁴, exact in f32.
+        (0, _) => {
+            let v = man as f32 * f32::from_bits(0x3380_0000);
+            return if sign == 0 { v } else { -v };
+        }
+        (0x1f, _) => sign | 0x7f80_0000 | (man << 13),
+        _ => sign | ((exp + 112) << 23) | (man << 13),
+    };
+    f32::from_bits(bits)
+}
+
 fn parse_descr(descr: &str) -> Result<(Dtype, bool), String> {
-    let bad = || format!("unsupported dtype {descr:?} (need a float or integer, e.g. '<f4')");
+    let bad = || format!("unsupported dtype {descr:?} (need a float, integer or bool, e.g. '<f4')");
     let (order, rest) = match descr.chars().next() {
         Some(c @ ('<' | '>' | '|' | '=')) => (c, &descr[1..]),
         _ => ('=', descr),
@@ -89,7 +113,8 @@ fn parse_descr(descr: &str) -> Result<(Dtype, bool), String> {
     // `kind` may be any character (fuzzing found a two-byte one), so slice past its bytes.
     let size: usize = rest[kind.len_utf8()..].parse().map_err(|_| bad())?;
     let dtype = match (kind, size) {
-        ('f', 4 | 8) => Dtype::Float(size),
+        ('f', 2 | 4 | 8) => Dtype::Float(size),
+        ('b', 1) => Dtype::Bool,
         ('i', 1 | 2 | 4 | 8) => Dtype::Int(size),
         ('u', 1 | 2 | 4 | 8) => Dtype::Uint(size),
         _ => return Err(bad()),
@@ -348,6 +373,39 @@ mod tests {
         // [[1, 2, 3], [4, 5, 6]] stored column-major.
         let c = fortran_to_c(&[1.0, 4.0, 2.0, 5.0, 3.0, 6.0], &[2, 3]);
         assert_eq!(c, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+    }
+
+    /// A `.npy` of `descr` and `shape` holding `payload`.
+    fn npy(descr: &str, shape: &str, payload: &[u8]) -> Vec<u8> {
+        let header =
+            format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}\n");
+        let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+        bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+        bytes.extend_from_slice(header.as_bytes());
+        bytes.extend_from_slice(payload);
+        bytes
+    }
+
+    #[test]
+    fn halves_are_read_exactly_with_their_infinities() {
+        // 1, -2, 0.5, the largest half, the smallest subnormal, +inf.
+        let halves: [u16; 6] = [0x3C00, 0xC000, 0x3800, 0x7BFF, 0x0001, 0x7C00];
+        let payload: Vec<u8> = halves.iter().flat_map(|h| h.to_le_bytes()).collect();
+        let a = parse_npy(&npy("<f2", "(6,)", &payload)).unwrap();
+        assert_eq!(a.data[..4], [1.0, -2.0, 0.5, 65504.0]);
+        assert_eq!(a.data[4], 2f32.powi(-24));
+        assert_eq!(a.data[5], f32::INFINITY);
+        let big: Vec<u8> = halves.iter().flat_map(|h| h.to_be_bytes()).collect();
+        assert_eq!(parse_npy(&npy(">f2", "(6,)", &big)).unwrap().data, a.data);
+        assert!(f16_to_f32(0x7E00).is_nan());
+        assert_eq!(f16_to_f32(0x8001), -(2f32.powi(-24)));
+    }
+
+    #[test]
+    fn bools_are_zero_or_one() {
+        let a = parse_npy(&npy("|b1", "(2, 2)", &[0, 1, 2, 0])).unwrap();
+        assert_eq!((a.shape, a.data), (vec![2, 2], vec![0.0, 1.0, 1.0, 0.0]));
+        assert!(parse_npy(&npy("|b2", "(1,)", &[0, 0])).is_err());
     }
 
     #[test]

@@ -8,20 +8,26 @@
 use crate::crc32;
 use crate::npy::{MAX_HEADER_BYTES, NpyArray, NpyHeader, Values, encode_npy, parse_npy_header};
 
+/// The little-endian integers of a zip record at `at`; an `at` near `usize::MAX` (a lying
+/// offset field) is a truncated record, not an overflow (found by fuzzing with overflow
+/// checks).
 fn le_u16(b: &[u8], at: usize) -> Result<u64, String> {
-    b.get(at..at + 2)
+    at.checked_add(2)
+        .and_then(|end| b.get(at..end))
         .map(|s| u16::from_le_bytes([s[0], s[1]]) as u64)
         .ok_or_else(|| "truncated zip record".to_string())
 }
 
 fn le_u32(b: &[u8], at: usize) -> Result<u64, String> {
-    b.get(at..at + 4)
+    at.checked_add(4)
+        .and_then(|end| b.get(at..end))
         .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]) as u64)
         .ok_or_else(|| "truncated zip record".to_string())
 }
 
 fn le_u64(b: &[u8], at: usize) -> Result<u64, String> {
-    b.get(at..at + 8)
+    at.checked_add(8)
+        .and_then(|end| b.get(at..end))
         .map(|s| u64::from_le_bytes(s.try_into().expect("8 bytes")))
         .ok_or_else(|| "truncated zip record".to_string())
 }
@@ -336,4 +342,17 @@ pub fn encode_npz(members: &[(&str, &[usize], &[f32])]) -> Vec<u8> {
     out.extend_from_slice(&dir_offset.to_le_bytes());
     out.extend_from_slice(&0u16.to_le_bytes());
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_lying_offset_near_the_top_of_memory_is_a_truncated_record() {
+        // Found by the `npy` fuzz target with overflow checks: `at + 4` overflowed.
+        let input = include_bytes!("../../fuzz/regressions/npz-offset-overflow");
+        assert!(npz_members(input).is_err());
+        assert!(le_u32(&[0; 8], usize::MAX - 1).is_err());
+    }
 }
