@@ -50,13 +50,18 @@ pub fn write_atomic_all(files: &[(&Path, &[u8])]) -> Result<()> {
     renamed
 }
 
+/// The folder `path` is in (`.` for a bare file name).
+pub fn folder_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    }
+}
+
 /// The temporary name [`write_atomic`] writes `path` under: hidden, beside it, with this
 /// process's id.
 fn temporary_for(path: &Path) -> Result<PathBuf> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
+    let dir = folder_of(path);
     let name = path.file_name().ok_or_else(|| {
         DomaError::InvalidConfig(format!("{} is not a file path", path.display()))
     })?;
@@ -184,12 +189,11 @@ pub fn read_input_text(path: &Path, kind: InputKind) -> Result<String> {
     })
 }
 
-/// Where `name`, written inside `referrer`, points: `name` joined to `referrer`'s folder,
-/// with symbolic links resolved, which must lie inside `root` (the folder the user
-/// pointed at, itself resolved). An absolute name, a `..`, or a link that leads outside
-/// is refused naming `referrer` and `name`. Returns the resolved path and the path relative to the
-/// resolved root.
-pub fn resolve_named(root: &Path, referrer: &Path, name: &str) -> Result<(PathBuf, PathBuf)> {
+/// Where `name`, written inside `referrer` (a file the user gave), points: `name` joined
+/// to `referrer`'s folder, with symbolic links resolved, which must lie inside that folder
+/// (itself resolved). An absolute name, a `..`, or a link that leads outside is refused
+/// naming `referrer` and `name`.
+pub fn resolve_named(referrer: &Path, name: &str) -> Result<PathBuf> {
     let refuse = |reason: &str| DomaError::Malformed {
         path: referrer.to_path_buf(),
         reason: format!("`{name}`: {reason}"),
@@ -208,14 +212,8 @@ pub fn resolve_named(root: &Path, referrer: &Path, name: &str) -> Result<(PathBu
             "`..` in a path; only files in the file's folder or below are read",
         ));
     }
-    let base = referrer.parent().unwrap_or(Path::new("."));
-    let base = if base.as_os_str().is_empty() {
-        Path::new(".")
-    } else {
-        base
-    };
-    let joined = base.join(rel);
-    let resolved = std::fs::canonicalize(&joined).map_err(|e| DomaError::Malformed {
+    let root = folder_of(referrer);
+    let resolved = std::fs::canonicalize(root.join(rel)).map_err(|e| DomaError::Malformed {
         path: referrer.to_path_buf(),
         reason: match e.kind() {
             std::io::ErrorKind::NotFound => format!("`{name}`, which it names, is missing"),
@@ -223,23 +221,19 @@ pub fn resolve_named(root: &Path, referrer: &Path, name: &str) -> Result<(PathBu
         },
     })?;
     let root = std::fs::canonicalize(root).map_err(|e| DomaError::io(root, e))?;
-    let inside = resolved
-        .strip_prefix(&root)
-        .map_err(|_| {
-            refuse(&format!(
-                "leads outside {} (symbolic links resolved); only files inside it are read",
-                root.display()
-            ))
-        })?
-        .to_path_buf();
-    Ok((resolved, inside))
+    if !resolved.starts_with(&root) {
+        return Err(refuse(&format!(
+            "leads outside {} (symbolic links resolved); only files inside it are read",
+            root.display()
+        )));
+    }
+    Ok(resolved)
 }
 
 /// Reads a file that `referrer` names (see [`resolve_named`]) as a [`read_input`] of
 /// `kind`.
-pub fn read_named(root: &Path, referrer: &Path, name: &str, kind: InputKind) -> Result<Vec<u8>> {
-    let (resolved, _) = resolve_named(root, referrer, name)?;
-    read_input(&resolved, kind)
+pub fn read_named(referrer: &Path, name: &str, kind: InputKind) -> Result<Vec<u8>> {
+    read_input(&resolve_named(referrer, name)?, kind)
 }
 
 /// Removes the temporary files that [`write_atomic`] left in `dir` when a process was
@@ -280,10 +274,7 @@ fn process_alive(pid: u32) -> bool {
 /// Fails early, before minutes of work, when `path` cannot be written: its folder is
 /// missing or not writable. Probes with a temporary file that it removes.
 pub fn check_writable(path: &Path) -> Result<()> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
+    let dir = folder_of(path);
     if !dir.is_dir() {
         return Err(DomaError::Io {
             path: dir.to_path_buf(),

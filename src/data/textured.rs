@@ -40,26 +40,18 @@ impl TexturedMesh {
     /// relative to its `.mtl`).
     pub fn read(path: &Path) -> Result<TexturedMesh> {
         let bytes = read_input(path, InputKind::Mesh)?;
-        let root = path.parent().unwrap_or(Path::new("."));
-        let root = if root.as_os_str().is_empty() {
-            Path::new(".")
-        } else {
-            root
-        };
-        let parsed = parse_textured(&bytes, |name| {
-            read_named(root, path, name, InputKind::Material)
-        })
-        .map_err(|e| match e {
-            TexturedError::Load(e) => e,
-            TexturedError::Material { name, reason } => DomaError::Malformed {
-                path: root.join(name),
-                reason,
-            },
-            TexturedError::Obj(reason) => DomaError::Malformed {
-                path: path.to_path_buf(),
-                reason,
-            },
-        })?;
+        let parsed = parse_textured(&bytes, |name| read_named(path, name, InputKind::Material))
+            .map_err(|e| match e {
+                TexturedError::Load(e) => e,
+                TexturedError::Material { name, reason } => DomaError::Malformed {
+                    path: crate::io::folder_of(path).join(name),
+                    reason,
+                },
+                TexturedError::Obj(reason) => DomaError::Malformed {
+                    path: path.to_path_buf(),
+                    reason,
+                },
+            })?;
         Ok(TexturedMesh {
             path: path.to_path_buf(),
             parts: parsed.parts,
@@ -138,12 +130,6 @@ impl TexturedMesh {
     /// checked to be a regular file within its bound: `(resolved path, name, kind)`. A
     /// refusal is an error naming the file that names it.
     pub fn material_files(&self) -> Result<Vec<(PathBuf, String, InputKind)>> {
-        let root = self.path.parent().unwrap_or(Path::new("."));
-        let root = if root.as_os_str().is_empty() {
-            Path::new(".")
-        } else {
-            root
-        };
         let libraries = self.mtllibs.iter().map(|m| (m, InputKind::Material));
         let textures = self
             .materials
@@ -153,7 +139,7 @@ impl TexturedMesh {
         libraries
             .chain(textures)
             .map(|(name, kind)| {
-                let (from, _) = resolve_named(root, &self.path, name)?;
+                let from = resolve_named(&self.path, name)?;
                 check_input(&from, kind)?;
                 Ok((from, name.clone(), kind))
             })

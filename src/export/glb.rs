@@ -150,11 +150,7 @@ impl Builder {
     /// named relative to the mesh's folder and read only from inside it
     /// ([`crate::io::read_named`]); a missing or refused texture is an error.
     fn texture(&mut self, mesh: &Path, name: &str) -> Result<Option<json::Index<json::Texture>>> {
-        let root = match mesh.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        let bytes = read_named(root, mesh, name, InputKind::Texture)?;
+        let bytes = read_named(mesh, name, InputKind::Texture)?;
         let mime = if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
             "image/png"
         } else if bytes.starts_with(&[0xFF, 0xD8, 0xFF]) {

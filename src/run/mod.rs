@@ -207,14 +207,15 @@ impl RunDir {
                 reason: "not a doma run folder (no config.json)".into(),
             });
         }
-        let config: RunConfig = crate::checkpoint::load_json(&path)?;
-        // A field that no run config has (an edit with a typo, another layout) is refused
-        // rather than ignored.
         let given: serde_json::Value = crate::checkpoint::load_json(&path)?;
-        let known = serde_json::to_value(&config).map_err(|e| DomaError::Malformed {
+        let malformed = |e: serde_json::Error| DomaError::Malformed {
             path: path.clone(),
             reason: e.to_string(),
-        })?;
+        };
+        let config: RunConfig = serde_json::from_value(given.clone()).map_err(malformed)?;
+        // A field that no run config has (an edit with a typo, another layout) is refused
+        // rather than ignored.
+        let known = serde_json::to_value(&config).map_err(malformed)?;
         if let Some(field) = crate::train::unknown_field(&given, &known, "") {
             return Err(DomaError::Malformed {
                 path,

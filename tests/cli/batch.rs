@@ -52,6 +52,18 @@ fn faerie(name: &str, seed: u64) -> Value {
     serde_json::json!({ "name": name, "data": FAERIE, "seed": seed })
 }
 
+/// One whole batch of `manifest` into `out`, quietly.
+fn batch_quietly(manifest: &Path, out: &Path) -> Output {
+    doma()
+        .arg("batch")
+        .arg(manifest)
+        .arg("--out")
+        .arg(out)
+        .arg("--quiet")
+        .output()
+        .unwrap()
+}
+
 /// The names of a shard report's entries with the given status.
 fn with_status(report: &Value, status: &str) -> Vec<String> {
     report["items"]
@@ -203,14 +215,7 @@ fn a_failed_entry_is_recorded_and_the_shard_goes_on() {
     good["iterations"] = serde_json::json!(3);
     let m = manifest(&dir, &[bad, missing, good]);
     let out = dir.join("out");
-    let run = doma()
-        .arg("batch")
-        .arg(&m)
-        .arg("--out")
-        .arg(&out)
-        .arg("--quiet")
-        .output()
-        .unwrap();
+    let run = batch_quietly(&m, &out);
     let err = text(&run.stderr);
     assert_eq!(run.status.code(), Some(1), "{err}");
     assert!(!err.contains("panicked"), "{err}");
@@ -243,14 +248,7 @@ fn a_folder_taken_by_a_file_is_a_recorded_failure_and_collect_stays_inside() {
     let out = dir.join("out");
     std::fs::create_dir_all(&out).unwrap();
     std::fs::write(out.join("blocked"), "a file where the run folder would go").unwrap();
-    let run = doma()
-        .arg("batch")
-        .arg(&m)
-        .arg("--out")
-        .arg(&out)
-        .arg("--quiet")
-        .output()
-        .unwrap();
+    let run = batch_quietly(&m, &out);
     let err = text(&run.stderr);
     assert_eq!(run.status.code(), Some(1), "{err}");
     let r = report(&run);
