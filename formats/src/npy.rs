@@ -321,14 +321,94 @@ fn fortran_to_c(values: &[f32], shape: &[usize]) -> Vec<f32> {
     out
 }
 
+/// The values of an array to encode, each kind as the tracker files store it: `f32`
+/// positions, `f16` (PointOdyssey's `trajs_3d`, rounded from `f32` to the nearest half),
+/// `bool` masks (`|b1`) and `i64` indices.
+#[derive(Clone, Copy, Debug)]
+pub enum NpyValues<'a> {
+    /// `<f4`.
+    F32(&'a [f32]),
+    /// `<f2`, rounded to nearest, ties to even; beyond ±65504 a value becomes ±inf.
+    F16(&'a [f32]),
+    /// `|b1`.
+    Bool(&'a [bool]),
+    /// `<i8`.
+    I64(&'a [i64]),
+}
+
+impl NpyValues<'_> {
+    fn len(&self) -> usize {
+        match self {
+            NpyValues::F32(v) | NpyValues::F16(v) => v.len(),
+            NpyValues::Bool(v) => v.len(),
+            NpyValues::I64(v) => v.len(),
+        }
+    }
+
+    fn descr(&self) -> &'static str {
+        match self {
+            NpyValues::F32(_) => "<f4",
+            NpyValues::F16(_) => "<f2",
+            NpyValues::Bool(_) => "|b1",
+            NpyValues::I64(_) => "<i8",
+        }
+    }
+}
+
+/// `x` rounded to the nearest IEEE half (ties to even), as its bits: what NumPy's
+/// `astype(np.float16)` gives. Overflow is ±inf, NaN stays NaN.
+pub fn f32_to_f16(x: f32) -> u16 {
+    let bits = x.to_bits();
+    let sign = ((bits >> 16) & 0x8000) as u16;
+    let exp = ((bits >> 23) & 0xff) as i32;
+    let man = bits & 0x7f_ffff;
+    if exp == 0xff {
+        return sign | 0x7c00 | if man != 0 { 0x200 } else { 0 };
+    }
+    // The value's exponent as a half's, and the 24-bit significand with its implicit 1.
+    let e = exp - 127 + 15;
+    if e >= 0x1f {
+        return sign | 0x7c00;
+    }
+    let full = man | 0x80_0000;
+    // Bits to drop: 13 for a normal half, more for a subnormal one.
+    let shift = if e >= 1 { 13 } else { (14 - e) as u32 };
+    if shift > 24 {
+        return sign;
+    }
+    let kept = full >> shift;
+    let rest = full & ((1u32 << shift) - 1);
+    let half = 1u32 << (shift - 1);
+    let rounded = if rest > half || (rest == half && kept & 1 == 1) {
+        kept + 1
+    } else {
+        kept
+    };
+    if e >= 1 {
+        // A carry out of the significand moves into the exponent, and at the top to inf.
+        let value = ((e as u32) << 10) + (rounded - 0x400);
+        sign | value.min(0x7c00) as u16
+    } else {
+        sign | rounded as u16
+    }
+}
+
 /// The bytes of a version-1 `.npy` of little-endian `f32` values, C order.
 ///
 /// # Panics
 /// If `data.len()` is not the product of `shape` (a programming error).
 pub fn encode_npy(shape: &[usize], data: &[f32]) -> Vec<u8> {
+    encode_npy_values(shape, NpyValues::F32(data))
+}
+
+/// The bytes of a version-1 `.npy` of `values` (little-endian), C order.
+///
+/// # Panics
+/// If the number of values is not the product of `shape` (a programming error).
+pub fn encode_npy_values(shape: &[usize], values: NpyValues) -> Vec<u8> {
     assert_eq!(
         shape.iter().product::<usize>(),
-        data.len(),
+        values.len(),
         "encode_npy: the data does not fill the shape"
     );
     let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
@@ -336,19 +416,31 @@ pub fn encode_npy(shape: &[usize], data: &[f32]) -> Vec<u8> {
         1 => format!("({},)", dims[0]),
         _ => format!("({})", dims.join(", ")),
     };
-    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {tuple}, }}");
+    let mut header = format!(
+        "{{'descr': '{}', 'fortran_order': False, 'shape': {tuple}, }}",
+        values.descr()
+    );
     // Pad so that the data starts on a 64-byte boundary, as NumPy does.
     while (10 + header.len() + 1) % 64 != 0 {
         header.push(' ');
     }
     header.push('\n');
-    let mut out = Vec::with_capacity(10 + header.len() + 4 * data.len());
+    let mut out = Vec::with_capacity(10 + header.len() + 8 * values.len());
     out.extend_from_slice(NPY_MAGIC);
     out.extend_from_slice(&[1, 0]);
     out.extend_from_slice(&(header.len() as u16).to_le_bytes());
     out.extend_from_slice(header.as_bytes());
-    for v in data {
-        out.extend_from_slice(&v.to_le_bytes());
+    match values {
+        NpyValues::F32(v) => v
+            .iter()
+            .for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
+        NpyValues::F16(v) => v
+            .iter()
+            .for_each(|&x| out.extend_from_slice(&f32_to_f16(x).to_le_bytes())),
+        NpyValues::Bool(v) => out.extend(v.iter().map(|&b| u8::from(b))),
+        NpyValues::I64(v) => v
+            .iter()
+            .for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
     }
     out
 }
@@ -399,6 +491,49 @@ mod tests {
         assert_eq!(parse_npy(&npy(">f2", "(6,)", &big)).unwrap().data, a.data);
         assert!(f16_to_f32(0x7E00).is_nan());
         assert_eq!(f16_to_f32(0x8001), -(2f32.powi(-24)));
+    }
+
+    #[test]
+    fn halves_round_to_nearest_even_and_round_trip() {
+        // Hand-computed bits: 1, −2, 65504 (the largest), 65520 (rounds up to inf), 2⁻²⁴
+        // (the smallest subnormal), 2⁻²⁶ (rounds to 0), 1 + 2⁻¹¹ (a tie: to even, 1),
+        // 1 + 3·2⁻¹¹ (a tie: to even, 1 + 2⁻⁹), 3·2⁻²⁵ (a subnormal tie: to 2·2⁻²⁴).
+        let cases: [(f32, u16); 9] = [
+            (1.0, 0x3C00),
+            (-2.0, 0xC000),
+            (65504.0, 0x7BFF),
+            (65520.0, 0x7C00),
+            (2f32.powi(-24), 0x0001),
+            (2f32.powi(-26), 0x0000),
+            (1.0 + 2f32.powi(-11), 0x3C00),
+            (1.0 + 3.0 * 2f32.powi(-11), 0x3C02),
+            (3.0 * 2f32.powi(-25), 0x0002),
+        ];
+        for (x, bits) in cases {
+            assert_eq!(f32_to_f16(x), bits, "{x}");
+        }
+        assert_eq!(f32_to_f16(f32::NEG_INFINITY), 0xFC00);
+        assert!(f16_to_f32(f32_to_f16(f32::NAN)).is_nan());
+        // Every finite half survives f16 → f32 → f16.
+        for h in (0..=0xffffu16).filter(|h| h & 0x7c00 != 0x7c00) {
+            assert_eq!(f32_to_f16(f16_to_f32(h)), h, "{h:#06x}");
+        }
+        let values = [0.5f32, -3.25, 1e-3];
+        let bytes = encode_npy_values(&[3], NpyValues::F16(&values));
+        let back = parse_npy(&bytes).unwrap().data;
+        for (a, b) in back.iter().zip(values) {
+            assert!((a - b).abs() <= b.abs() * 2f32.powi(-11), "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn bools_and_integers_round_trip() {
+        let mask = [true, false, false, true, true, false];
+        let a = parse_npy(&encode_npy_values(&[2, 3], NpyValues::Bool(&mask))).unwrap();
+        assert_eq!(a.data, vec![1.0, 0.0, 0.0, 1.0, 1.0, 0.0]);
+        let ints = [0i64, 7, -3];
+        let a = parse_npy(&encode_npy_values(&[3], NpyValues::I64(&ints))).unwrap();
+        assert_eq!(a.data, vec![0.0, 7.0, -3.0]);
     }
 
     #[test]

@@ -6,7 +6,9 @@
 //! defect is an error saying what is wrong; nothing panics.
 
 use crate::crc32;
-use crate::npy::{MAX_HEADER_BYTES, NpyArray, NpyHeader, Values, encode_npy, parse_npy_header};
+use crate::npy::{
+    MAX_HEADER_BYTES, NpyArray, NpyHeader, NpyValues, Values, encode_npy_values, parse_npy_header,
+};
 
 /// The little-endian integers of a zip record at `at`; an `at` near `usize::MAX` (a lying
 /// offset field) is a truncated record, not an overflow (found by fuzzing with overflow
@@ -301,10 +303,20 @@ pub fn parse_npz(bytes: &[u8]) -> Result<Vec<(String, NpyArray)>, String> {
 /// The bytes of a `.npz` archive (stored, like `np.savez`) of `f32` arrays
 /// `(name, shape, values)`; each member is named `name.npy`.
 pub fn encode_npz(members: &[(&str, &[usize], &[f32])]) -> Vec<u8> {
+    let typed: Vec<(&str, &[usize], NpyValues)> = members
+        .iter()
+        .map(|&(name, shape, data)| (name, shape, NpyValues::F32(data)))
+        .collect();
+    encode_npz_values(&typed)
+}
+
+/// The bytes of a `.npz` archive (stored, like `np.savez`) of arrays of any
+/// [`NpyValues`] kind, `(name, shape, values)`; each member is named `name.npy`.
+pub fn encode_npz_values(members: &[(&str, &[usize], NpyValues)]) -> Vec<u8> {
     let mut out = Vec::new();
     let mut directory = Vec::new();
-    for (name, shape, data) in members {
-        let payload = encode_npy(shape, data);
+    for (name, shape, values) in members {
+        let payload = encode_npy_values(shape, *values);
         let file = format!("{name}.npy");
         let crc = crc32(&payload);
         let offset = out.len() as u32;
