@@ -12,7 +12,9 @@ pub const EPE_SCALE: f64 = 1e4;
 
 /// The end-point error per frame: for every point and frame `k`,
 /// `‖(ŷ_k − x_0) − (y_k − x_0)‖₁ = ‖ŷ_k − y_k‖₁` (summed over x, y, z), averaged over
-/// the points. Frame 0 is included, as in the authors' code (docs/reference.md §7).
+/// the points. Frame 0 is included, as in the authors' code (docs/reference.md §7). Where
+/// `truth` has an observed mask, a frame's average is over its observed points, and a
+/// frame with none is NaN.
 pub fn epe_per_frame(predicted: &Trajectories, truth: &Trajectories) -> Result<Vec<f64>> {
     if predicted.frames() != truth.frames() || predicted.points() != truth.points() {
         return Err(DomaError::InvalidData(format!(
@@ -24,33 +26,61 @@ pub fn epe_per_frame(predicted: &Trajectories, truth: &Trajectories) -> Result<V
         )));
     }
     Ok((0..truth.frames())
-        .map(|k| {
-            let total: f64 = predicted
-                .frame(k)
-                .iter()
-                .zip(truth.frame(k))
-                .map(|(a, b)| (*a as f64 - *b as f64).abs())
-                .sum();
-            total / truth.points() as f64
-        })
+        .map(|k| frame_epe(predicted.frame(k), truth, k))
         .collect())
 }
 
-/// The EPE (docs/reference.md §7): [`epe_per_frame`] averaged over all frames, raw (multiply by
-/// [`EPE_SCALE`] for the paper's tables).
-pub fn epe(predicted: &Trajectories, truth: &Trajectories) -> Result<f64> {
-    let per_frame = epe_per_frame(predicted, truth)?;
-    Ok(per_frame.iter().sum::<f64>() / per_frame.len() as f64)
+/// The EPE of one frame's prediction `y` (`[N, 3]`) against `truth`'s frame `k`, over its
+/// observed points: the complete-data sum in the same order when all are observed.
+fn frame_epe(y: &[f32], truth: &Trajectories, k: usize) -> f64 {
+    let target = truth.frame(k);
+    match truth.observed_in_frame(k) {
+        None => {
+            let total: f64 = y
+                .iter()
+                .zip(target)
+                .map(|(a, b)| (*a as f64 - *b as f64).abs())
+                .sum();
+            total / truth.points() as f64
+        }
+        Some(mask) => {
+            let (mut total, mut count) = (0f64, 0usize);
+            for (i, _) in mask.iter().enumerate().filter(|(_, o)| **o) {
+                total += (0..3)
+                    .map(|c| (y[3 * i + c] as f64 - target[3 * i + c] as f64).abs())
+                    .sum::<f64>();
+                count += 1;
+            }
+            if count == 0 {
+                f64::NAN
+            } else {
+                total / count as f64
+            }
+        }
+    }
 }
 
-/// Warps the canonical points of `truth` (its frame 0) to every frame with `field`, in
+/// The mean of the per-frame EPEs of the frames that have observations (all of them, for
+/// complete data).
+pub fn mean_over_frames(per_frame: &[f64]) -> f64 {
+    let seen: Vec<f64> = per_frame.iter().copied().filter(|e| !e.is_nan()).collect();
+    seen.iter().sum::<f64>() / seen.len() as f64
+}
+
+/// The EPE (docs/reference.md §7): [`epe_per_frame`] averaged over all frames (those with
+/// observations), raw (multiply by [`EPE_SCALE`] for the paper's tables).
+pub fn epe(predicted: &Trajectories, truth: &Trajectories) -> Result<f64> {
+    Ok(mean_over_frames(&epe_per_frame(predicted, truth)?))
+}
+
+/// Warps the canonical points of `truth` ([`Trajectories::canonical`]) to every frame with `field`, in
 /// chunks of points ([`crate::warp::WARP_CHUNK`]); the result holds every frame.
 pub fn predict(
     field: &dyn MotionField,
     truth: &Trajectories,
     device: &Device,
 ) -> Result<Trajectories> {
-    let x0 = as_points(truth.frame(0));
+    let x0 = as_points(truth.canonical());
     let mut positions = Vec::with_capacity(truth.positions().len());
     crate::warp::warp_frames(
         field,
@@ -73,7 +103,7 @@ pub fn field_epe_per_frame(
     truth: &Trajectories,
     device: &Device,
 ) -> Result<Vec<f64>> {
-    let x0 = as_points(truth.frame(0));
+    let x0 = as_points(truth.canonical());
     let mut per_frame = Vec::with_capacity(truth.frames());
     crate::warp::warp_frames(
         field,
@@ -82,13 +112,7 @@ pub fn field_epe_per_frame(
         truth.frames(),
         device,
         |k, y| {
-            let total: f64 = y
-                .as_flattened()
-                .iter()
-                .zip(truth.frame(k))
-                .map(|(a, b)| (*a as f64 - *b as f64).abs())
-                .sum();
-            per_frame.push(total / truth.points() as f64);
+            per_frame.push(frame_epe(y.as_flattened(), truth, k));
             Ok(())
         },
     )?;
@@ -98,8 +122,9 @@ pub fn field_epe_per_frame(
 /// The EPE of `field` on the held-out trajectories `truth` (in bounded memory,
 /// [`field_epe_per_frame`]).
 pub fn evaluate_epe(field: &dyn MotionField, truth: &Trajectories, device: &Device) -> Result<f64> {
-    let per_frame = field_epe_per_frame(field, truth, device)?;
-    Ok(per_frame.iter().sum::<f64>() / per_frame.len() as f64)
+    Ok(mean_over_frames(&field_epe_per_frame(
+        field, truth, device,
+    )?))
 }
 
 /// A k-d tree over a point cloud, for nearest-neighbour queries on the host.

@@ -230,6 +230,11 @@ pub fn parse_npy_header(bytes: &[u8]) -> Result<NpyHeader, String> {
 
 impl NpyHeader {
     /// The descriptor text, for messages.
+    /// Whether the values are IEEE halves (`f2`), whose overflow reads as infinity.
+    pub fn is_half(&self) -> bool {
+        self.dtype == Dtype::Float(2)
+    }
+
     pub(crate) fn describe(&self) -> String {
         format!("shape {:?} of {:?}", self.shape, self.dtype)
     }

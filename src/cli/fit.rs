@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use crate::backend::BackendKind;
 use crate::cli::{ClipArgs, WeightSearchArgs, fraction, weight};
+use crate::data::layout::{CoordFrame, Layout};
 use crate::field::Variant;
 use crate::jacobian::JacobianKind;
 use crate::run::{FitOutcome, ModelChoice, RunConfig, RunDir, RunSpec, fit_run};
@@ -22,7 +23,7 @@ pub struct FitArgs {
     #[arg(long, required_unless_present = "resume", conflicts_with = "resume")]
     pub out: Option<PathBuf>,
     /// Continue the interrupted run in this folder from its last checkpoint.
-    #[arg(long, conflicts_with_all = ["data", "config", "variant", "iters", "test_fraction", "mesh", "frames", "stride", "jacobian", "h_weight", "seed", "checkpoint_every", "points_per_step"])]
+    #[arg(long, conflicts_with_all = ["data", "config", "variant", "iters", "test_fraction", "mesh", "frames", "stride", "jacobian", "h_weight", "seed", "checkpoint_every", "points_per_step", "layout", "frame", "count_hidden", "reference_frame", "drop_unobserved", "holdout_observations"])]
     pub resume: Option<PathBuf>,
     /// A fit config (JSON, the `fit` part of a run's config.json; missing fields take
     /// their defaults); flags override it.
@@ -64,6 +65,28 @@ pub struct FitArgs {
     /// them, the paper's protocol), so that a step's memory does not grow with the tracks.
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
     pub points_per_step: Option<u64>,
+    /// The layout of a tracker's .npz (default: detected from its keys).
+    #[arg(long, value_enum)]
+    pub layout: Option<Layout>,
+    /// The coordinate frame of a tracker's tracks: PointOdyssey's are in the world frame
+    /// unless `camera` (its extrinsics applied); TAPVid-3D's are in the camera frame.
+    #[arg(long, value_enum)]
+    pub frame: Option<CoordFrame>,
+    /// Count PointOdyssey's valid but hidden entries (its ground truth) as observed.
+    #[arg(long)]
+    pub count_hidden: bool,
+    /// The frame whose positions are the field's input x (default: the frame with the most
+    /// observed points), counted within the clip.
+    #[arg(long, value_name = "K")]
+    pub reference_frame: Option<usize>,
+    /// Go on without the tracks that are never observed (`complete` records the kept
+    /// indices) rather than refuse them.
+    #[arg(long)]
+    pub drop_unobserved: bool,
+    /// Hide this fraction of the observations from the fit, in spans of 2–10 frames, and
+    /// report the EPE on them beside linear interpolation and k-NN.
+    #[arg(long, value_name = "F", value_parser = fraction)]
+    pub holdout_observations: Option<f64>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -88,6 +111,12 @@ impl FitArgs {
             test_fraction: self.test_fraction,
             checkpoint_every: self.checkpoint_every.map(|k| k as usize),
             points_per_step: self.points_per_step.map(|k| k as usize),
+            layout: self.layout,
+            frame: self.frame,
+            count_hidden: self.count_hidden.then_some(true),
+            reference_frame: self.reference_frame,
+            drop_unobserved: self.drop_unobserved.then_some(true),
+            holdout_observations: self.holdout_observations,
         }
     }
 

@@ -5,6 +5,7 @@
 
 pub mod batch;
 pub mod bench;
+pub mod complete;
 pub mod eval;
 pub mod export;
 pub mod fit;
@@ -57,6 +58,8 @@ pub enum Command {
     Batch(batch::BatchArgs),
     /// Print the metrics of a fitted run, on its held-out points or on new data.
     Eval(eval::EvalArgs),
+    /// Write every track of a fitted run at every frame, gaps filled by the field.
+    Complete(complete::CompleteArgs),
     /// Warp a canonical mesh through a fitted run and write an OBJ sequence.
     Warp(warp::WarpArgs),
     /// Export a fitted run's motion as an animated binary glTF (.glb).
@@ -84,6 +87,7 @@ impl Command {
             Command::Eval(a) => eval::run(&a),
             Command::Warp(a) => warp::run(&a),
             Command::Export(a) => export::run(&a),
+            Command::Complete(a) => complete::run(&a),
             Command::View(a) => view::run(&a),
             Command::Info(a) => info::run(&a),
             Command::Plot(a) => plot::run(&a),

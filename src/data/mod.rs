@@ -1,11 +1,14 @@
 //! Point trajectories and their splits.
 
 pub mod anime;
+pub mod layout;
 pub mod mesh;
 pub mod npy;
 pub mod sequence;
 pub mod synthetic;
 pub mod textured;
+pub mod tracker;
+pub mod tracks;
 pub mod traj;
 
 use burn::tensor::{Device, Tensor, TensorData};
@@ -48,17 +51,34 @@ impl From<doma_formats::Frames> for Trajectories {
             frames: f.frames,
             points: f.points,
             positions: f.positions,
+            observed: None,
+            canonical: None,
+            reference: 0,
         }
     }
 }
 
 /// `T` frames of `N` corresponding points, `[T, N, 3]`, frame-major, `f32`.
-/// Point `i` is the same material point in every frame; frame 0 is canonical.
+/// Point `i` is the same material point in every frame.
+///
+/// Tracks from a tracker are not seen in every frame: an optional observed mask `[T, N]`
+/// says which entries are data. An unobserved entry stores a finite stand-in (the track's
+/// linear interpolation between its observations, held constant past its ends,
+/// [`tracks::interpolate`]); the losses and metrics never read it. The field's input
+/// `x` of each point, its *canonical* position, is frame 0's position for complete
+/// data, and for masked data the position in a reference frame
+/// ([`tracks::Tracks::into_trajectories`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Trajectories {
     frames: usize,
     points: usize,
     positions: Vec<f32>,
+    /// `[T, N]`, whether each entry was observed; `None`: every entry was.
+    observed: Option<Vec<bool>>,
+    /// `[N, 3]`, the canonical positions when they are not frame 0's.
+    canonical: Option<Vec<f32>>,
+    /// The frame the canonical positions belong to.
+    reference: usize,
 }
 
 impl Trajectories {
@@ -72,7 +92,88 @@ impl Trajectories {
             frames,
             points,
             positions,
+            observed: None,
+            canonical: None,
+            reference: 0,
         })
+    }
+
+    /// These trajectories with the observed mask `observed` (`[T, N]`, frame-major) and
+    /// canonical positions `canonical` (`[N, 3]`) in frame `reference`. A mask that is all
+    /// true is stored as none, so that complete data runs the complete-data maths.
+    pub fn with_observations(
+        mut self,
+        observed: Vec<bool>,
+        reference: usize,
+        canonical: Vec<f32>,
+    ) -> Result<Self> {
+        if observed.len() != self.frames * self.points
+            || canonical.len() != self.points * 3
+            || reference >= self.frames
+        {
+            return Err(DomaError::InvalidData(format!(
+                "a mask of {} entries, {} canonical coordinates and reference frame {reference} \
+                 do not fit {} frames of {} points",
+                observed.len(),
+                canonical.len(),
+                self.frames,
+                self.points
+            )));
+        }
+        if let Some(i) = canonical.iter().position(|v| !v.is_finite()) {
+            return Err(DomaError::InvalidData(format!(
+                "the canonical position of point {} is not finite",
+                i / 3
+            )));
+        }
+        self.observed = (!observed.iter().all(|&o| o)).then_some(observed);
+        self.canonical = (reference != 0 || self.observed.is_some()).then_some(canonical);
+        self.reference = reference;
+        Ok(self)
+    }
+
+    /// The observed mask `[T, N]`; `None` when every entry is observed.
+    pub fn observed(&self) -> Option<&[bool]> {
+        self.observed.as_deref()
+    }
+
+    /// Frame `k`'s observed mask `[N]`; `None` when every entry of the data is observed.
+    pub fn observed_in_frame(&self, k: usize) -> Option<&[bool]> {
+        self.observed
+            .as_deref()
+            .map(|m| &m[k * self.points..(k + 1) * self.points])
+    }
+
+    /// Whether point `i` is observed in frame `k`.
+    pub fn is_observed(&self, k: usize, i: usize) -> bool {
+        self.observed_in_frame(k).is_none_or(|m| m[i])
+    }
+
+    /// The number of observed entries.
+    pub fn observed_count(&self) -> usize {
+        match &self.observed {
+            None => self.frames * self.points,
+            Some(m) => m.iter().filter(|&&o| o).count(),
+        }
+    }
+
+    /// The canonical positions `[N, 3]`: every point's input `x` to the field (frame 0's
+    /// positions for complete data).
+    pub fn canonical(&self) -> &[f32] {
+        self.canonical.as_deref().unwrap_or_else(|| self.frame(0))
+    }
+
+    /// The frame the canonical positions belong to (0 for complete data).
+    pub fn reference(&self) -> usize {
+        self.reference
+    }
+
+    /// The canonical positions as a `[N, 3]` tensor on `device`.
+    pub fn canonical_tensor(&self, device: &Device) -> Tensor<2> {
+        Tensor::from_data(
+            TensorData::new(self.canonical().to_vec(), [self.points, 3]),
+            device,
+        )
     }
 
     /// The positions as the format crate's checked [`doma_formats::Frames`].
@@ -97,6 +198,11 @@ impl Trajectories {
     /// All positions, `[T, N, 3]` frame-major.
     pub fn positions(&self) -> &[f32] {
         &self.positions
+    }
+
+    /// The positions `[T, N, 3]`, moved out.
+    pub fn into_positions(self) -> Vec<f32> {
+        self.positions
     }
 
     /// Frame `k`'s positions, `[N, 3]` row-major.
@@ -133,12 +239,32 @@ impl Trajectories {
                 positions.extend_from_slice(&frame[3 * i..3 * i + 3]);
             }
         }
-        Trajectories::new(self.frames, indices.len(), positions)
+        let out = Trajectories::new(self.frames, indices.len(), positions)?;
+        if self.observed.is_none() && self.canonical.is_none() {
+            return Ok(out);
+        }
+        let observed = (0..self.frames)
+            .flat_map(|k| indices.iter().map(move |&i| self.is_observed(k, i)))
+            .collect();
+        let canonical = self.canonical();
+        let canonical = indices
+            .iter()
+            .flat_map(|&i| canonical[3 * i..3 * i + 3].iter().copied())
+            .collect();
+        out.with_observations(observed, self.reference, canonical)
     }
 
     /// The frames `range` (a contiguous clip), every `stride`-th, as a new sequence whose
-    /// first selected frame is canonical. Refuses an empty selection or frames past the end.
+    /// first selected frame is canonical. Refuses an empty selection, frames past the end,
+    /// and masked data (a clip of tracks is taken before their canonical positions are
+    /// found, [`tracks::Tracks::select_frames`]).
     pub fn select_frames(&self, range: std::ops::Range<usize>, stride: usize) -> Result<Self> {
+        if self.canonical.is_some() {
+            return Err(DomaError::InvalidData(
+                "a clip of masked tracks is taken before their canonical positions are found"
+                    .into(),
+            ));
+        }
         if stride == 0 || range.start >= range.end || range.end > self.frames {
             return Err(DomaError::InvalidData(format!(
                 "frames {}..{} (stride {stride}) do not select a clip of the {} frames",
@@ -154,15 +280,15 @@ impl Trajectories {
         Trajectories::new(count, self.points, positions)
     }
 
-    /// The sequence moved and scaled so that frame 0's bounding box is centred at the
-    /// origin with its longest side spanning `[−1, 1]` (SIREN's `ω₀ = 30` assumes inputs of
+    /// The sequence moved and scaled so that the canonical positions' bounding box (frame
+    /// 0's, for complete data) is centred at the origin with its longest side spanning `[−1, 1]` (SIREN's `ω₀ = 30` assumes inputs of
     /// about that range). Returns the new sequence, the centre and the scale `s`
     /// (`x' = (x − c) / s`). A point whose normalised coordinate is not finite (a later
     /// frame ~10³⁸ box sizes away) is refused rather than fitted as zeros or infinities.
     pub fn normalized(&self) -> Result<(Self, [f32; 3], f32)> {
         let mut lo = [f32::INFINITY; 3];
         let mut hi = [f32::NEG_INFINITY; 3];
-        for p in self.frame(0).chunks_exact(3) {
+        for p in self.canonical().chunks_exact(3) {
             for c in 0..3 {
                 lo[c] = lo[c].min(p[c]);
                 hi[c] = hi[c].max(p[c]);
@@ -188,10 +314,18 @@ impl Trajectories {
                 self.positions[i]
             )));
         }
+        let normalize = |v: &[f32]| -> Vec<f32> {
+            v.chunks_exact(3)
+                .flat_map(|p| (0..3).map(move |c| (p[c] - center[c]) / scale))
+                .collect()
+        };
         let out = Trajectories {
             frames: self.frames,
             points: self.points,
             positions,
+            observed: self.observed.clone(),
+            canonical: self.canonical.as_deref().map(normalize),
+            reference: self.reference,
         };
         Ok((out, center, scale))
     }

@@ -9,8 +9,10 @@ use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
+use super::layout::TrackFile;
 use super::mesh::read_obj;
-use super::{Trajectories, anime, npy, traj};
+use super::tracks::{Tracks, hold_out_spans};
+use super::{Trajectories, anime, layout, npy, traj};
 use crate::{DomaError, Result};
 
 /// An animated mesh: vertex trajectories `[T, V, 3]` and, when known, the triangles.
@@ -26,6 +28,42 @@ pub struct Sequence {
     pub center: [f32; 3],
     /// See `center`.
     pub scale: f32,
+    /// The observations hidden from the fit to measure gap filling
+    /// ([`LoadOptions::hold_out`]), normalised like the trajectories.
+    pub held_out: Option<HeldOut>,
+    /// The input's indices of the tracks kept ([`LoadOptions::drop_unobserved`]); `None`:
+    /// every track, in order.
+    pub kept: Option<Vec<usize>>,
+}
+
+/// Observations hidden from a fit, and what they were.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeldOut {
+    /// `(frame, point)`, sorted.
+    pub entries: Vec<(usize, usize)>,
+    /// The observed position of each entry.
+    pub truth: Vec<[f32; 3]>,
+}
+
+/// How a sequence is loaded: beside the file, everything that decides which entries a fit
+/// sees and where its canonical positions are.
+#[derive(Clone, Debug, Default)]
+pub struct LoadOptions {
+    /// An OBJ whose vertices are the points in order, for the faces.
+    pub mesh: Option<std::path::PathBuf>,
+    /// A clip of the frames.
+    pub frames: Option<Range<usize>>,
+    /// Every `stride`-th frame (0 is taken as 1).
+    pub stride: usize,
+    /// How a tracker's `.npz` is read.
+    pub file: TrackFile,
+    /// The reference frame of the canonical positions (default: the most observed).
+    pub reference: Option<usize>,
+    /// Go on without the tracks that are never observed (in the clip) rather than refuse.
+    pub drop_unobserved: bool,
+    /// Hide this fraction of the observations, in spans, with this seed
+    /// ([`hold_out_spans`]).
+    pub hold_out: Option<(f64, u64)>,
 }
 
 /// Loads `data` (`.traj`, `.anime`, `.npy`, `.npz`, or a folder of OBJ frames with equal
@@ -41,40 +79,109 @@ pub fn load_sequence(
     frames: Option<Range<usize>>,
     stride: usize,
 ) -> Result<Sequence> {
-    let (trajectories, mut faces) = read_any(data)?;
+    load_sequence_with(
+        data,
+        &LoadOptions {
+            mesh: mesh.map(Path::to_path_buf),
+            frames,
+            stride,
+            ..LoadOptions::default()
+        },
+    )
+}
+
+/// [`load_sequence`] of tracks that may be unobserved in some frames (a tracker's `.npz`,
+/// [`layout`]): after the clip, tracks never observed are refused or dropped, the
+/// held-out observations are hidden, and the canonical positions are found in the
+/// reference frame ([`Tracks::into_trajectories`]) before the coordinates are normalised
+/// by their bounding box. Complete data loads exactly as [`load_sequence`] loads it.
+pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence> {
+    let malformed = |reason: String| DomaError::Malformed {
+        path: data.to_path_buf(),
+        reason,
+    };
+    let (mut tracks, mut faces) = read_tracks(data, &options.file)?;
     let ext = extension(data);
     let sibling = data.with_extension("obj");
-    let obj = mesh
-        .map(Path::to_path_buf)
+    let obj = options
+        .mesh
+        .clone()
         .or_else(|| (faces.is_none() && ext == "traj" && sibling.is_file()).then_some(sibling));
     if let Some(obj) = obj {
         let m = read_obj(&obj)?;
-        if m.vertices.len() != trajectories.points() {
+        if m.vertices.len() != tracks.points() {
             return Err(DomaError::Malformed {
                 path: obj,
                 reason: format!(
                     "{} vertices, but {} has {} points",
                     m.vertices.len(),
                     data.display(),
-                    trajectories.points()
+                    tracks.points()
                 ),
             });
         }
         faces = Some(m.faces);
     }
-    let trajectories = match frames {
-        Some(r) => trajectories.select_frames(r, stride)?,
-        None if stride > 1 => trajectories.select_frames(0..trajectories.frames(), stride)?,
-        None => trajectories,
+    let stride = options.stride.max(1);
+    tracks = match options.frames.clone() {
+        Some(r) => tracks
+            .select_frames(r, stride)
+            .map_err(DomaError::InvalidData)?,
+        None if stride > 1 => tracks
+            .select_frames(0..tracks.frames(), stride)
+            .map_err(DomaError::InvalidData)?,
+        None => tracks,
     };
+    let mut kept = None;
+    let never = tracks.never_observed();
+    if options.drop_unobserved && !never.is_empty() {
+        if never.len() == tracks.points() {
+            return Err(malformed("no track is observed in any frame".into()));
+        }
+        let keep: Vec<usize> = (0..tracks.points())
+            .filter(|i| never.binary_search(i).is_err())
+            .collect();
+        tracks = tracks.select_points(&keep);
+        // The faces index the input's vertices, some of which are gone.
+        faces = None;
+        kept = Some(keep);
+    }
+    let held_out = match options.hold_out {
+        Some((fraction, seed)) => {
+            let entries = hold_out_spans(&tracks, fraction, seed)
+                .map_err(|e| malformed(format!("--holdout-observations: {e}")))?;
+            let n = tracks.points();
+            let truth = entries
+                .iter()
+                .map(|&(k, i)| {
+                    let e = 3 * (k * n + i);
+                    let p = &tracks.positions()[e..e + 3];
+                    [p[0], p[1], p[2]]
+                })
+                .collect();
+            tracks.hide(&entries);
+            Some(HeldOut { entries, truth })
+        }
+        None => None,
+    };
+    let trajectories = tracks
+        .into_trajectories(options.reference)
+        .map_err(|e| match e {
+            DomaError::InvalidData(reason) | DomaError::InvalidConfig(reason) => malformed(reason),
+            other => other,
+        })?;
     // Fit and measure in normalised coordinates, so that one ω₀ suits every user's units.
-    let (trajectories, center, scale) =
-        trajectories
-            .normalized()
-            .map_err(|e| DomaError::Malformed {
-                path: data.to_path_buf(),
-                reason: e.to_string(),
-            })?;
+    let (trajectories, center, scale) = trajectories
+        .normalized()
+        .map_err(|e| malformed(e.to_string()))?;
+    let held_out = held_out.map(|h| HeldOut {
+        truth: h
+            .truth
+            .iter()
+            .map(|p| std::array::from_fn(|c| (p[c] - center[c]) / scale))
+            .collect(),
+        entries: h.entries,
+    });
     let name = data
         .file_stem()
         .map_or("data".into(), |s| s.to_string_lossy().into_owned());
@@ -84,6 +191,8 @@ pub fn load_sequence(
         faces,
         center,
         scale,
+        held_out,
+        kept,
     })
 }
 
@@ -95,17 +204,28 @@ fn extension(data: &Path) -> String {
         .unwrap_or_default()
 }
 
+/// Reads any supported sequence file (or OBJ folder) by its extension as tracks (a
+/// tracker's `.npz` with its mask, [`layout`]; every other file complete), and the faces
+/// where the format has them. A `file` other than the default applies to `.npz` alone.
+pub fn read_tracks(data: &Path, file: &TrackFile) -> Result<(Tracks, Option<Vec<[u32; 3]>>)> {
+    check_readable(data)?;
+    if extension(data) == "npz" && !data.is_dir() {
+        return Ok((layout::read_npz_tracks(data, file)?, None));
+    }
+    if !file.is_default() {
+        return Err(DomaError::Usage(format!(
+            "--layout, --frame and --count-hidden apply to a tracker's .npz, not to {}",
+            data.display()
+        )));
+    }
+    let (t, faces) = read_any(data)?;
+    Ok((Tracks::complete(t), faces))
+}
+
 /// Reads any supported sequence file (or OBJ folder) by its extension: the trajectories,
 /// and the faces where the format has them.
 pub fn read_any(data: &Path) -> Result<(Trajectories, Option<Vec<[u32; 3]>>)> {
-    let meta = std::fs::metadata(data).map_err(|e| DomaError::io(data, e))?;
-    if !(meta.is_file() || meta.is_dir()) {
-        // A FIFO or a device would block a read forever, or never end.
-        return Err(DomaError::Malformed {
-            path: data.to_path_buf(),
-            reason: "not a regular file or folder (a FIFO, a socket or a device)".into(),
-        });
-    }
+    check_readable(data)?;
     Ok(match extension(data).as_str() {
         _ if data.is_dir() => {
             let (t, f) = super::mesh::read_obj_sequence(data)?;
@@ -127,6 +247,19 @@ pub fn read_any(data: &Path) -> Result<(Trajectories, Option<Vec<[u32; 3]>>)> {
             });
         }
     })
+}
+
+/// Refuses what is neither a regular file nor a folder: a FIFO or a device would block a
+/// read forever, or never end.
+fn check_readable(data: &Path) -> Result<()> {
+    let meta = std::fs::metadata(data).map_err(|e| DomaError::io(data, e))?;
+    if !(meta.is_file() || meta.is_dir()) {
+        return Err(DomaError::Malformed {
+            path: data.to_path_buf(),
+            reason: "not a regular file or folder (a FIFO, a socket or a device)".into(),
+        });
+    }
+    Ok(())
 }
 
 /// A seeded split of `n` indices into `round(fraction · n)` and the rest.

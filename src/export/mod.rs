@@ -92,7 +92,7 @@ pub fn export_gltf(
         }
         Some(path) => (TexturedMesh::read(path)?, false),
         None => {
-            let vertices: Vec<[f32; 3]> = as_points(own.trajectories.frame(0))
+            let vertices: Vec<[f32; 3]> = as_points(own.trajectories.canonical())
                 .into_iter()
                 .map(to_data)
                 .collect();

@@ -4,13 +4,15 @@ use std::path::Path;
 
 use burn::tensor::Device;
 
-use super::{Report, RunDir};
+use super::{GapReport, Report, RunConfig, RunDir};
 use crate::Result;
 use crate::checkpoint::load_json;
 use crate::data::Trajectories;
-use crate::data::sequence::load_sequence;
+use crate::data::mesh::as_points;
+use crate::data::sequence::{Sequence, load_sequence};
+use crate::data::tracks::neighbour_motion;
 use crate::field::MotionField;
-use crate::metrics::{EPE_SCALE, field_epe_per_frame};
+use crate::metrics::{EPE_SCALE, field_epe_per_frame, mean_over_frames};
 use crate::train::IterationRecord;
 
 /// The EPE report of `field` on `truth` (normalised coordinates).
@@ -26,7 +28,7 @@ pub fn evaluate(
         .collect();
     Ok(Report {
         evaluated_on: what.into(),
-        epe_x1e4: per_frame.iter().sum::<f64>() / per_frame.len() as f64,
+        epe_x1e4: mean_over_frames(&per_frame),
         epe_per_frame_x1e4: per_frame,
         frames: truth.frames(),
         points: truth.points(),
@@ -34,7 +36,72 @@ pub fn evaluate(
         checkpoint_bytes: 0,
         iterations: 0,
         seconds: 0.0,
+        held_out_observations: None,
     })
+}
+
+/// The gap-filling report of `field` fitted to `data` under `config`: on the held-out
+/// observations of the training tracks, the field's EPE beside linear interpolation's and
+/// the k-NN baseline's ([`GapReport`]); `None` when nothing was held out.
+pub fn gap_report(
+    field: &dyn MotionField,
+    config: &RunConfig,
+    data: &Sequence,
+    device: &Device,
+) -> Result<Option<GapReport>> {
+    let Some(held) = &data.held_out else {
+        return Ok(None);
+    };
+    let (train_idx, _) = config.split_indices(data.trajectories.points())?;
+    let train = data.trajectories.select_points(&train_idx)?;
+    let mut row = vec![usize::MAX; data.trajectories.points()];
+    for (r, &i) in train_idx.iter().enumerate() {
+        row[i] = r;
+    }
+    // The entries of training tracks, as (frame, training row), with their truth.
+    let (entries, truth): (Vec<(usize, usize)>, Vec<[f32; 3]>) = held
+        .entries
+        .iter()
+        .zip(&held.truth)
+        .filter(|((_, i), _)| row[*i] != usize::MAX)
+        .map(|(&(k, i), &p)| ((k, row[i]), p))
+        .unzip();
+    if entries.is_empty() {
+        return Ok(None);
+    }
+    let l1 = |a: &[f32; 3], b: &[f32; 3]| (0..3).map(|c| (a[c] - b[c]).abs() as f64).sum::<f64>();
+    let mean = |pred: &[[f32; 3]]| {
+        EPE_SCALE * pred.iter().zip(&truth).map(|(a, b)| l1(a, b)).sum::<f64>()
+            / entries.len() as f64
+    };
+    let linear: Vec<[f32; 3]> = entries
+        .iter()
+        .map(|&(k, r)| {
+            let p = &train.frame(k)[3 * r..3 * r + 3];
+            [p[0], p[1], p[2]]
+        })
+        .collect();
+    let neighbours = neighbour_motion(&train, &entries)?;
+    // The field's prediction, frame by frame over the frames that have entries.
+    let canonical = as_points(train.canonical());
+    let mut predicted = vec![[0f32; 3]; entries.len()];
+    let mut start = 0;
+    while start < entries.len() {
+        let k = entries[start].0;
+        let end = start + entries[start..].partition_point(|e| e.0 == k);
+        let x: Vec<[f32; 3]> = entries[start..end].iter().map(|e| canonical[e.1]).collect();
+        crate::warp::warp_frames(field, &x, k..k + 1, train.frames(), device, |_, y| {
+            predicted[start..end].copy_from_slice(&y);
+            Ok(())
+        })?;
+        start = end;
+    }
+    Ok(Some(GapReport {
+        entries: entries.len(),
+        epe_x1e4: mean(&predicted),
+        linear_x1e4: mean(&linear),
+        neighbours_x1e4: mean(&neighbours),
+    }))
 }
 
 /// The metrics of the run in `run`: on its own held-out points, or on every point of
@@ -66,7 +133,12 @@ pub fn eval_run(run: &RunDir, data: Option<&Path>, device: &Device) -> Result<Re
         Vec::new()
     };
     let report = evaluate(&field, &truth, &what, device)?;
+    let gaps = match data {
+        None => gap_report(&field, &config, &own, device)?,
+        Some(_) => None,
+    };
     Ok(Report {
+        held_out_observations: gaps,
         checkpoint_bytes: bytes,
         iterations: history.len(),
         seconds: history.last().map_or(0.0, |r| r.seconds),

@@ -4,9 +4,10 @@ use std::sync::atomic::AtomicBool;
 
 use burn::tensor::Device;
 
-use super::{Report, RunConfig, RunDir, RunLock, evaluate};
+use super::{Report, RunConfig, RunDir, RunLock, evaluate, gap_report};
 use crate::checkpoint::{Precision, save_json};
 use crate::data::Trajectories;
+use crate::data::sequence::Sequence;
 use crate::field::model::Model;
 use crate::io::write_atomic;
 use crate::train::{Fitted, Hooks, Outcome, Trainer};
@@ -44,10 +45,11 @@ pub fn fit_run(
             (config, RunLock::acquire(&run.dir)?)
         }
     };
-    let (train, test) = config.split(&config.load()?.trajectories)?;
+    let sequence = config.load()?;
+    let (train, test) = config.split(&sequence.trajectories)?;
     let ad = device.clone().autodiff();
     let fit = &config.fit;
-    let field = fit.model.init(fit.seed, train.frame(0), &ad);
+    let field = fit.model.init(fit.seed, train.canonical(), &ad);
     let mut trainer = Trainer::new(field, fit, &train, device)?.progress(progress);
     if resume && run.resume().is_file() {
         let snapshot = run.read_resume()?;
@@ -68,7 +70,9 @@ pub fn fit_run(
         hooks = hooks.stop_after(n);
     }
     match trainer.run_with(hooks)? {
-        Outcome::Finished(fitted) => finish(run, &fitted, &test, device).map(FitOutcome::Finished),
+        Outcome::Finished(fitted) => {
+            finish(run, &config, &sequence, &fitted, &test, device).map(FitOutcome::Finished)
+        }
         Outcome::Interrupted { iterations_done } => Ok(FitOutcome::Interrupted { iterations_done }),
     }
 }
@@ -97,6 +101,8 @@ fn start(run: &RunDir, config: RunConfig) -> Result<(RunConfig, RunLock)> {
 /// Writes `model.bpk` and `report.json` (the EPE on the held-out points `test`).
 fn finish(
     run: &RunDir,
+    config: &RunConfig,
+    sequence: &Sequence,
     fitted: &Fitted<Model>,
     test: &Trajectories,
     device: &Device,
@@ -108,6 +114,7 @@ fn finish(
         checkpoint_bytes: encoded.len() as u64,
         iterations: fitted.history.len(),
         seconds: fitted.seconds,
+        held_out_observations: gap_report(&fitted.field, config, sequence, device)?,
         ..evaluate(&fitted.field, test, what, device)?
     };
     save_json(&report, &run.report())?;

@@ -16,6 +16,7 @@
 //! weights as an uninterrupted fit on the same device. A non-finite loss stops the fit with
 //! an error naming the iteration and leaves the last good checkpoint in place.
 
+mod complete;
 mod eval;
 mod fit;
 mod info;
@@ -25,7 +26,8 @@ mod resume;
 mod spec;
 mod warp;
 
-pub use eval::{eval_run, evaluate};
+pub use complete::{Completion, complete_run};
+pub use eval::{eval_run, evaluate, gap_report};
 pub use fit::{FitOutcome, fit_run};
 pub use info::{RunInfo, info};
 pub use lock::RunLock;
@@ -40,7 +42,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::decode_checkpoint;
 use crate::data::Trajectories;
-use crate::data::sequence::{Sequence, load_sequence, split_indices};
+use crate::data::layout::TrackFile;
+use crate::data::sequence::{LoadOptions, Sequence, load_sequence_with, split_indices};
 use crate::field::model::{Model, ModelConfig};
 use crate::train::FitConfig;
 use crate::{DomaError, Result};
@@ -69,6 +72,20 @@ pub struct RunConfig {
     /// each weight's validation EPE; the chosen weight is in `fit`.
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub weight_search: Option<crate::train::select::WeightChoice>,
+    /// How a tracker's `.npz` is read (its layout and frame).
+    #[serde(default)]
+    pub tracks: TrackFile,
+    /// The reference frame of the canonical positions, within the clip (default: the
+    /// frame with the most observed points).
+    #[serde(default)]
+    pub reference_frame: Option<usize>,
+    /// Go on without the tracks that are never observed rather than refuse them.
+    #[serde(default)]
+    pub drop_unobserved: bool,
+    /// The fraction of the observations hidden from the fit, in spans of frames, to
+    /// measure gap filling (seeded by the fit's seed).
+    #[serde(default)]
+    pub holdout_observations: Option<f64>,
 }
 
 fn default_backend() -> crate::backend::BackendKind {
@@ -89,6 +106,10 @@ impl RunConfig {
             backend: default_backend(),
             fit,
             weight_search: None,
+            tracks: TrackFile::default(),
+            reference_frame: None,
+            drop_unobserved: false,
+            holdout_observations: None,
         }
     }
 
@@ -109,23 +130,36 @@ impl RunConfig {
         Ok(())
     }
 
-    /// Loads the run's data, normalised as when it was fitted.
+    /// Loads the run's data, normalised as when it was fitted, with its held-out
+    /// observations hidden.
     pub fn load(&self) -> Result<Sequence> {
-        load_sequence(
+        load_sequence_with(
             &self.data,
-            self.mesh.as_deref(),
-            self.frames.map(|[a, b]| a..b),
-            self.stride,
+            &LoadOptions {
+                mesh: self.mesh.clone(),
+                frames: self.frames.map(|[a, b]| a..b),
+                stride: self.stride,
+                file: self.tracks.clone(),
+                reference: self.reference_frame,
+                drop_unobserved: self.drop_unobserved,
+                hold_out: self.holdout_observations.map(|f| (f, self.fit.seed)),
+            },
         )
+    }
+
+    /// The indices of the training and held-out points of `n` (a seeded split).
+    pub fn split_indices(&self, n: usize) -> Result<(Vec<usize>, Vec<usize>)> {
+        split_indices(n, 1.0 - self.test_fraction, self.fit.seed).map_err(|e| {
+            DomaError::Malformed {
+                path: self.data.clone(),
+                reason: format!("{e} (--test-fraction {})", self.test_fraction),
+            }
+        })
     }
 
     /// The training and held-out points of `data` (a seeded split).
     pub fn split(&self, data: &Trajectories) -> Result<(Trajectories, Trajectories)> {
-        let (train, test) = split_indices(data.points(), 1.0 - self.test_fraction, self.fit.seed)
-            .map_err(|e| DomaError::Malformed {
-            path: self.data.clone(),
-            reason: format!("{e} (--test-fraction {})", self.test_fraction),
-        })?;
+        let (train, test) = self.split_indices(data.points())?;
         Ok((data.select_points(&train)?, data.select_points(&test)?))
     }
 }
@@ -137,7 +171,8 @@ pub struct Report {
     pub evaluated_on: String,
     /// EPE × 10⁴ over all evaluated points and frames (normalised units).
     pub epe_x1e4: f64,
-    /// EPE × 10⁴ per frame.
+    /// EPE × 10⁴ per frame (`null` for a frame with no observed entry).
+    #[serde(with = "nan_as_null")]
     pub epe_per_frame_x1e4: Vec<f64>,
     /// Frames evaluated.
     pub frames: usize,
@@ -151,6 +186,41 @@ pub struct Report {
     pub iterations: usize,
     /// Seconds of fitting (over all resumed parts).
     pub seconds: f64,
+    /// Gap filling: the EPE on the observations hidden from the fit, beside two baselines
+    /// (`--holdout-observations`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out_observations: Option<GapReport>,
+}
+
+/// The EPE × 10⁴ (the L1 distance, summed over x, y, z, averaged over the entries) on the
+/// observations of the training tracks that the fit did not see, by the fitted field and
+/// by two baselines on the same entries from the same observations: each track's linear
+/// interpolation ([`crate::data::tracks::interpolate`]) and its nearest neighbours' motion
+/// ([`crate::data::tracks::neighbour_motion`]).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct GapReport {
+    /// The hidden observations of the training tracks.
+    pub entries: usize,
+    /// The fitted field's EPE × 10⁴.
+    pub epe_x1e4: f64,
+    /// Linear interpolation's EPE × 10⁴.
+    pub linear_x1e4: f64,
+    /// The k-NN baseline's EPE × 10⁴.
+    pub neighbours_x1e4: f64,
+}
+
+/// A per-frame list with NaN (a frame with nothing to measure) written as JSON's `null`.
+mod nan_as_null {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &[f64], s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(v.iter().map(|x| (!x.is_nan()).then_some(*x)))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+        let v: Vec<Option<f64>> = Vec::deserialize(d)?;
+        Ok(v.into_iter().map(|x| x.unwrap_or(f64::NAN)).collect())
+    }
 }
 
 /// A fitted run opened for warping or showing it (`warp`, `export`, `view`).
@@ -281,6 +351,6 @@ impl RunDir {
             return Ok(Vec::new());
         }
         let sequence = config.load()?;
-        Ok(config.split(&sequence.trajectories)?.0.frame(0).to_vec())
+        Ok(config.split(&sequence.trajectories)?.0.canonical().to_vec())
     }
 }

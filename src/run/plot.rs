@@ -39,7 +39,7 @@ pub fn plot_run(run: &RunDir, frames: Option<&[usize]>, device: &Device) -> Resu
     if let Some(choice) = &config.weight_search {
         written.push(weight_plot(choice, &dir)?);
     }
-    let canonical = as_points(test.frame(0));
+    let canonical = as_points(test.canonical());
     for &k in chosen {
         let (truth, pred) = (as_points(test.frame(k)), as_points(predicted.frame(k)));
         let mut errors: Vec<f64> = truth

@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use super::RunConfig;
 use crate::backend::BackendKind;
+use crate::data::layout::{CoordFrame, Layout, TrackFile};
 use crate::field::dpf::DpfConfig;
 use crate::field::model::ModelConfig;
 use crate::field::{DomaFieldConfig, Variant};
@@ -109,6 +110,25 @@ pub struct RunSpec {
     /// Training points per step (`FitConfig::points_per_step`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub points_per_step: Option<usize>,
+    /// The layout of a tracker's `.npz` (default: detected from its keys).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub layout: Option<Layout>,
+    /// The coordinate frame of a tracker's tracks (default: the layout's own).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame: Option<CoordFrame>,
+    /// Count PointOdyssey's valid but hidden entries as observed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub count_hidden: Option<bool>,
+    /// The reference frame of the canonical positions (default: the most observed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_frame: Option<usize>,
+    /// Go on without the tracks never observed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drop_unobserved: Option<bool>,
+    /// Hide this fraction of the observations from the fit, in spans, to measure gap
+    /// filling.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout_observations: Option<f64>,
 }
 
 impl RunSpec {
@@ -130,6 +150,12 @@ impl RunSpec {
             test_fraction: self.test_fraction.or(d.test_fraction),
             checkpoint_every: self.checkpoint_every.or(d.checkpoint_every),
             points_per_step: self.points_per_step.or(d.points_per_step),
+            layout: self.layout.or(d.layout),
+            frame: self.frame.or(d.frame),
+            count_hidden: self.count_hidden.or(d.count_hidden),
+            reference_frame: self.reference_frame.or(d.reference_frame),
+            drop_unobserved: self.drop_unobserved.or(d.drop_unobserved),
+            holdout_observations: self.holdout_observations.or(d.holdout_observations),
         }
     }
 
@@ -215,6 +241,14 @@ impl RunSpec {
         if let Some(k) = self.checkpoint_every {
             config.checkpoint_every = k;
         }
+        config.tracks = TrackFile {
+            layout: self.layout,
+            frame: self.frame,
+            count_hidden: self.count_hidden.unwrap_or(false),
+        };
+        config.reference_frame = self.reference_frame;
+        config.drop_unobserved = self.drop_unobserved.unwrap_or(false);
+        config.holdout_observations = self.holdout_observations;
         if let Some([a, b]) = self.frames
             && a >= b
         {

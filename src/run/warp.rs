@@ -126,7 +126,7 @@ fn canonical_mesh(mesh: Option<&Path>) -> Result<Canonical> {
     }
 }
 
-/// The run data's own canonical mesh, in the data's units: frame 0 with the sequence's faces.
+/// The run data's own canonical mesh, in the data's units: the canonical positions (frame 0 for complete data) with the sequence's faces.
 fn own_canonical_mesh(own: &Sequence, data: &Path) -> Result<TriMesh> {
     let faces = own.faces.clone().ok_or_else(|| {
         DomaError::InvalidData(format!(
@@ -134,7 +134,7 @@ fn own_canonical_mesh(own: &Sequence, data: &Path) -> Result<TriMesh> {
             data.display()
         ))
     })?;
-    let vertices = as_points(own.trajectories.frame(0))
+    let vertices = as_points(own.trajectories.canonical())
         .iter()
         .map(|p| std::array::from_fn(|c| p[c] * own.scale + own.center[c]))
         .collect();

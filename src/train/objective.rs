@@ -61,9 +61,26 @@ pub struct TrajectoryObjective<'a> {
     prepared: Option<(Tensor<2>, usize, usize)>,
     /// Training points per step when fewer than all (`FitConfig::points_per_step`).
     subset: Option<usize>,
-    /// The rows of each step of the current iteration (`[steps · subset]`), and the next
-    /// step's index into them.
-    prepared_rows: Option<(Tensor<1, Int>, usize)>,
+    /// The rows of each step of the current iteration, all steps' end to end, each step's
+    /// `(start, len)` in them, and the next step's index.
+    prepared_rows: Option<PreparedRows>,
+    /// Each frame's observed training rows on the device, where a frame has unobserved
+    /// ones (`Some(None)` when it has none observed).
+    frame_rows: Vec<Option<Option<Tensor<1, Int>>>>,
+}
+
+/// The rows of an iteration's steps end to end, each step's `(start, len)` in them, and
+/// the next step's index.
+type PreparedRows = (Tensor<1, Int>, Vec<(usize, usize)>, usize);
+
+/// The training rows of one step.
+enum StepRows {
+    /// Every training point.
+    All,
+    /// These rows.
+    Rows(Box<Tensor<1, Int>>),
+    /// None: the frame has no observed training point.
+    Nothing,
 }
 
 impl<'a> TrajectoryObjective<'a> {
@@ -83,17 +100,46 @@ impl<'a> TrajectoryObjective<'a> {
         let ad = device.clone().autodiff();
         let sampling = config.smoothness_sampling.clone();
         let w_h = config.loss.smoothness_weight;
-        // L_H gets its own points when they differ from the training points.
+        let masked = data.observed().is_some();
+        // L_H gets its own points when they differ from the training points: with a mask,
+        // the points observed in the reference frame.
         let separate_h = w_h > 0.0
-            && (sampling.jitter > 0.0 || sampling.max_points.is_some_and(|m| m < data.points()));
+            && (masked
+                || sampling.jitter > 0.0
+                || sampling.max_points.is_some_and(|m| m < data.points()));
         let warp_needs_jacobian = config.loss.elasticity_weight > 0.0 || (w_h > 0.0 && !separate_h);
+        let canonical = data.canonical();
+        let x0_host = match data.observed_in_frame(data.reference()) {
+            Some(seen) => (0..data.points())
+                .filter(|&i| seen[i])
+                .flat_map(|i| canonical[3 * i..3 * i + 3].iter().copied())
+                .collect(),
+            None => canonical.to_vec(),
+        };
+        let frame_rows = (0..data.frames())
+            .map(|k| {
+                let seen = data.observed_in_frame(k)?;
+                if seen.iter().all(|&o| o) {
+                    return None;
+                }
+                let rows: Vec<i64> = (0..data.points())
+                    .filter(|&i| seen[i])
+                    .map(|i| i as i64)
+                    .collect();
+                let len = rows.len();
+                Some(
+                    (len > 0)
+                        .then(|| Tensor::<1, Int>::from_data(TensorData::new(rows, [len]), &ad)),
+                )
+            })
+            .collect();
         Ok(TrajectoryObjective {
             data,
             loss: config.loss.clone(),
             sampling,
             method,
-            x0_host: data.frame(0).to_vec(),
-            x0: data.frame_tensor(0, &ad),
+            x0_host,
+            x0: data.canonical_tensor(&ad),
             targets: (0..data.frames())
                 .map(|k| data.frame_tensor(k, &ad))
                 .collect(),
@@ -103,6 +149,7 @@ impl<'a> TrajectoryObjective<'a> {
             prepared: None,
             subset: config.points_per_step.filter(|&k| k < data.points()),
             prepared_rows: None,
+            frame_rows,
         })
     }
 }
@@ -121,12 +168,14 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
         if !(h || self.subset.is_some()) || order.is_empty() {
             return;
         }
-        let (mut all, mut rows_all) = (Vec::new(), Vec::new());
+        let (mut all, mut rows_all, mut spans) = (Vec::new(), Vec::new(), Vec::new());
         let mut n = 0;
         // Per step: its training rows, then its L_H samples, as `step_loss` draws them.
-        for _ in order {
-            if let Some(k) = self.subset {
-                rows_all.extend(step_rows(self.data.points(), k, rng));
+        for &k in order {
+            if let Some(take) = self.subset {
+                let start = rows_all.len();
+                rows_all.extend(self.draw_rows(k, take, rng));
+                spans.push((start, rows_all.len() - start));
             }
             if h {
                 let (pts, rows) = smoothness_samples(&self.x0_host, &self.sampling, rng);
@@ -142,7 +191,7 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
         if self.subset.is_some() {
             let len = rows_all.len();
             let rows = Tensor::<1, Int>::from_data(TensorData::new(rows_all, [len]), &self.ad);
-            self.prepared_rows = Some((rows, 0));
+            self.prepared_rows = Some((rows, spans, 0));
         }
     }
 
@@ -155,33 +204,52 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
     ) -> Result<(Tensor<1>, Tensor<1>)> {
         let method = self.method.as_ref();
         let t = self.data.time(k);
-        let (x0, target) = match self.subset {
-            None => (self.x0.clone(), self.targets[k].clone()),
+        let rows = match self.subset {
+            None => match &self.frame_rows[k] {
+                None => StepRows::All,
+                Some(Some(rows)) => StepRows::Rows(Box::new(rows.clone())),
+                Some(None) => StepRows::Nothing,
+            },
             Some(n) => {
-                let rows = match self.prepared_rows.as_mut() {
-                    Some((all, next)) if (*next + 1) * n <= all.dims()[0] => {
+                let prepared = match self.prepared_rows.as_mut() {
+                    Some((all, spans, next)) if *next < spans.len() => {
                         *next += 1;
-                        all.clone().narrow(0, (*next - 1) * n, n)
+                        let (start, len) = spans[*next - 1];
+                        (len > 0).then(|| all.clone().narrow(0, start, len))
                     }
                     // A step outside `Trainer::iteration` (benchmarks): drawn here.
                     _ => {
-                        let rows = step_rows(self.data.points(), n, rng);
-                        Tensor::<1, Int>::from_data(TensorData::new(rows, [n]), &self.ad)
+                        let rows = self.draw_rows(k, n, rng);
+                        let len = rows.len();
+                        (len > 0).then(|| {
+                            Tensor::<1, Int>::from_data(TensorData::new(rows, [len]), &self.ad)
+                        })
                     }
                 };
-                (
-                    self.x0.clone().select(0, rows.clone()),
-                    self.targets[k].clone().select(0, rows),
-                )
+                prepared.map_or(StepRows::Nothing, |r| StepRows::Rows(Box::new(r)))
             }
         };
-        let out = if self.warp_needs_jacobian {
-            field.warp_dual(x0, t, method)
-        } else {
-            field.warp_values(x0, t, method)
-        };
-        let l1 = loss::trajectory_l1(out.warped.value, target);
-        let mut total = l1.clone();
+        let mut total: Option<Tensor<1>> = None;
+        let mut l1 = None;
+        let mut out = None;
+        if let Some((x0, target)) = match rows {
+            StepRows::All => Some((self.x0.clone(), self.targets[k].clone())),
+            StepRows::Rows(rows) => Some((
+                self.x0.clone().select(0, (*rows).clone()),
+                self.targets[k].clone().select(0, *rows),
+            )),
+            StepRows::Nothing => None,
+        } {
+            let warped = if self.warp_needs_jacobian {
+                field.warp_dual(x0, t, method)
+            } else {
+                field.warp_values(x0, t, method)
+            };
+            let data_term = loss::trajectory_l1(warped.warped.value.clone(), target);
+            total = Some(data_term.clone());
+            l1 = Some(data_term);
+            out = Some(warped);
+        }
         let w = &self.loss;
         if w.smoothness_weight > 0.0 {
             let raw = if self.separate_h {
@@ -196,19 +264,52 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
                         Tensor::<2>::from_data(TensorData::new(pts, [n, 3]), &self.ad)
                     }
                 };
-                field.raw_dual(pts, t, method)
+                Some(field.raw_dual(pts, t, method))
             } else {
-                out.raw
+                out.as_ref().map(|o| o.raw.clone())
             };
-            let tangent = raw.tangent.expect("raw_dual yields tangents");
-            total = total
-                + loss::smoothness(tangent, w.smoothness_norm).mul_scalar(w.smoothness_weight);
+            if let Some(raw) = raw {
+                let tangent = raw.tangent.expect("raw_dual yields tangents");
+                let h =
+                    loss::smoothness(tangent, w.smoothness_norm).mul_scalar(w.smoothness_weight);
+                total = Some(match total {
+                    Some(t) => t + h,
+                    None => h,
+                });
+            }
         }
-        if w.elasticity_weight > 0.0 {
-            let tangent = out.warped.tangent.expect("warp_dual yields tangents");
-            total = total + loss::elasticity(tangent).mul_scalar(w.elasticity_weight);
+        if w.elasticity_weight > 0.0
+            && let Some(out) = &out
+        {
+            let tangent = out
+                .warped
+                .tangent
+                .clone()
+                .expect("warp_dual yields tangents");
+            let e = loss::elasticity(tangent).mul_scalar(w.elasticity_weight);
+            total = total.map(|t| t + e);
         }
-        Ok((l1, total))
+        // A frame with no observed training point and no regulariser contributes nothing.
+        let zero = || Tensor::<1>::zeros([1], &self.ad);
+        Ok((l1.unwrap_or_else(zero), total.unwrap_or_else(zero)))
+    }
+}
+
+impl TrajectoryObjective<'_> {
+    /// A step's training rows on frame `k`: `take` distinct rows of all the training points
+    /// when the frame observes all of them, else of its observed ones (fewer when it has
+    /// fewer).
+    fn draw_rows(&self, k: usize, take: usize, rng: &mut ChaCha8Rng) -> Vec<i64> {
+        match (&self.frame_rows[k], self.data.observed_in_frame(k)) {
+            (Some(_), Some(seen)) => {
+                let rows: Vec<usize> = (0..seen.len()).filter(|&i| seen[i]).collect();
+                step_rows(rows.len(), take.min(rows.len()), rng)
+                    .into_iter()
+                    .map(|r| rows[r as usize] as i64)
+                    .collect()
+            }
+            _ => step_rows(self.data.points(), take, rng),
+        }
     }
 }
 
@@ -292,7 +393,7 @@ mod tests {
             .iter()
             .map(|_| step_rows(40, 7, &mut replay))
             .collect();
-        let (rows, _) = objective.prepared_rows.clone().unwrap();
+        let (rows, _, _) = objective.prepared_rows.clone().unwrap();
         let rows: Vec<i64> = crate::readback::to_vec(rows).unwrap();
         assert_eq!(rows, drawn.concat());
         for step in &drawn {
@@ -322,5 +423,49 @@ mod tests {
                 "{l1} vs {expected}"
             );
         }
+    }
+
+    #[test]
+    fn a_masked_frame_s_l1_is_over_its_observed_rows_and_an_empty_frame_s_is_zero() {
+        let full = data();
+        let mut observed = vec![true; 3 * 40];
+        // Frame 1 observes the even rows only; frame 2 observes none.
+        for i in 0..40 {
+            observed[40 + i] = i % 2 == 0;
+            observed[80 + i] = false;
+        }
+        let masked = crate::data::tracks::Tracks::new(3, 40, full.positions().to_vec(), observed)
+            .unwrap()
+            .into_trajectories(Some(0))
+            .unwrap();
+        let device = Device::flex();
+        let config = FitConfig::doma(DomaFieldConfig::new(Variant::Trans).with_hidden(16))
+            .with_jacobian(JacobianKind::Autodiff);
+        let field = config
+            .model
+            .init(0, masked.canonical(), &device.clone().autodiff());
+        let mut objective = TrajectoryObjective::new(&field, &config, &masked, &device).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let inference = field.clone().valid();
+        let all: Vec<f32> = crate::readback::to_vec(
+            inference.warp(masked.canonical_tensor(&device), masked.time(1)),
+        )
+        .unwrap();
+        let target = full.frame(1);
+        let expected = (0..40)
+            .step_by(2)
+            .flat_map(|r| (0..3).map(move |c| 3 * r + c))
+            .map(|i| (all[i] - target[i]).abs() as f64)
+            .sum::<f64>()
+            / 60.0;
+        let (l1, _) = objective.step_loss(&field, 1, 0, &mut rng).unwrap();
+        let l1 = crate::readback::to_vec::<f64, 1, _>(l1).unwrap()[0];
+        assert!(
+            (l1 - expected).abs() < 1e-6 * expected.max(1.0),
+            "{l1} vs {expected}"
+        );
+        let (l1, total) = objective.step_loss(&field, 2, 0, &mut rng).unwrap();
+        let read = |t| crate::readback::to_vec::<f64, 1, _>(t).unwrap()[0];
+        assert_eq!((read(l1), read(total)), (0.0, 0.0));
     }
 }

@@ -71,7 +71,7 @@ impl<'a> Trainer<Model, TrajectoryObjective<'a>> {
     ) -> Result<Self> {
         config.validate()?;
         let ad = device.clone().autodiff();
-        let model = config.model.init(config.seed, data.frame(0), &ad);
+        let model = config.model.init(config.seed, data.canonical(), &ad);
         Trainer::new(model, config, data, device)
     }
 }

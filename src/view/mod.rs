@@ -82,7 +82,7 @@ pub fn view_html(
             (norm, Some(tris).filter(|t| !t.is_empty()), false)
         }
         None => (
-            as_points(own.trajectories.frame(0)),
+            as_points(own.trajectories.canonical()),
             own.faces.clone(),
             true,
         ),

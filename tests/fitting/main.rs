@@ -8,4 +8,5 @@ mod alignment;
 mod experiments_small;
 mod fit;
 mod run;
+mod tracks;
 mod weight_search;

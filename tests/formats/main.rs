@@ -9,4 +9,5 @@ mod anime;
 mod data;
 mod mesh;
 mod npy;
+mod tracks;
 mod traj;

@@ -1,0 +1,221 @@
+//! The `.npz` layouts of tracker output, detected by their keys:
+//!
+//! | layout | tracks | mask | frame |
+//! |---|---|---|---|
+//! | PointOdyssey `anno.npz` | `trajs_3d` `[T, N, 3]` (f16) | `valids` and `visibs` `[T, N]` (bool) | world; `extrinsics` `[T, 4, 4]` (world to camera) |
+//! | TAPVid-3D clip | `tracks_XYZ` `[T, N, 3]` | `visibility` `[T, N]` (bool) | camera |
+//!
+//! Any other archive is read as plain trajectories (one member, or the one named).
+//! PointOdyssey's `trajs_3d` holds ground truth even where a point is hidden; an entry
+//! counts as observed when it is valid and visible, or valid alone with
+//! [`TrackFile::count_hidden`]. Unobserved entries are never read ([`super::tracks`]).
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::npy::{npz_member_header, npz_members, read_npz_member, read_npz_trajectories};
+use super::tracks::Tracks;
+use crate::{DomaError, Result};
+use doma_formats::npy::NpyArray;
+use doma_formats::npz::NpzMember;
+
+/// The layout of a `.npz` file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Layout {
+    /// Complete trajectories `[T, N, 3]` (or `[N, 3]`): one member, every entry observed.
+    Plain,
+    /// PointOdyssey's `anno.npz`.
+    #[value(name = "pointodyssey")]
+    #[serde(rename = "pointodyssey")]
+    PointOdyssey,
+    /// A TAPVid-3D clip.
+    #[value(name = "tapvid3d")]
+    #[serde(rename = "tapvid3d")]
+    TapVid3d,
+}
+
+impl std::fmt::Display for Layout {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Layout::Plain => "plain",
+            Layout::PointOdyssey => "pointodyssey",
+            Layout::TapVid3d => "tapvid3d",
+        })
+    }
+}
+
+impl Layout {
+    /// The layout that `keys` (an archive's member names) show: PointOdyssey's
+    /// `trajs_3d`, TAPVid-3D's `tracks_XYZ`, else plain.
+    pub fn detect<'a>(keys: impl IntoIterator<Item = &'a str>) -> Layout {
+        let keys: Vec<&str> = keys.into_iter().collect();
+        if keys.contains(&"trajs_3d") {
+            Layout::PointOdyssey
+        } else if keys.contains(&"tracks_XYZ") {
+            Layout::TapVid3d
+        } else {
+            Layout::Plain
+        }
+    }
+
+    /// The keys of the tracks and the mask(s) this layout reads.
+    fn keys(self) -> &'static [&'static str] {
+        match self {
+            Layout::Plain => &[],
+            Layout::PointOdyssey => &["trajs_3d", "valids", "visibs"],
+            Layout::TapVid3d => &["tracks_XYZ", "visibility"],
+        }
+    }
+}
+
+/// The coordinate frame tracks are fitted in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum CoordFrame {
+    /// The world frame (PointOdyssey's own).
+    World,
+    /// The camera frame of each frame (TAPVid-3D's own; PointOdyssey's through its
+    /// `extrinsics`).
+    Camera,
+}
+
+/// How a tracker's file is read.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TrackFile {
+    /// The layout (default: detected from the keys).
+    #[serde(default)]
+    pub layout: Option<Layout>,
+    /// The coordinate frame (default: the layout's own).
+    #[serde(default)]
+    pub frame: Option<CoordFrame>,
+    /// Count PointOdyssey's valid but hidden entries as observed.
+    #[serde(default)]
+    pub count_hidden: bool,
+}
+
+impl TrackFile {
+    /// Whether every field is its default (a file read as it says).
+    pub fn is_default(&self) -> bool {
+        *self == TrackFile::default()
+    }
+}
+
+/// Reads the tracks of a `.npz` file in its layout ([`Layout::detect`], or `file.layout`).
+/// Errors name the file and the key: a missing key, a mask whose shape is not the tracks'
+/// `[T, N]`, an observed coordinate that is not finite (an f16 overflow reads as
+/// infinity), a frame or flag that the layout does not have.
+pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
+    let malformed = |reason: String| DomaError::Malformed {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
+    let members = npz_members(&bytes).map_err(malformed)?;
+    let names: Vec<&str> = members.iter().map(|m| m.name.as_str()).collect();
+    let layout = file
+        .layout
+        .unwrap_or_else(|| Layout::detect(names.iter().copied()));
+    let usage =
+        |what: &str| DomaError::Usage(format!("{what}: {} is read as {layout}", path.display()));
+    match (layout, file.frame) {
+        (Layout::Plain, Some(_)) => return Err(usage("--frame needs a tracker layout")),
+        (Layout::TapVid3d, Some(CoordFrame::World)) => {
+            return Err(usage(
+                "--frame world: TAPVid-3D's tracks are in the camera frame and it stores no camera pose",
+            ));
+        }
+        _ => {}
+    }
+    if file.count_hidden && layout != Layout::PointOdyssey {
+        return Err(usage("--count-hidden applies to PointOdyssey's valids"));
+    }
+    if layout == Layout::Plain {
+        let data = read_npz_trajectories(path, None)?;
+        return Ok(Tracks::complete(data));
+    }
+    let member = |key: &str| -> Result<&NpzMember> {
+        members.iter().find(|m| m.name == key).ok_or_else(|| {
+            malformed(format!(
+                "no key {key:?}, which the {layout} layout needs ({:?}); the archive holds {names:?}",
+                layout.keys()
+            ))
+        })
+    };
+    // Shapes are checked from the headers before any values are inflated.
+    let tracks_key = layout.keys()[0];
+    let tracks_member = member(tracks_key)?;
+    let header = npz_member_header(&bytes, tracks_member).map_err(malformed)?;
+    let (t, n) = match header.shape[..] {
+        [t, n, 3] => (t, n),
+        _ => {
+            return Err(malformed(format!(
+                "{tracks_key} has shape {:?}, not [T, N, 3]",
+                header.shape
+            )));
+        }
+    };
+    let half = header.is_half();
+    let read_mask = |key: &str| -> Result<Vec<bool>> {
+        let m = member(key)?;
+        let h = npz_member_header(&bytes, m).map_err(malformed)?;
+        if h.shape != [t, n] {
+            return Err(malformed(format!(
+                "{key} has shape {:?}, but {tracks_key} of shape [{t}, {n}, 3] needs [{t}, {n}]",
+                h.shape
+            )));
+        }
+        let a: NpyArray = read_npz_member(&bytes, m).map_err(malformed)?;
+        Ok(a.data.into_iter().map(|v| v != 0.0).collect())
+    };
+    let observed = match layout {
+        Layout::PointOdyssey => {
+            let valid = read_mask("valids")?;
+            if file.count_hidden {
+                valid
+            } else {
+                let visible = read_mask("visibs")?;
+                valid.iter().zip(visible).map(|(&a, b)| a && b).collect()
+            }
+        }
+        _ => read_mask("visibility")?,
+    };
+    let mut positions = read_npz_member(&bytes, tracks_member)
+        .map_err(malformed)?
+        .data;
+    if layout == Layout::PointOdyssey && file.frame == Some(CoordFrame::Camera) {
+        let m = member("extrinsics")?;
+        let h = npz_member_header(&bytes, m).map_err(malformed)?;
+        if h.shape != [t, 4, 4] {
+            return Err(malformed(format!(
+                "extrinsics has shape {:?}, but {t} frames need [{t}, 4, 4]",
+                h.shape
+            )));
+        }
+        let e = read_npz_member(&bytes, m).map_err(malformed)?.data;
+        to_camera(&mut positions, &e, n);
+    }
+    Tracks::new(t, n, positions, observed).map_err(|reason| {
+        let hint = if half && reason.contains("inf") {
+            " (an f16 value past ±65504 reads as infinity)"
+        } else {
+            ""
+        };
+        malformed(format!("{tracks_key}: {reason}{hint}"))
+    })
+}
+
+/// Applies frame `k`'s world-to-camera matrix (`extrinsics[k]`, `[4, 4]` row-major) to
+/// its `n` points: `p_cam = R p + t`.
+fn to_camera(positions: &mut [f32], extrinsics: &[f32], n: usize) {
+    for (k, frame) in positions.chunks_exact_mut(3 * n).enumerate() {
+        let e = &extrinsics[16 * k..16 * (k + 1)];
+        for p in frame.chunks_exact_mut(3) {
+            let q: [f32; 3] = std::array::from_fn(|r| {
+                e[4 * r] * p[0] + e[4 * r + 1] * p[1] + e[4 * r + 2] * p[2] + e[4 * r + 3]
+            });
+            p.copy_from_slice(&q);
+        }
+    }
+}

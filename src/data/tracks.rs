@@ -1,0 +1,536 @@
+//! Tracks as a tracker reports them: points seen in some frames and not others.
+//!
+//! A [`Tracks`] holds positions `[T, N, 3]` and an observed mask `[T, N]`; an unobserved
+//! entry may hold anything (NaN, a stale value, ground truth the tracker never saw). It
+//! becomes [`Trajectories`] once every track's canonical position is known
+//! ([`Tracks::into_trajectories`], docs/design.md §7):
+//! - the reference frame is the one with the most observed points (the earliest of a
+//!   tie), unless the user names one;
+//! - a track observed there starts from its observation;
+//! - a track not observed there starts from its observation in the nearest frame `s` where
+//!   it is seen, moved by the mean motion from `s` to the reference frame of its
+//!   [`NEIGHBOURS`] nearest tracks seen in both.
+//!
+//! The unobserved entries then store the track's linear interpolation ([`interpolate`]),
+//! which is also the first gap-filling baseline; [`neighbour_motion`] is the second.
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::Trajectories;
+use crate::metrics::PointTree;
+use crate::{DomaError, Result};
+
+/// The neighbours whose motion places an unseen track's canonical position, and predicts
+/// a hidden entry in the k-NN baseline.
+pub const NEIGHBOURS: usize = 8;
+
+/// Positions with an observed mask; unobserved entries are never read.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tracks {
+    frames: usize,
+    points: usize,
+    positions: Vec<f32>,
+    observed: Vec<bool>,
+}
+
+impl Tracks {
+    /// Checks and wraps positions `[T, N, 3]` and a mask `[T, N]` (both frame-major).
+    /// Refuses an empty sequence, lengths that do not match, and an observed entry that is
+    /// not finite (naming its frame and point).
+    pub fn new(
+        frames: usize,
+        points: usize,
+        positions: Vec<f32>,
+        observed: Vec<bool>,
+    ) -> std::result::Result<Self, String> {
+        if frames == 0 || points == 0 {
+            return Err(format!("{frames} frames of {points} points: no tracks"));
+        }
+        let entries = frames
+            .checked_mul(points)
+            .ok_or_else(|| format!("{frames} frames of {points} points overflow"))?;
+        if positions.len() != entries * 3 || observed.len() != entries {
+            return Err(format!(
+                "{} coordinates and a mask of {} entries do not fit {frames} frames of {points} points",
+                positions.len(),
+                observed.len()
+            ));
+        }
+        if let Some(e) = (0..entries)
+            .find(|&e| observed[e] && positions[3 * e..3 * e + 3].iter().any(|v| !v.is_finite()))
+        {
+            return Err(format!(
+                "point {} of frame {} is observed but not finite ({:?})",
+                e % points,
+                e / points,
+                &positions[3 * e..3 * e + 3]
+            ));
+        }
+        Ok(Tracks {
+            frames,
+            points,
+            positions,
+            observed,
+        })
+    }
+
+    /// Complete trajectories as tracks, every entry observed.
+    pub fn complete(data: Trajectories) -> Self {
+        let (frames, points) = (data.frames(), data.points());
+        Tracks {
+            frames,
+            points,
+            positions: data.into_positions(),
+            observed: vec![true; frames * points],
+        }
+    }
+
+    /// `T`.
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
+    /// `N`.
+    pub fn points(&self) -> usize {
+        self.points
+    }
+
+    /// The positions `[T, N, 3]` (unobserved entries as the file stored them).
+    pub fn positions(&self) -> &[f32] {
+        &self.positions
+    }
+
+    /// The observed mask `[T, N]`.
+    pub fn observed(&self) -> &[bool] {
+        &self.observed
+    }
+
+    /// The number of observed entries.
+    pub fn observed_count(&self) -> usize {
+        self.observed.iter().filter(|&&o| o).count()
+    }
+
+    /// The tracks observed in no frame, in order.
+    pub fn never_observed(&self) -> Vec<usize> {
+        (0..self.points)
+            .filter(|&i| (0..self.frames).all(|k| !self.observed[k * self.points + i]))
+            .collect()
+    }
+
+    /// The tracks at `indices`, in that order (each index checked by the caller).
+    pub fn select_points(&self, indices: &[usize]) -> Self {
+        let mut positions = Vec::with_capacity(self.frames * indices.len() * 3);
+        let mut observed = Vec::with_capacity(self.frames * indices.len());
+        for k in 0..self.frames {
+            for &i in indices {
+                let e = k * self.points + i;
+                positions.extend_from_slice(&self.positions[3 * e..3 * e + 3]);
+                observed.push(self.observed[e]);
+            }
+        }
+        Tracks {
+            frames: self.frames,
+            points: indices.len(),
+            positions,
+            observed,
+        }
+    }
+
+    /// The frames `range`, every `stride`-th. Refuses an empty selection or frames past
+    /// the end.
+    pub fn select_frames(
+        &self,
+        range: std::ops::Range<usize>,
+        stride: usize,
+    ) -> std::result::Result<Self, String> {
+        if stride == 0 || range.start >= range.end || range.end > self.frames {
+            return Err(format!(
+                "frames {}..{} (stride {stride}) do not select a clip of the {} frames",
+                range.start, range.end, self.frames
+            ));
+        }
+        let n = self.points;
+        let (mut positions, mut observed, mut count) = (Vec::new(), Vec::new(), 0);
+        for k in range.step_by(stride) {
+            positions.extend_from_slice(&self.positions[3 * k * n..3 * (k + 1) * n]);
+            observed.extend_from_slice(&self.observed[k * n..(k + 1) * n]);
+            count += 1;
+        }
+        Ok(Tracks {
+            frames: count,
+            points: n,
+            positions,
+            observed,
+        })
+    }
+
+    /// Marks the entries `(frame, point)` unobserved.
+    pub fn hide(&mut self, entries: &[(usize, usize)]) {
+        for &(k, i) in entries {
+            self.observed[k * self.points + i] = false;
+        }
+    }
+
+    /// The frame with the most observed points (the earliest of a tie).
+    pub fn most_observed_frame(&self) -> usize {
+        let counts = (0..self.frames).map(|k| {
+            self.observed[k * self.points..(k + 1) * self.points]
+                .iter()
+                .filter(|&&o| o)
+                .count()
+        });
+        // `max_by_key` keeps the last maximum; reversing the frames makes it the earliest.
+        counts
+            .enumerate()
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rev()
+            .max_by_key(|&(_, c)| c)
+            .map_or(0, |(k, _)| k)
+    }
+
+    /// The trajectories these tracks give: the canonical positions in `reference` (default:
+    /// [`Self::most_observed_frame`]) as the module says, the unobserved entries
+    /// [`interpolate`]d. Complete tracks with reference 0 give exactly the complete
+    /// [`Trajectories`]. Refuses a track that is never observed, with the count and the
+    /// first, and a reference frame past the end.
+    pub fn into_trajectories(self, reference: Option<usize>) -> Result<Trajectories> {
+        let never = self.never_observed();
+        if let Some(&first) = never.first() {
+            return Err(DomaError::InvalidData(format!(
+                "{} of the {} tracks are never observed (the first is track {first}); \
+                 --drop-unobserved goes on without them",
+                never.len(),
+                self.points
+            )));
+        }
+        let r = reference.unwrap_or_else(|| self.most_observed_frame());
+        if r >= self.frames {
+            return Err(DomaError::InvalidConfig(format!(
+                "reference frame {r} is past the last of the {} frames",
+                self.frames
+            )));
+        }
+        let filled = if self.observed.iter().all(|&o| o) {
+            self.positions
+        } else {
+            interpolate(self.frames, self.points, &self.positions, &self.observed)
+        };
+        let canonical = canonical_positions(self.frames, self.points, &filled, &self.observed, r)?;
+        Trajectories::new(self.frames, self.points, filled)?.with_observations(
+            self.observed,
+            r,
+            canonical,
+        )
+    }
+}
+
+/// Every entry of `positions` (`[T, N, 3]`) that `observed` (`[T, N]`) does not mark,
+/// replaced by its track's linear interpolation in frame index between the nearest
+/// observations before and after, or held at the first or last observation past the ends.
+/// A track with no observation is left as it is.
+pub fn interpolate(frames: usize, points: usize, positions: &[f32], observed: &[bool]) -> Vec<f32> {
+    let mut out = positions.to_vec();
+    let mut seen = Vec::with_capacity(frames);
+    for i in 0..points {
+        seen.clear();
+        seen.extend((0..frames).filter(|&k| observed[k * points + i]));
+        if seen.is_empty() || seen.len() == frames {
+            continue;
+        }
+        let at = |k: usize, c: usize| positions[3 * (k * points + i) + c];
+        let mut next = 0;
+        for k in 0..frames {
+            if observed[k * points + i] {
+                continue;
+            }
+            while next < seen.len() && seen[next] < k {
+                next += 1;
+            }
+            for c in 0..3 {
+                out[3 * (k * points + i) + c] = match (next.checked_sub(1), seen.get(next)) {
+                    (Some(p), Some(&b)) => {
+                        let a = seen[p];
+                        let w = (k - a) as f32 / (b - a) as f32;
+                        at(a, c) + w * (at(b, c) - at(a, c))
+                    }
+                    (Some(p), None) => at(seen[p], c),
+                    (None, Some(&b)) => at(b, c),
+                    (None, None) => unreachable!("the track has an observation"),
+                };
+            }
+        }
+    }
+    out
+}
+
+/// The canonical position of every track in frame `r`: its observation there, else its
+/// observation in the nearest frame `s` where it is seen (the earlier of two as near)
+/// moved by the mean `s → r` motion of its [`NEIGHBOURS`] nearest tracks (in frame `s`)
+/// that are seen in both frames, else that observation unmoved.
+fn canonical_positions(
+    frames: usize,
+    points: usize,
+    positions: &[f32],
+    observed: &[bool],
+    r: usize,
+) -> Result<Vec<f32>> {
+    let seen = |k: usize, i: usize| observed[k * points + i];
+    let at = |k: usize, i: usize| -> [f32; 3] {
+        let e = 3 * (k * points + i);
+        [positions[e], positions[e + 1], positions[e + 2]]
+    };
+    let mut canonical: Vec<f32> = positions[3 * r * points..3 * (r + 1) * points].to_vec();
+    // The unseen tracks grouped by the frame they are placed from.
+    let mut by_frame: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for i in (0..points).filter(|&i| !seen(r, i)) {
+        let s = (0..frames)
+            .filter(|&k| seen(k, i))
+            .min_by_key(|&k| (k.abs_diff(r), k))
+            .expect("every track is observed somewhere");
+        by_frame.entry(s).or_default().push(i);
+    }
+    for (s, tracks) in by_frame {
+        let both: Vec<usize> = (0..points).filter(|&i| seen(s, i) && seen(r, i)).collect();
+        let tree = if both.is_empty() {
+            None
+        } else {
+            let cloud: Vec<[f32; 3]> = both.iter().map(|&i| at(s, i)).collect();
+            Some(PointTree::new(&cloud)?)
+        };
+        for j in tracks {
+            let p = at(s, j);
+            let mut moved = p;
+            if let Some(tree) = &tree {
+                let near = tree.nearest_k(&p, NEIGHBOURS.min(both.len()));
+                for c in 0..3 {
+                    let motion: f64 = near
+                        .iter()
+                        .map(|&n| (at(r, both[n])[c] - at(s, both[n])[c]) as f64)
+                        .sum::<f64>()
+                        / near.len() as f64;
+                    moved[c] = (p[c] as f64 + motion) as f32;
+                }
+            }
+            canonical[3 * j..3 * j + 3].copy_from_slice(&moved);
+        }
+    }
+    Ok(canonical)
+}
+
+/// The k-NN gap-filling baseline: entry `(k, j)` predicted as `x_j` moved by the mean
+/// motion `x_i → y_i(k)` of the [`NEIGHBOURS`] tracks nearest to `x_j` in the canonical
+/// positions among those observed in frame `k` (track `j` itself excluded). An entry of a
+/// frame where no other track is observed stays at `x_j`.
+pub fn neighbour_motion(data: &Trajectories, entries: &[(usize, usize)]) -> Result<Vec<[f32; 3]>> {
+    let n = data.points();
+    let canonical = data.canonical();
+    let x = |i: usize| [canonical[3 * i], canonical[3 * i + 1], canonical[3 * i + 2]];
+    let mut out = vec![[0f32; 3]; entries.len()];
+    let mut order: Vec<usize> = (0..entries.len()).collect();
+    order.sort_by_key(|&e| entries[e].0);
+    let mut start = 0;
+    while start < order.len() {
+        let k = entries[order[start]].0;
+        let end = start + order[start..].partition_point(|&e| entries[e].0 == k);
+        let seen: Vec<usize> = (0..n).filter(|&i| data.is_observed(k, i)).collect();
+        let frame = data.frame(k);
+        let tree = if seen.is_empty() {
+            None
+        } else {
+            let cloud: Vec<[f32; 3]> = seen.iter().map(|&i| x(i)).collect();
+            Some(PointTree::new(&cloud)?)
+        };
+        for &e in &order[start..end] {
+            let j = entries[e].1;
+            let xj = x(j);
+            let mut y = xj;
+            if let Some(tree) = &tree {
+                let near: Vec<usize> = tree
+                    .nearest_k(&xj, (NEIGHBOURS + 1).min(seen.len()))
+                    .into_iter()
+                    .map(|m| seen[m])
+                    .filter(|&i| i != j)
+                    .take(NEIGHBOURS)
+                    .collect();
+                if !near.is_empty() {
+                    for c in 0..3 {
+                        let motion: f64 = near
+                            .iter()
+                            .map(|&i| (frame[3 * i + c] - canonical[3 * i + c]) as f64)
+                            .sum::<f64>()
+                            / near.len() as f64;
+                        y[c] = (xj[c] as f64 + motion) as f32;
+                    }
+                }
+            }
+            out[e] = y;
+        }
+        start = end;
+    }
+    Ok(out)
+}
+
+/// A seeded choice of about `fraction` of the observed entries of `tracks` to hide, in
+/// spans of 2 to 10 consecutive frames of one track (as a tracker loses a point for a
+/// while), leaving every track at least one observation. Returns the entries
+/// `(frame, point)`, sorted. Refuses a fraction outside `(0, 1)` or one that cannot be
+/// reached.
+pub fn hold_out_spans(
+    tracks: &Tracks,
+    fraction: f64,
+    seed: u64,
+) -> std::result::Result<Vec<(usize, usize)>, String> {
+    if !(fraction > 0.0 && fraction < 1.0) {
+        return Err(format!(
+            "a held-out fraction of {fraction} is not strictly between 0 and 1"
+        ));
+    }
+    let (t, n) = (tracks.frames, tracks.points);
+    let target = (fraction * tracks.observed_count() as f64).round() as usize;
+    let mut observed = tracks.observed.clone();
+    let mut left: Vec<usize> = (0..n)
+        .map(|i| (0..t).filter(|&k| observed[k * n + i]).count())
+        .collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut hidden = Vec::with_capacity(target);
+    let longest = t.clamp(1, 10);
+    let mut tries = 0usize;
+    while hidden.len() < target {
+        tries += 1;
+        if tries > 100 * (target + n) {
+            return Err(format!(
+                "cannot hide {fraction} of the {} observations in spans while every track \
+                 keeps one (hid {})",
+                tracks.observed_count(),
+                hidden.len()
+            ));
+        }
+        let i = rng.random_range(0..n);
+        let len = rng.random_range(longest.min(2)..=longest);
+        let start = rng.random_range(0..=t - len);
+        for k in start..start + len {
+            if hidden.len() == target || left[i] <= 1 {
+                break;
+            }
+            if observed[k * n + i] {
+                observed[k * n + i] = false;
+                left[i] -= 1;
+                hidden.push((k, i));
+            }
+        }
+    }
+    hidden.sort_unstable();
+    Ok(hidden)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `frames` frames of `points` points; point p in frame k is at (k + 10p, 2k, 0).
+    fn linear(frames: usize, points: usize) -> Vec<f32> {
+        (0..frames)
+            .flat_map(|k| (0..points).flat_map(move |p| [(k + 10 * p) as f32, 2.0 * k as f32, 0.0]))
+            .collect()
+    }
+
+    #[test]
+    fn interpolation_is_linear_between_observations_and_constant_past_the_ends() {
+        let positions = linear(5, 1);
+        // Seen in frames 1 and 3 only: frame 2 is their midpoint, 0 and 4 are held.
+        let observed = [false, true, false, true, false];
+        let mut poisoned = positions.clone();
+        for k in [0, 2, 4] {
+            poisoned[3 * k] = f32::NAN;
+        }
+        let out = interpolate(5, 1, &poisoned, &observed);
+        assert_eq!(&out[6..9], &[2.0, 4.0, 0.0]);
+        assert_eq!(&out[0..3], &[1.0, 2.0, 0.0]);
+        assert_eq!(&out[12..15], &[3.0, 6.0, 0.0]);
+    }
+
+    #[test]
+    fn an_unseen_track_starts_where_its_neighbours_motion_takes_it() {
+        // Three points translating by (1, 2, 0) per frame; point 2 is not seen in frame 0
+        // (the most observed frame) but is in frames 1 and 2: it starts 1 frame's motion
+        // back from frame 1, exactly its true frame-0 position.
+        let positions = linear(3, 3);
+        let mut observed = vec![true; 9];
+        observed[2] = false;
+        let tracks = Tracks::new(3, 3, positions.clone(), observed).unwrap();
+        assert_eq!(tracks.most_observed_frame(), 1);
+        let data = tracks.clone().into_trajectories(Some(0)).unwrap();
+        assert_eq!(data.reference(), 0);
+        assert_eq!(&data.canonical()[6..9], &[20.0, 0.0, 0.0]);
+        assert!(!data.is_observed(0, 2) && data.is_observed(1, 2));
+        // By default the reference is frame 1, where all three are seen.
+        let data = tracks.into_trajectories(None).unwrap();
+        assert_eq!((data.reference(), data.canonical()), (1, &positions[9..18]));
+    }
+
+    #[test]
+    fn complete_tracks_are_the_complete_trajectories() {
+        let t = Trajectories::new(4, 3, linear(4, 3)).unwrap();
+        assert_eq!(
+            Tracks::complete(t.clone()).into_trajectories(None).unwrap(),
+            t
+        );
+    }
+
+    #[test]
+    fn refusals_name_the_track_and_the_entry() {
+        let mut observed = vec![true; 6];
+        observed[1] = false;
+        observed[4] = false;
+        let err = Tracks::new(2, 3, linear(2, 3), observed)
+            .unwrap()
+            .into_trajectories(None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("1 of the 3 tracks") && err.contains("track 1"),
+            "{err}"
+        );
+        let mut positions = linear(2, 3);
+        positions[3 * 4 + 1] = f32::INFINITY;
+        let err = Tracks::new(2, 3, positions, vec![true; 6]).unwrap_err();
+        assert!(err.contains("point 1 of frame 1"), "{err}");
+        assert!(Tracks::new(2, 3, linear(2, 3), vec![true; 5]).is_err());
+    }
+
+    #[test]
+    fn the_neighbour_baseline_moves_a_point_with_its_neighbours() {
+        // Rigid translation: every neighbour's motion is the point's own.
+        let positions = linear(3, 12);
+        let mut observed = vec![true; 36];
+        observed[2 * 12 + 5] = false;
+        let data = Tracks::new(3, 12, positions.clone(), observed)
+            .unwrap()
+            .into_trajectories(Some(0))
+            .unwrap();
+        let y = neighbour_motion(&data, &[(2, 5)]).unwrap();
+        assert_eq!(y[0], [52.0, 4.0, 0.0]);
+    }
+
+    #[test]
+    fn held_out_spans_are_seeded_leave_every_track_seen_and_reach_the_fraction() {
+        let tracks = Tracks::new(20, 30, linear(20, 30), vec![true; 600]).unwrap();
+        let a = hold_out_spans(&tracks, 0.25, 7).unwrap();
+        assert_eq!(a, hold_out_spans(&tracks, 0.25, 7).unwrap());
+        assert_ne!(a, hold_out_spans(&tracks, 0.25, 8).unwrap());
+        assert_eq!(a.len(), 150);
+        let mut hidden = tracks.clone();
+        hidden.hide(&a);
+        assert!(hidden.never_observed().is_empty());
+        // In spans: most hidden entries have a hidden neighbour in time on their track.
+        let set: std::collections::BTreeSet<_> = a.iter().copied().collect();
+        let runs = a
+            .iter()
+            .filter(|&&(k, i)| set.contains(&(k + 1, i)) || (k > 0 && set.contains(&(k - 1, i))))
+            .count();
+        assert!(runs as f64 > 0.9 * a.len() as f64, "{runs} of {}", a.len());
+        assert!(hold_out_spans(&tracks, 1.0, 0).is_err());
+    }
+}

@@ -1,0 +1,119 @@
+//! `doma complete`: every track of a fitted run at every frame, gaps filled by the field.
+
+use std::path::Path;
+
+use burn::tensor::Device;
+use doma_formats::npy::NpyValues;
+
+use super::RunDir;
+use crate::data::layout::Layout;
+use crate::data::mesh::as_points;
+use crate::data::sequence::read_tracks;
+use crate::io::write_atomic;
+use crate::{DomaError, Result};
+
+/// What [`complete_run`] wrote.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Completion {
+    /// Frames.
+    pub frames: usize,
+    /// Tracks.
+    pub tracks: usize,
+    /// Entries the input observed (written as they were).
+    pub observed: usize,
+    /// Entries the field filled.
+    pub filled: usize,
+}
+
+/// Writes every track of the run in `run` at every frame of its clip into the `.npz`
+/// `out`, in the input's frame, units and track order: an observed entry as the input
+/// holds it, every other one warped by the fitted field from the track's canonical
+/// position. The keys are `tracks` (`f32 [T, N, 3]`) and `observed` (`bool [T, N]`, the
+/// input's mask), plus `kept` (`i64 [N]`, the input's index of each track) when the fit
+/// dropped tracks that were never observed. `layout` writes the keys of a tracker's
+/// layout instead: PointOdyssey's `trajs_3d` (as `f32`), `visibs` (the mask) and `valids`
+/// (all true), or TAPVid-3D's `tracks_XYZ` and `visibility`. The observations held out of
+/// the fit count as observed: they are the input's.
+pub fn complete_run(
+    run: &RunDir,
+    out: &Path,
+    layout: Option<Layout>,
+    device: &Device,
+) -> Result<Completion> {
+    let config = run.load_config()?;
+    let field = run.load_field(&config, device)?;
+    let sequence = config.load()?;
+    // The input again, clipped and kept as the fit's data was, for its own values.
+    let (mut input, _) = read_tracks(&config.data, &config.tracks)?;
+    if let Some([a, b]) = config.frames {
+        input = input
+            .select_frames(a..b, config.stride)
+            .map_err(DomaError::InvalidData)?;
+    } else if config.stride > 1 {
+        input = input
+            .select_frames(0..input.frames(), config.stride)
+            .map_err(DomaError::InvalidData)?;
+    }
+    if let Some(kept) = &sequence.kept {
+        input = input.select_points(kept);
+    }
+    let data = &sequence.trajectories;
+    if (input.frames(), input.points()) != (data.frames(), data.points()) {
+        return Err(DomaError::Malformed {
+            path: config.data.clone(),
+            reason: format!(
+                "now holds {} frames of {} tracks; the run fitted {} of {}",
+                input.frames(),
+                input.points(),
+                data.frames(),
+                data.points()
+            ),
+        });
+    }
+    let (t, n) = (data.frames(), data.points());
+    let mut tracks = input.positions().to_vec();
+    let seen = input.observed();
+    let canonical = as_points(data.canonical());
+    let (c, s) = (sequence.center, sequence.scale);
+    crate::warp::warp_frames(&field, &canonical, 0..t, t, device, |k, y| {
+        for (i, p) in y.iter().enumerate() {
+            if !seen[k * n + i] {
+                let e = 3 * (k * n + i);
+                for d in 0..3 {
+                    tracks[e + d] = p[d] * s + c[d];
+                }
+            }
+        }
+        Ok(())
+    })?;
+    let observed = seen.to_vec();
+    let kept: Option<Vec<i64>> = sequence
+        .kept
+        .as_ref()
+        .map(|k| k.iter().map(|&i| i as i64).collect());
+    let all_valid = vec![true; t * n];
+    let (tracks_key, mask_key) = match layout {
+        Some(Layout::PointOdyssey) => ("trajs_3d", "visibs"),
+        Some(Layout::TapVid3d) => ("tracks_XYZ", "visibility"),
+        Some(Layout::Plain) | None => ("tracks", "observed"),
+    };
+    let (shape3, shape2, shape1) = ([t, n, 3], [t, n], [n]);
+    let mut members: Vec<(&str, &[usize], NpyValues)> = vec![
+        (tracks_key, &shape3, NpyValues::F32(&tracks)),
+        (mask_key, &shape2, NpyValues::Bool(&observed)),
+    ];
+    if layout == Some(Layout::PointOdyssey) {
+        members.push(("valids", &shape2, NpyValues::Bool(&all_valid)));
+    }
+    if let Some(kept) = &kept {
+        members.push(("kept", &shape1, NpyValues::I64(kept)));
+    }
+    write_atomic(out, &doma_formats::npz::encode_npz_values(&members))?;
+    let observed = observed.iter().filter(|&&o| o).count();
+    Ok(Completion {
+        frames: t,
+        tracks: n,
+        observed,
+        filled: t * n - observed,
+    })
+}

@@ -1,0 +1,157 @@
+//! Fitting tracker output: complete tracks fit exactly as complete trajectories do, held-out
+//! observations are reported beside the two baselines, and `complete` writes every track
+//! at every frame in the input's order, with the input's observations untouched.
+
+use crate::common;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+use burn::tensor::Device;
+use doma::data::layout::{Layout, TrackFile, read_npz_tracks};
+use doma::data::mesh::read_obj;
+use doma::data::npy::read_npz;
+use doma::data::tracker::{TrackerConfig, TrackerView, simulate};
+use doma::data::traj::{read_traj, write_traj};
+use doma::field::{DomaFieldConfig, Variant};
+use doma::jacobian::JacobianKind;
+use doma::run::{FitOutcome, Report, RunConfig, RunDir, complete_run, eval_run, fit_run};
+use doma::siren::WithSirenShape;
+use doma::train::{FitConfig, WithSchedule};
+use doma_formats::npy::NpyValues;
+use doma_formats::npz::encode_npz_values;
+
+fn shipped(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("data")
+        .join(name)
+}
+
+fn view() -> TrackerView {
+    let truth = read_traj(shipped("md2_faerie.traj"))
+        .unwrap()
+        .select_frames(112..120, 1)
+        .unwrap();
+    let mesh = read_obj(shipped("md2_faerie.obj")).unwrap();
+    simulate(&truth, &mesh.faces, &TrackerConfig::default()).unwrap()
+}
+
+fn fit(data: &Path, run: &RunDir, edit: impl FnOnce(&mut RunConfig)) -> Report {
+    let config = FitConfig::doma(DomaFieldConfig::new(Variant::Affinity).with_hidden(32))
+        .with_iterations(4)
+        .with_smoothness_weight(0.1)
+        .with_jacobian(JacobianKind::Analytic)
+        .with_seed(2);
+    let mut c = RunConfig::new(data.to_path_buf(), config);
+    c.test_fraction = 0.25;
+    edit(&mut c);
+    let never = AtomicBool::new(false);
+    let _g = common::backward_lock();
+    match fit_run(run, Some(c), &Device::flex(), &never, None, false).unwrap() {
+        FitOutcome::Finished(report) => report,
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn complete_tracks_in_a_tracker_layout_fit_bit_for_bit_as_complete_trajectories() {
+    let v = view();
+    let dir = common::scratch("doma-allvisible");
+    let (traj, npz) = (dir.join("clip.traj"), dir.join("clip.npz"));
+    write_traj(&traj, &v.truth).unwrap();
+    let (t, n) = (v.truth.frames(), v.truth.points());
+    let all = vec![true; t * n];
+    std::fs::write(
+        &npz,
+        encode_npz_values(&[
+            (
+                "tracks_XYZ",
+                &[t, n, 3],
+                NpyValues::F32(v.truth.positions()),
+            ),
+            ("visibility", &[t, n], NpyValues::Bool(&all)),
+        ]),
+    )
+    .unwrap();
+    let a = fit(&traj, &RunDir::new(dir.join("a")), |_| {});
+    let b = fit(&npz, &RunDir::new(dir.join("b")), |_| {});
+    assert_eq!(a.epe_x1e4.to_bits(), b.epe_x1e4.to_bits());
+    assert_eq!(a.epe_per_frame_x1e4, b.epe_per_frame_x1e4);
+}
+
+#[test]
+fn held_out_observations_are_reported_beside_both_baselines_and_eval_repeats_them() {
+    let v = view();
+    let dir = common::scratch("doma-holdout");
+    let npz = dir.join("clip.npz");
+    v.write(&npz, Layout::TapVid3d).unwrap();
+    let run = RunDir::new(dir.join("run"));
+    let report = fit(&npz, &run, |c| {
+        c.drop_unobserved = true;
+        c.holdout_observations = Some(0.2);
+    });
+    let gaps = report.held_out_observations.clone().expect("a gap report");
+    assert!(gaps.entries > 0);
+    for e in [gaps.epe_x1e4, gaps.linear_x1e4, gaps.neighbours_x1e4] {
+        assert!(e.is_finite() && e > 0.0, "{gaps:?}");
+    }
+    let again = eval_run(&run, None, &Device::flex()).unwrap();
+    assert_eq!(again.held_out_observations, Some(gaps));
+    assert_eq!(again.epe_x1e4.to_bits(), report.epe_x1e4.to_bits());
+}
+
+#[test]
+fn a_completed_file_has_the_input_s_shape_order_and_observations() {
+    let v = view();
+    let dir = common::scratch("doma-complete");
+    let npz = dir.join("clip.npz");
+    v.write(&npz, Layout::TapVid3d).unwrap();
+    let run = RunDir::new(dir.join("run"));
+    fit(&npz, &run, |c| c.drop_unobserved = true);
+    let input = read_npz_tracks(&npz, &TrackFile::default()).unwrap();
+    let (t, n) = (input.frames(), input.points());
+    let out = dir.join("done.npz");
+    let done = complete_run(&run, &out, None, &Device::flex()).unwrap();
+    let members = read_npz(&out).unwrap();
+    let get = |k: &str| members.iter().find(|m| m.0 == k).unwrap().1.clone();
+    let kept: Vec<usize> = get("kept").data.iter().map(|&i| i as usize).collect();
+    assert!(kept.len() < n && kept.windows(2).all(|w| w[0] < w[1]));
+    let m = kept.len();
+    assert_eq!((done.frames, done.tracks), (t, m));
+    let (tracks, observed) = (get("tracks"), get("observed"));
+    assert_eq!(
+        (tracks.shape, observed.shape.clone()),
+        (vec![t, m, 3], vec![t, m])
+    );
+    for k in 0..t {
+        for (r, &i) in kept.iter().enumerate() {
+            let seen = input.observed()[k * n + i];
+            assert_eq!(observed.data[k * m + r] == 1.0, seen);
+            let got = &tracks.data[3 * (k * m + r)..3 * (k * m + r) + 3];
+            let had = &input.positions()[3 * (k * n + i)..3 * (k * n + i) + 3];
+            if seen {
+                assert_eq!(got, had, "frame {k}, track {i}");
+            } else {
+                assert!(got.iter().all(|x| x.is_finite()));
+            }
+        }
+    }
+    assert_eq!(
+        done.filled,
+        observed.data.iter().filter(|&&o| o == 0.0).count()
+    );
+    // In PointOdyssey's layout the file reads back as tracks whose every entry is valid.
+    let po = dir.join("done_po.npz");
+    complete_run(&run, &po, Some(Layout::PointOdyssey), &Device::flex()).unwrap();
+    let back = read_npz_tracks(&po, &TrackFile::default()).unwrap();
+    assert_eq!(back.positions(), &tracks.data[..]);
+    let counted = read_npz_tracks(
+        &po,
+        &TrackFile {
+            count_hidden: true,
+            ..TrackFile::default()
+        },
+    )
+    .unwrap();
+    assert!(counted.observed().iter().all(|&o| o));
+}

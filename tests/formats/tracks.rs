@@ -1,0 +1,249 @@
+//! Tracker output: PointOdyssey and TAPVid-3D `.npz` files made from a shipped mesh by the
+//! simulated tracker (`doma::data::tracker`), read back with their masks; every refusal
+//! names the file and the key; a hidden entry's stored value changes nothing.
+
+use crate::common;
+
+use std::path::{Path, PathBuf};
+
+use doma::data::layout::{CoordFrame, Layout, TrackFile, read_npz_tracks};
+use doma::data::mesh::read_obj;
+use doma::data::sequence::{LoadOptions, load_sequence_with};
+use doma::data::tracker::{TrackerConfig, TrackerView, simulate};
+use doma::data::traj::read_traj;
+use doma_formats::npy::NpyValues;
+use doma_formats::npy::f32_to_f16;
+use doma_formats::npz::encode_npz_values;
+
+fn shipped(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("data")
+        .join(name)
+}
+
+/// The faerie's "wave" clip as a tracker sees it.
+fn view() -> TrackerView {
+    let truth = read_traj(shipped("md2_faerie.traj"))
+        .unwrap()
+        .select_frames(112..123, 1)
+        .unwrap();
+    let mesh = read_obj(shipped("md2_faerie.obj")).unwrap();
+    simulate(&truth, &mesh.faces, &TrackerConfig::default()).unwrap()
+}
+
+fn read(path: &Path, file: &TrackFile) -> doma::Result<doma::data::tracks::Tracks> {
+    read_npz_tracks(path, file)
+}
+
+#[test]
+fn the_simulated_tracker_hides_back_faces_spans_and_late_starts() {
+    let v = view();
+    let (t, n) = (v.truth.frames(), v.truth.points());
+    let observed = v.observed();
+    let hidden = observed.iter().filter(|&&o| !o).count();
+    // Roughly half of a closed mesh faces away from a camera.
+    assert!(
+        hidden > t * n / 4 && hidden < 3 * t * n / 4,
+        "{hidden} of {}",
+        t * n
+    );
+    let late = (0..n).filter(|&i| !v.valid[i]).count();
+    assert!(late > 0 && late < n / 2, "{late} late tracks");
+}
+
+#[test]
+fn pointodyssey_round_trips_with_its_mask_frames_and_hidden_count() {
+    let v = view();
+    let dir = common::scratch("doma-po");
+    let path = dir.join("anno.npz");
+    v.write(&path, Layout::PointOdyssey).unwrap();
+    let tracks = read(&path, &TrackFile::default()).unwrap();
+    assert_eq!(
+        (tracks.frames(), tracks.points()),
+        (v.truth.frames(), v.truth.points())
+    );
+    assert_eq!(tracks.observed(), &v.observed()[..]);
+    // World frame, rounded to halves.
+    let half = |x: f32| {
+        doma_formats::npy::parse_npy(&doma_formats::npy::encode_npy_values(
+            &[1],
+            NpyValues::F16(&[x]),
+        ))
+        .unwrap()
+        .data[0]
+    };
+    for (a, b) in tracks.positions().iter().zip(v.truth.positions()) {
+        assert_eq!(*a, half(*b));
+    }
+    // Valid but hidden entries count with --count-hidden.
+    let counted = read(
+        &path,
+        &TrackFile {
+            count_hidden: true,
+            ..TrackFile::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(counted.observed(), &v.valid[..]);
+    // The camera frame applies the extrinsics.
+    let camera = read(
+        &path,
+        &TrackFile {
+            frame: Some(CoordFrame::Camera),
+            ..TrackFile::default()
+        },
+    )
+    .unwrap();
+    let expected = v.camera_positions();
+    for (a, b) in camera.positions().iter().zip(&expected) {
+        assert!((a - b).abs() < 0.1, "{a} vs {b}");
+    }
+}
+
+#[test]
+fn tapvid3d_round_trips_in_its_camera_frame_exactly() {
+    let v = view();
+    let dir = common::scratch("doma-tv");
+    let path = dir.join("clip.npz");
+    v.write(&path, Layout::TapVid3d).unwrap();
+    let tracks = read(&path, &TrackFile::default()).unwrap();
+    assert_eq!(tracks.positions(), &v.camera_positions()[..]);
+    assert_eq!(tracks.observed(), &v.observed()[..]);
+    // Forcing the other layout names the key it lacks.
+    let err = read(
+        &path,
+        &TrackFile {
+            layout: Some(Layout::PointOdyssey),
+            ..TrackFile::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("clip.npz") && err.contains("trajs_3d"),
+        "{err}"
+    );
+    for (file, flag) in [
+        (
+            TrackFile {
+                frame: Some(CoordFrame::World),
+                ..TrackFile::default()
+            },
+            "--frame world",
+        ),
+        (
+            TrackFile {
+                count_hidden: true,
+                ..TrackFile::default()
+            },
+            "--count-hidden",
+        ),
+    ] {
+        let err = read(&path, &file).unwrap_err().to_string();
+        assert!(err.contains(flag) && err.contains("clip.npz"), "{err}");
+    }
+}
+
+/// A PointOdyssey-like archive of 2 frames × 3 tracks with the given members replaced.
+fn archive(path: &Path, trajs: &[f32], visibs: (&[usize], &[bool]), drop: Option<&str>) {
+    let valids = [true; 6];
+    let members: Vec<(&str, &[usize], NpyValues)> = vec![
+        ("trajs_3d", &[2, 3, 3], NpyValues::F16(trajs)),
+        ("visibs", visibs.0, NpyValues::Bool(visibs.1)),
+        ("valids", &[2, 3], NpyValues::Bool(&valids)),
+    ];
+    let kept: Vec<_> = members.into_iter().filter(|m| Some(m.0) != drop).collect();
+    std::fs::write(path, encode_npz_values(&kept)).unwrap();
+}
+
+#[test]
+fn bad_tracker_files_are_refused_naming_the_file_and_the_key() {
+    let dir = common::scratch("doma-bad-tracks");
+    let path = dir.join("anno.npz");
+    let trajs: Vec<f32> = (0..18).map(|i| i as f32).collect();
+    let seen = [true; 6];
+    let check = |needles: &[&str]| {
+        let err = read(&path, &TrackFile::default()).unwrap_err().to_string();
+        assert!(err.contains("anno.npz"), "{err}");
+        for n in needles {
+            assert!(err.contains(n), "{err} lacks {n}");
+        }
+    };
+    archive(&path, &trajs, (&[2, 3], &seen), Some("visibs"));
+    check(&["no key \"visibs\""]);
+    archive(&path, &trajs, (&[3, 2], &seen), None);
+    check(&["visibs has shape [3, 2]", "[2, 3]"]);
+    // A coordinate past f16's range is stored as infinity: refused where observed...
+    let mut big = trajs.clone();
+    big[4] = 1e6;
+    assert_eq!(f32_to_f16(1e6), 0x7c00);
+    archive(&path, &big, (&[2, 3], &seen), None);
+    check(&["trajs_3d", "point 1 of frame 0", "inf", "f16"]);
+    // ... and ignored where hidden.
+    let mut hidden = seen;
+    hidden[1] = false;
+    archive(&path, &big, (&[2, 3], &hidden), None);
+    assert!(read(&path, &TrackFile::default()).is_ok());
+}
+
+#[test]
+fn a_never_observed_track_is_refused_with_its_count_or_dropped_and_recorded() {
+    let dir = common::scratch("doma-never");
+    let path = dir.join("anno.npz");
+    let trajs: Vec<f32> = (0..18).map(|i| (i % 7) as f32).collect();
+    // Track 1 is seen in neither frame.
+    let seen = [true, false, true, true, false, true];
+    archive(&path, &trajs, (&[2, 3], &seen), None);
+    let err = load_sequence_with(&path, &LoadOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("anno.npz") && err.contains("1 of the 3 tracks") && err.contains("track 1"),
+        "{err}"
+    );
+    let options = LoadOptions {
+        drop_unobserved: true,
+        ..LoadOptions::default()
+    };
+    let seq = load_sequence_with(&path, &options).unwrap();
+    assert_eq!(seq.kept, Some(vec![0, 2]));
+    assert_eq!(seq.trajectories.points(), 2);
+}
+
+#[test]
+fn a_hidden_entry_s_stored_value_changes_nothing() {
+    let v = view();
+    let dir = common::scratch("doma-honour");
+    let (a, b) = (dir.join("a.npz"), dir.join("b.npz"));
+    v.write(&a, Layout::TapVid3d).unwrap();
+    // The same file with every hidden entry's coordinates replaced by NaN or garbage.
+    let observed = v.observed();
+    let mut xyz = v.camera_positions();
+    for (e, o) in observed.iter().enumerate() {
+        if !o {
+            xyz[3 * e] = if e % 2 == 0 { f32::NAN } else { 1e30 };
+        }
+    }
+    let (t, n) = (v.truth.frames(), v.truth.points());
+    std::fs::write(
+        &b,
+        encode_npz_values(&[
+            ("tracks_XYZ", &[t, n, 3], NpyValues::F32(&xyz)),
+            ("visibility", &[t, n], NpyValues::Bool(&observed)),
+        ]),
+    )
+    .unwrap();
+    let options = LoadOptions {
+        drop_unobserved: true,
+        hold_out: Some((0.2, 4)),
+        ..LoadOptions::default()
+    };
+    let (sa, sb) = (
+        load_sequence_with(&a, &options).unwrap(),
+        load_sequence_with(&b, &options).unwrap(),
+    );
+    assert_eq!(sa.trajectories, sb.trajectories);
+    assert_eq!((sa.center, sa.scale), (sb.center, sb.scale));
+    assert_eq!(sa.held_out, sb.held_out);
+    assert!(sa.trajectories.positions().iter().all(|x| x.is_finite()));
+}
