@@ -11,6 +11,83 @@ pub fn trajectory_l1(predicted: Tensor<2>, target: Tensor<2>) -> Tensor<1> {
     (predicted - target).abs().mean()
 }
 
+/// The per-coordinate penalty of the trajectory loss. Real tracks carry outliers; a robust
+/// penalty bounds their pull on the fit.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DataPenalty {
+    /// `|r|`, the paper's trajectory loss.
+    L1,
+    /// Huber: `r² / (2δ)` for `|r| ≤ δ`, `|r| − δ/2` beyond (L1's slope in the tails).
+    Huber {
+        /// The threshold `δ`, in normalised units.
+        delta: f64,
+    },
+    /// Charbonnier: `√(r² + ε²) − ε`.
+    Charbonnier {
+        /// The smoothing `ε`, in normalised units.
+        epsilon: f64,
+    },
+}
+
+impl DataPenalty {
+    /// Refuses a threshold that is not finite and positive.
+    pub fn validate(&self) -> Result<(), String> {
+        match *self {
+            DataPenalty::L1 => Ok(()),
+            DataPenalty::Huber { delta: s } | DataPenalty::Charbonnier { epsilon: s } => {
+                if s.is_finite() && s > 0.0 {
+                    Ok(())
+                } else {
+                    Err(format!("the data penalty's scale {s} must be positive"))
+                }
+            }
+        }
+    }
+
+    /// The penalty of each residual (any shape).
+    pub fn apply<const D: usize>(&self, residual: Tensor<D>) -> Tensor<D> {
+        match *self {
+            DataPenalty::L1 => residual.abs(),
+            DataPenalty::Huber { delta } => {
+                // With c = min(|r|, δ): c (|r| − c/2) / δ is both branches at once.
+                let a = residual.abs();
+                let c = a.clone().clamp_max(delta);
+                c.clone().mul(a - c.div_scalar(2.0)).div_scalar(delta)
+            }
+            DataPenalty::Charbonnier { epsilon } => residual
+                .square()
+                .add_scalar(epsilon * epsilon)
+                .sqrt()
+                .sub_scalar(epsilon),
+        }
+    }
+}
+
+/// The trajectory loss with a per-coordinate `penalty` and per-point `weights` (`[N, 1]`,
+/// non-negative, a tracker's confidence): `Σ_i w_i Σ_c ρ(ŷ_ic − y_ic) / (3 Σ_i w_i)`, the
+/// weighted mean. With [`DataPenalty::L1`] and no weights it is [`trajectory_l1`], computed
+/// the same way. All-zero weights give 0.
+pub fn trajectory_loss(
+    predicted: Tensor<2>,
+    target: Tensor<2>,
+    penalty: DataPenalty,
+    weights: Option<Tensor<2>>,
+) -> Tensor<1> {
+    let rho = penalty.apply(predicted - target);
+    match weights {
+        None => rho.mean(),
+        Some(w) => {
+            let total = w
+                .clone()
+                .sum()
+                .mul_scalar(3.0)
+                .clamp_min(f32::MIN_POSITIVE as f64);
+            rho.mul(w).sum().div(total)
+        }
+    }
+}
+
 /// How the smoothness loss `L_H` treats each Jacobian entry (docs/reference.md §4.2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]

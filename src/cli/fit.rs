@@ -7,6 +7,7 @@ use crate::cli::{ClipArgs, WeightSearchArgs, fraction, weight};
 use crate::data::layout::{CoordFrame, Layout};
 use crate::field::Variant;
 use crate::jacobian::JacobianKind;
+use crate::loss::DataPenalty;
 use crate::run::{FitOutcome, ModelChoice, RunConfig, RunDir, RunSpec, fit_run};
 use crate::train::FitConfig;
 use crate::train::select::Weight;
@@ -23,7 +24,7 @@ pub struct FitArgs {
     #[arg(long, required_unless_present = "resume", conflicts_with = "resume")]
     pub out: Option<PathBuf>,
     /// Continue the interrupted run in this folder from its last checkpoint.
-    #[arg(long, conflicts_with_all = ["data", "config", "variant", "iters", "test_fraction", "mesh", "frames", "stride", "jacobian", "h_weight", "seed", "checkpoint_every", "points_per_step", "layout", "frame", "count_hidden", "reference_frame", "drop_unobserved", "holdout_observations"])]
+    #[arg(long, conflicts_with_all = ["data", "config", "variant", "iters", "test_fraction", "mesh", "frames", "stride", "jacobian", "h_weight", "seed", "checkpoint_every", "points_per_step", "layout", "frame", "count_hidden", "reference_frame", "drop_unobserved", "holdout_observations", "confidence", "robust"])]
     pub resume: Option<PathBuf>,
     /// A fit config (JSON, the `fit` part of a run's config.json; missing fields take
     /// their defaults); flags override it.
@@ -87,9 +88,41 @@ pub struct FitArgs {
     /// report the EPE on them beside linear interpolation and k-NN.
     #[arg(long, value_name = "F", value_parser = fraction)]
     pub holdout_observations: Option<f64>,
+    /// The key of a `[T, N]` array of per-observation confidence weights in a tracker's
+    /// .npz: each observation's share of the trajectory loss.
+    #[arg(long, value_name = "KEY")]
+    pub confidence: Option<String>,
+    /// A robust trajectory loss for tracks with outliers: `huber[:DELTA]` or
+    /// `charbonnier[:EPSILON]` (normalised units, default 0.01), or `l1` (the paper's).
+    #[arg(long, value_name = "PENALTY", value_parser = data_penalty)]
+    pub robust: Option<DataPenalty>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// Parses `l1`, `huber[:DELTA]` or `charbonnier[:EPSILON]`.
+pub fn data_penalty(s: &str) -> std::result::Result<DataPenalty, String> {
+    let (kind, scale) = match s.split_once(':') {
+        Some((k, v)) => (
+            k,
+            v.parse::<f64>()
+                .map_err(|_| format!("`{v}` is not a number"))?,
+        ),
+        None => (s, 0.01),
+    };
+    let penalty = match kind {
+        "l1" if !s.contains(':') => DataPenalty::L1,
+        "huber" => DataPenalty::Huber { delta: scale },
+        "charbonnier" => DataPenalty::Charbonnier { epsilon: scale },
+        _ => {
+            return Err(format!(
+                "`{s}` is not l1, huber[:DELTA] or charbonnier[:EPSILON]"
+            ));
+        }
+    };
+    penalty.validate()?;
+    Ok(penalty)
 }
 
 impl FitArgs {
@@ -117,6 +150,8 @@ impl FitArgs {
             reference_frame: self.reference_frame,
             drop_unobserved: self.drop_unobserved.then_some(true),
             holdout_observations: self.holdout_observations,
+            confidence: self.confidence.clone(),
+            data_penalty: self.robust,
         }
     }
 
@@ -188,6 +223,27 @@ pub fn run(args: &FitArgs) -> Result<()> {
                 run.dir.display()
             );
             crate::cli::interrupt::exit();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn robust_penalties_parse_with_and_without_a_scale() {
+        assert_eq!(data_penalty("l1"), Ok(DataPenalty::L1));
+        assert_eq!(
+            data_penalty("huber"),
+            Ok(DataPenalty::Huber { delta: 0.01 })
+        );
+        assert_eq!(
+            data_penalty("charbonnier:0.002"),
+            Ok(DataPenalty::Charbonnier { epsilon: 0.002 })
+        );
+        for bad in ["huber:-1", "huber:x", "l2", "l1:3", "charbonnier:0"] {
+            assert!(data_penalty(bad).is_err(), "{bad}");
         }
     }
 }

@@ -93,6 +93,9 @@ pub struct TrackFile {
     /// Count PointOdyssey's valid but hidden entries as observed.
     #[serde(default)]
     pub count_hidden: bool,
+    /// The key of a `[T, N]` array of per-observation confidence weights.
+    #[serde(default)]
+    pub confidence: Option<String>,
 }
 
 impl TrackFile {
@@ -132,6 +135,9 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
         return Err(usage("--count-hidden applies to PointOdyssey's valids"));
     }
     if layout == Layout::Plain {
+        if file.confidence.is_some() {
+            return Err(usage("--confidence needs a tracker layout"));
+        }
         let data = read_npz_trajectories(path, None)?;
         return Ok(Tracks::complete(data));
     }
@@ -169,6 +175,17 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
         let a: NpyArray = read_npz_member(&bytes, m).map_err(malformed)?;
         Ok(a.data.into_iter().map(|v| v != 0.0).collect())
     };
+    let read_weights = |key: &str| -> Result<Vec<f32>> {
+        let m = member(key)?;
+        let h = npz_member_header(&bytes, m).map_err(malformed)?;
+        if h.shape != [t, n] {
+            return Err(malformed(format!(
+                "{key} has shape {:?}, but {tracks_key} of shape [{t}, {n}, 3] needs [{t}, {n}]",
+                h.shape
+            )));
+        }
+        Ok(read_npz_member(&bytes, m).map_err(malformed)?.data)
+    };
     let observed = match layout {
         Layout::PointOdyssey => {
             let valid = read_mask("valids")?;
@@ -196,14 +213,20 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
         let e = read_npz_member(&bytes, m).map_err(malformed)?.data;
         to_camera(&mut positions, &e, n);
     }
-    Tracks::new(t, n, positions, observed).map_err(|reason| {
+    let tracks = Tracks::new(t, n, positions, observed).map_err(|reason| {
         let hint = if half && reason.contains("inf") {
             " (an f16 value past ±65504 reads as infinity)"
         } else {
             ""
         };
         malformed(format!("{tracks_key}: {reason}{hint}"))
-    })
+    })?;
+    match &file.confidence {
+        Some(key) => tracks
+            .with_weights(read_weights(key)?)
+            .map_err(|reason| malformed(format!("{key}: {reason}"))),
+        None => Ok(tracks),
+    }
 }
 
 /// Applies frame `k`'s world-to-camera matrix (`extrinsics[k]`, `[4, 4]` row-major) to

@@ -54,6 +54,7 @@ impl From<doma_formats::Frames> for Trajectories {
             observed: None,
             canonical: None,
             reference: 0,
+            weights: None,
         }
     }
 }
@@ -79,6 +80,8 @@ pub struct Trajectories {
     canonical: Option<Vec<f32>>,
     /// The frame the canonical positions belong to.
     reference: usize,
+    /// `[T, N]`, each observation's confidence weight; `None`: all weigh the same.
+    weights: Option<Vec<f32>>,
 }
 
 impl Trajectories {
@@ -95,7 +98,38 @@ impl Trajectories {
             observed: None,
             canonical: None,
             reference: 0,
+            weights: None,
         })
+    }
+
+    /// These trajectories with a confidence weight per entry (`[T, N]`, finite and
+    /// non-negative), which scales each observation's share of the trajectory loss.
+    pub fn with_weights(mut self, weights: Vec<f32>) -> Result<Self> {
+        if weights.len() != self.frames * self.points {
+            return Err(DomaError::InvalidData(format!(
+                "{} weights for {} frames of {} points",
+                weights.len(),
+                self.frames,
+                self.points
+            )));
+        }
+        if let Some(e) = weights.iter().position(|w| !(w.is_finite() && *w >= 0.0)) {
+            return Err(DomaError::InvalidData(format!(
+                "the weight of point {} in frame {} is {}: weights are finite and non-negative",
+                e % self.points,
+                e / self.points,
+                weights[e]
+            )));
+        }
+        self.weights = Some(weights);
+        Ok(self)
+    }
+
+    /// Frame `k`'s confidence weights `[N]`, if the data has any.
+    pub fn weights_in_frame(&self, k: usize) -> Option<&[f32]> {
+        self.weights
+            .as_deref()
+            .map(|w| &w[k * self.points..(k + 1) * self.points])
     }
 
     /// These trajectories with the observed mask `observed` (`[T, N]`, frame-major) and
@@ -239,7 +273,14 @@ impl Trajectories {
                 positions.extend_from_slice(&frame[3 * i..3 * i + 3]);
             }
         }
-        let out = Trajectories::new(self.frames, indices.len(), positions)?;
+        let mut out = Trajectories::new(self.frames, indices.len(), positions)?;
+        if let Some(w) = &self.weights {
+            out.weights = Some(
+                (0..self.frames)
+                    .flat_map(|k| indices.iter().map(move |&i| w[k * self.points + i]))
+                    .collect(),
+            );
+        }
         if self.observed.is_none() && self.canonical.is_none() {
             return Ok(out);
         }
@@ -259,9 +300,9 @@ impl Trajectories {
     /// and masked data (a clip of tracks is taken before their canonical positions are
     /// found, [`tracks::Tracks::select_frames`]).
     pub fn select_frames(&self, range: std::ops::Range<usize>, stride: usize) -> Result<Self> {
-        if self.canonical.is_some() {
+        if self.canonical.is_some() || self.weights.is_some() {
             return Err(DomaError::InvalidData(
-                "a clip of masked tracks is taken before their canonical positions are found"
+                "a clip of masked or weighted tracks is taken before their canonical positions are found"
                     .into(),
             ));
         }
@@ -326,6 +367,7 @@ impl Trajectories {
             observed: self.observed.clone(),
             canonical: self.canonical.as_deref().map(normalize),
             reference: self.reference,
+            weights: self.weights.clone(),
         };
         Ok((out, center, scale))
     }

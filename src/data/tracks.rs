@@ -32,6 +32,8 @@ pub struct Tracks {
     points: usize,
     positions: Vec<f32>,
     observed: Vec<bool>,
+    /// `[T, N]`, each observation's confidence weight (0 where unobserved).
+    weights: Option<Vec<f32>>,
 }
 
 impl Tracks {
@@ -72,7 +74,35 @@ impl Tracks {
             points,
             positions,
             observed,
+            weights: None,
         })
+    }
+
+    /// These tracks with a confidence weight per entry (`[T, N]`): finite and
+    /// non-negative where observed (the error names the frame and point); an unobserved
+    /// entry's weight is never read.
+    pub fn with_weights(mut self, mut weights: Vec<f32>) -> std::result::Result<Self, String> {
+        if weights.len() != self.observed.len() {
+            return Err(format!(
+                "{} weights for {} frames of {} tracks",
+                weights.len(),
+                self.frames,
+                self.points
+            ));
+        }
+        for (e, w) in weights.iter_mut().enumerate() {
+            if !self.observed[e] {
+                *w = 0.0;
+            } else if !(w.is_finite() && *w >= 0.0) {
+                return Err(format!(
+                    "the weight of point {} in frame {} is {w}: weights are finite and non-negative",
+                    e % self.points,
+                    e / self.points
+                ));
+            }
+        }
+        self.weights = Some(weights);
+        Ok(self)
     }
 
     /// Complete trajectories as tracks, every entry observed.
@@ -83,6 +113,7 @@ impl Tracks {
             points,
             positions: data.into_positions(),
             observed: vec![true; frames * points],
+            weights: None,
         }
     }
 
@@ -106,6 +137,11 @@ impl Tracks {
         &self.observed
     }
 
+    /// The confidence weights `[T, N]` (0 where unobserved), if any.
+    pub fn weights(&self) -> Option<&[f32]> {
+        self.weights.as_deref()
+    }
+
     /// The number of observed entries.
     pub fn observed_count(&self) -> usize {
         self.observed.iter().filter(|&&o| o).count()
@@ -122,11 +158,15 @@ impl Tracks {
     pub fn select_points(&self, indices: &[usize]) -> Self {
         let mut positions = Vec::with_capacity(self.frames * indices.len() * 3);
         let mut observed = Vec::with_capacity(self.frames * indices.len());
+        let mut weights = self.weights.as_ref().map(|_| Vec::new());
         for k in 0..self.frames {
             for &i in indices {
                 let e = k * self.points + i;
                 positions.extend_from_slice(&self.positions[3 * e..3 * e + 3]);
                 observed.push(self.observed[e]);
+                if let (Some(out), Some(w)) = (&mut weights, &self.weights) {
+                    out.push(w[e]);
+                }
             }
         }
         Tracks {
@@ -134,6 +174,7 @@ impl Tracks {
             points: indices.len(),
             positions,
             observed,
+            weights,
         }
     }
 
@@ -152,9 +193,13 @@ impl Tracks {
         }
         let n = self.points;
         let (mut positions, mut observed, mut count) = (Vec::new(), Vec::new(), 0);
+        let mut weights = self.weights.as_ref().map(|_| Vec::new());
         for k in range.step_by(stride) {
             positions.extend_from_slice(&self.positions[3 * k * n..3 * (k + 1) * n]);
             observed.extend_from_slice(&self.observed[k * n..(k + 1) * n]);
+            if let (Some(out), Some(w)) = (&mut weights, &self.weights) {
+                out.extend_from_slice(&w[k * n..(k + 1) * n]);
+            }
             count += 1;
         }
         Ok(Tracks {
@@ -162,6 +207,7 @@ impl Tracks {
             points: n,
             positions,
             observed,
+            weights,
         })
     }
 
@@ -169,6 +215,9 @@ impl Tracks {
     pub fn hide(&mut self, entries: &[(usize, usize)]) {
         for &(k, i) in entries {
             self.observed[k * self.points + i] = false;
+            if let Some(w) = &mut self.weights {
+                w[k * self.points + i] = 0.0;
+            }
         }
     }
 
@@ -218,11 +267,15 @@ impl Tracks {
             interpolate(self.frames, self.points, &self.positions, &self.observed)
         };
         let canonical = canonical_positions(self.frames, self.points, &filled, &self.observed, r)?;
-        Trajectories::new(self.frames, self.points, filled)?.with_observations(
+        let data = Trajectories::new(self.frames, self.points, filled)?.with_observations(
             self.observed,
             r,
             canonical,
-        )
+        )?;
+        match self.weights {
+            Some(w) => data.with_weights(w),
+            None => Ok(data),
+        }
     }
 }
 

@@ -14,6 +14,7 @@ use crate::field::dpf::DpfConfig;
 use crate::field::model::ModelConfig;
 use crate::field::{DomaFieldConfig, Variant};
 use crate::jacobian::JacobianKind;
+use crate::loss::DataPenalty;
 use crate::train::select::Weight;
 use crate::train::select::{Penalty, WeightChoice, WeightSearch, choose_weight};
 use crate::train::{FitConfig, SmoothnessSampling};
@@ -129,6 +130,12 @@ pub struct RunSpec {
     /// filling.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout_observations: Option<f64>,
+    /// The key of a tracker file's per-observation confidence weights.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confidence: Option<String>,
+    /// The trajectory loss's per-coordinate penalty.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data_penalty: Option<DataPenalty>,
 }
 
 impl RunSpec {
@@ -156,6 +163,8 @@ impl RunSpec {
             reference_frame: self.reference_frame.or(d.reference_frame),
             drop_unobserved: self.drop_unobserved.or(d.drop_unobserved),
             holdout_observations: self.holdout_observations.or(d.holdout_observations),
+            confidence: self.confidence.or(d.confidence),
+            data_penalty: self.data_penalty.or(d.data_penalty),
         }
     }
 
@@ -211,6 +220,9 @@ impl RunSpec {
         if self.points_per_step.is_some() {
             fit.points_per_step = self.points_per_step;
         }
+        if let Some(p) = self.data_penalty {
+            fit.loss.data_penalty = (p != DataPenalty::L1).then_some(p);
+        }
         Ok(fit)
     }
 
@@ -245,6 +257,7 @@ impl RunSpec {
             layout: self.layout,
             frame: self.frame,
             count_hidden: self.count_hidden.unwrap_or(false),
+            confidence: self.confidence.clone(),
         };
         config.reference_frame = self.reference_frame;
         config.drop_unobserved = self.drop_unobserved.unwrap_or(false);

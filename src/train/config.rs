@@ -10,7 +10,7 @@ use serde_json::Value;
 use crate::field::model::ModelConfig;
 use crate::field::{DomaFieldConfig, Variant};
 use crate::jacobian::JacobianKind;
-use crate::loss::SmoothnessNorm;
+use crate::loss::{DataPenalty, SmoothnessNorm};
 use crate::{DomaError, Result};
 
 /// Adam as the authors run it: PyTorch's defaults, `ε = 1e-8`.
@@ -117,15 +117,24 @@ pub struct LossConfig {
     /// The weight `w_E` of the elasticity loss (0 = off).
     #[config(default = 0.0)]
     pub elasticity_weight: f64,
+    /// The per-coordinate penalty of the trajectory loss: a robust one for tracks with
+    /// outliers (`None`: the paper's L1; a config without the field reads as `None`).
+    pub data_penalty: Option<DataPenalty>,
 }
 
 impl LossConfig {
-    /// Refuses negative or non-finite weights.
+    /// Refuses negative or non-finite weights, and a robust penalty's bad scale.
     pub fn validate(&self) -> Result<()> {
         check_weights(&[
             ("smoothness weight", self.smoothness_weight),
             ("elasticity weight", self.elasticity_weight),
-        ])
+        ])?;
+        self.penalty().validate().map_err(DomaError::InvalidConfig)
+    }
+
+    /// The trajectory loss's penalty ([`DataPenalty::L1`] unless one is set).
+    pub fn penalty(&self) -> DataPenalty {
+        self.data_penalty.unwrap_or(DataPenalty::L1)
     }
 }
 

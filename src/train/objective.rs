@@ -67,6 +67,8 @@ pub struct TrajectoryObjective<'a> {
     /// Each frame's observed training rows on the device, where a frame has unobserved
     /// ones (`Some(None)` when it has none observed).
     frame_rows: Vec<Option<Option<Tensor<1, Int>>>>,
+    /// Each frame's confidence weights `[N, 1]`, when the data has them.
+    frame_weights: Option<Vec<Tensor<2>>>,
 }
 
 /// The rows of an iteration's steps end to end, each step's `(start, len)` in them, and
@@ -133,6 +135,14 @@ impl<'a> TrajectoryObjective<'a> {
                 )
             })
             .collect();
+        let frame_weights = data.weights_in_frame(0).map(|_| {
+            (0..data.frames())
+                .map(|k| {
+                    let w = data.weights_in_frame(k).expect("weights in every frame");
+                    Tensor::<2>::from_data(TensorData::new(w.to_vec(), [w.len(), 1]), &ad)
+                })
+                .collect()
+        });
         Ok(TrajectoryObjective {
             data,
             loss: config.loss.clone(),
@@ -150,6 +160,7 @@ impl<'a> TrajectoryObjective<'a> {
             subset: config.points_per_step.filter(|&k| k < data.points()),
             prepared_rows: None,
             frame_rows,
+            frame_weights,
         })
     }
 }
@@ -232,11 +243,13 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
         let mut total: Option<Tensor<1>> = None;
         let mut l1 = None;
         let mut out = None;
-        if let Some((x0, target)) = match rows {
-            StepRows::All => Some((self.x0.clone(), self.targets[k].clone())),
+        let weights = self.frame_weights.as_ref().map(|w| w[k].clone());
+        if let Some((x0, target, weights)) = match rows {
+            StepRows::All => Some((self.x0.clone(), self.targets[k].clone(), weights)),
             StepRows::Rows(rows) => Some((
                 self.x0.clone().select(0, (*rows).clone()),
-                self.targets[k].clone().select(0, *rows),
+                self.targets[k].clone().select(0, (*rows).clone()),
+                weights.map(|w| w.select(0, *rows)),
             )),
             StepRows::Nothing => None,
         } {
@@ -245,7 +258,12 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
             } else {
                 field.warp_values(x0, t, method)
             };
-            let data_term = loss::trajectory_l1(warped.warped.value.clone(), target);
+            let data_term = loss::trajectory_loss(
+                warped.warped.value.clone(),
+                target,
+                self.loss.penalty(),
+                weights,
+            );
             total = Some(data_term.clone());
             l1 = Some(data_term);
             out = Some(warped);

@@ -155,3 +155,29 @@ fn a_completed_file_has_the_input_s_shape_order_and_observations() {
     .unwrap();
     assert!(counted.observed().iter().all(|&o| o));
 }
+
+#[test]
+fn a_run_config_written_before_tracker_support_still_opens() {
+    let v = view();
+    let dir = common::scratch("doma-oldconfig");
+    let traj = dir.join("clip.traj");
+    write_traj(&traj, &v.truth).unwrap();
+    let run = RunDir::new(dir.join("run"));
+    let report = fit(&traj, &run, |_| {});
+    let mut config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.config()).unwrap()).unwrap();
+    let top = config.as_object_mut().unwrap();
+    for key in [
+        "tracks",
+        "reference_frame",
+        "drop_unobserved",
+        "holdout_observations",
+    ] {
+        assert!(top.remove(key).is_some(), "{key}");
+    }
+    let loss = top["fit"]["loss"].as_object_mut().unwrap();
+    assert!(loss.remove("data_penalty").is_some());
+    std::fs::write(run.config(), serde_json::to_string(&config).unwrap()).unwrap();
+    let again = eval_run(&run, None, &Device::flex()).unwrap();
+    assert_eq!(again.epe_x1e4.to_bits(), report.epe_x1e4.to_bits());
+}

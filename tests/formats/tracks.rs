@@ -247,3 +247,52 @@ fn a_hidden_entry_s_stored_value_changes_nothing() {
     assert_eq!(sa.held_out, sb.held_out);
     assert!(sa.trajectories.positions().iter().all(|x| x.is_finite()));
 }
+
+#[test]
+fn confidence_weights_are_read_from_their_key_and_checked_where_observed() {
+    let dir = common::scratch("doma-confidence");
+    let path = dir.join("clip.npz");
+    let xyz: Vec<f32> = (0..18).map(|i| i as f32).collect();
+    let write = |conf: &[f32], shape: &[usize]| {
+        std::fs::write(
+            &path,
+            encode_npz_values(&[
+                ("tracks_XYZ", &[2, 3, 3], NpyValues::F32(&xyz)),
+                (
+                    "visibility",
+                    &[2, 3],
+                    NpyValues::Bool(&[true, true, true, true, false, true]),
+                ),
+                ("conf", shape, NpyValues::F32(conf)),
+            ]),
+        )
+        .unwrap();
+    };
+    let file = TrackFile {
+        confidence: Some("conf".into()),
+        ..TrackFile::default()
+    };
+    // The unobserved entry's NaN is never read (stored as 0).
+    write(&[1.0, 0.5, 2.0, 0.0, f32::NAN, 1.0], &[2, 3]);
+    let tracks = read(&path, &file).unwrap();
+    assert_eq!(tracks.weights(), Some(&[1.0, 0.5, 2.0, 0.0, 0.0, 1.0][..]));
+    write(&[1.0, -0.5, 2.0, 0.0, 1.0, 1.0], &[2, 3]);
+    let err = read(&path, &file).unwrap_err().to_string();
+    assert!(
+        err.contains("clip.npz") && err.contains("conf") && err.contains("point 1 in frame 0"),
+        "{err}"
+    );
+    write(&[1.0; 6], &[6]);
+    let err = read(&path, &file).unwrap_err().to_string();
+    assert!(err.contains("conf has shape [6]"), "{err}");
+    let err = read(
+        &path,
+        &TrackFile {
+            confidence: Some("nope".into()),
+            ..TrackFile::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("no key \"nope\""), "{err}");
+}

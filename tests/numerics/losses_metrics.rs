@@ -171,3 +171,72 @@ fn a_perfect_field_has_zero_epe() {
     let still = Trajectories::new(3, 10, [p.clone(), p.clone(), p].concat()).unwrap();
     assert_eq!(metrics::evaluate_epe(&field, &still, &d).unwrap(), 0.0);
 }
+
+#[test]
+fn robust_penalties_and_confidence_weights_match_hand_computed_values() {
+    use doma::loss::DataPenalty;
+    let d = Device::flex();
+    // Residuals 0.005, −0.02, 0 for point 0 and 0.1, 0, 0 for point 1.
+    let pred = tensor2(vec![0.005, -0.02, 0.0, 0.1, 0.0, 0.0], [2, 3], &d);
+    let target = tensor2(vec![0.0; 6], [2, 3], &d);
+    let loss = |p, w: Option<Vec<f64>>| {
+        let w = w.map(|w| tensor2(w, [2, 1], &d));
+        scalar(loss::trajectory_loss(pred.clone(), target.clone(), p, w))
+    };
+    // L1: (0.005 + 0.02 + 0.1) / 6.
+    assert!((loss(DataPenalty::L1, None) - 0.125 / 6.0).abs() < 1e-7);
+    // Huber, δ = 0.01: 0.005²/0.02 = 0.00125; 0.02 − 0.005 = 0.015; 0.1 − 0.005 = 0.095.
+    let huber = loss(DataPenalty::Huber { delta: 0.01 }, None);
+    assert!(
+        (huber - (0.00125 + 0.015 + 0.095) / 6.0).abs() < 1e-7,
+        "{huber}"
+    );
+    // Charbonnier, ε = 0.01: √(r² + 10⁻⁴) − 0.01 per coordinate (0 for r = 0).
+    let c = |r: f64| (r * r + 1e-4).sqrt() - 0.01;
+    let charb = loss(DataPenalty::Charbonnier { epsilon: 0.01 }, None);
+    let expected = (c(0.005) + c(0.02) + c(0.1)) / 6.0;
+    assert!((charb - expected).abs() < 1e-7, "{charb} vs {expected}");
+    // Weights 3 and 1: (3 · 0.025 + 1 · 0.1) / (3 · 4).
+    let weighted = loss(DataPenalty::L1, Some(vec![3.0, 1.0]));
+    assert!((weighted - 0.175 / 12.0).abs() < 1e-7, "{weighted}");
+    // A zero weight removes a point; all-zero weights give 0, not NaN.
+    let only_second = loss(DataPenalty::L1, Some(vec![0.0, 2.0]));
+    assert!((only_second - 0.1 / 3.0).abs() < 1e-7);
+    assert_eq!(loss(DataPenalty::L1, Some(vec![0.0, 0.0])), 0.0);
+    // The unweighted L1 penalty is trajectory_l1, bit for bit.
+    assert_eq!(
+        loss(DataPenalty::L1, None).to_bits(),
+        scalar(loss::trajectory_l1(pred.clone(), target.clone())).to_bits()
+    );
+    assert!(DataPenalty::Huber { delta: 0.0 }.validate().is_err());
+    assert!(
+        DataPenalty::Charbonnier { epsilon: f64::NAN }
+            .validate()
+            .is_err()
+    );
+}
+
+#[test]
+fn the_epe_of_masked_trajectories_averages_observed_entries_only() {
+    use doma::data::tracks::Tracks;
+    // 2 frames × 2 points; point 1 is unobserved in frame 1, where the prediction is far off.
+    let truth = Tracks::new(
+        2,
+        2,
+        vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0],
+        vec![true, true, true, false],
+    )
+    .unwrap()
+    .into_trajectories(Some(0))
+    .unwrap();
+    let predicted = Trajectories::new(
+        2,
+        2,
+        vec![0.5, 0.0, 0.0, 1.0, 0.25, 0.0, 0.0, 0.0, 0.0, 9.0, 9.0, 9.0],
+    )
+    .unwrap();
+    // Frame 0: (0.5 + 0.25) / 2; frame 1: point 0 alone, 0.
+    let per_frame = metrics::epe_per_frame(&predicted, &truth).unwrap();
+    assert_eq!(per_frame, vec![0.375, 0.0]);
+    assert_eq!(metrics::epe(&predicted, &truth).unwrap(), 0.1875);
+}
