@@ -30,6 +30,9 @@ pub struct ExportArgs {
     /// Keyframes per second.
     #[arg(long, default_value_t = 24.0)]
     pub fps: f32,
+    /// The data's up axis, turned onto glTF's +y (default: the data's y).
+    #[arg(long, value_enum)]
+    pub up: Option<crate::view::Axis>,
     /// The device.
     #[command(flatten)]
     pub device: DeviceArgs,
@@ -46,6 +49,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
             frames: args.frames.clone(),
             color_by_error: args.color_by_error,
             fps: Some(args.fps),
+            up: args.up,
         },
         &device,
     )?;

@@ -21,6 +21,9 @@ pub struct ViewArgs {
     /// Which frames, `A..B` or `A..=B` (default: all of the run's frames).
     #[arg(long, value_parser = crate::data::parse_frame_range)]
     pub frames: Option<std::ops::Range<usize>>,
+    /// The vertical axis (default: the box's clearly longest side, else y).
+    #[arg(long, value_enum)]
+    pub up: Option<crate::view::Axis>,
     /// The device.
     #[command(flatten)]
     pub device: DeviceArgs,
@@ -33,6 +36,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         &RunDir::new(&args.run),
         args.mesh.as_deref(),
         args.frames.clone(),
+        args.up,
         &args.out,
         &device,
     )?;

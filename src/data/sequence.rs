@@ -142,8 +142,19 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
             .filter(|i| never.binary_search(i).is_err())
             .collect();
         tracks = tracks.select_points(&keep);
-        // The faces index the input's vertices, some of which are gone.
-        faces = None;
+        // The faces of kept vertices alone, renumbered.
+        let mut new_index = vec![u32::MAX; never.len() + keep.len()];
+        for (r, &i) in keep.iter().enumerate() {
+            new_index[i] = r as u32;
+        }
+        faces = faces.map(|f| {
+            f.iter()
+                .filter_map(|t| {
+                    let m = t.map(|v| new_index[v as usize]);
+                    m.iter().all(|&v| v != u32::MAX).then_some(m)
+                })
+                .collect()
+        });
         kept = Some(keep);
     }
     let held_out = match options.hold_out {

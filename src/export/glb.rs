@@ -181,10 +181,14 @@ impl Builder {
 /// The `.glb` of `shape` moving through `frames` (each `[V, 3]` over all parts, in the
 /// data's units): one primitive per part with a morph target per frame
 /// ([`part_primitive`]), one node, and the animation of its weights ([`morph_animation`]).
+/// With `observed` (`[T][V]`, the run's own points of masked data), each frame's vertex
+/// colours are `colors` (or grey) where observed and [`FILLED`] where the field fills the
+/// point, through `COLOR_0` morph targets beside the positions.
 pub(super) fn build_glb(
     shape: &TexturedMesh,
     frames: &[Vec<[f32; 3]>],
     colors: Option<&[[f32; 3]]>,
+    observed: Option<&[Vec<bool>]>,
     fps: f32,
 ) -> Result<Vec<u8>> {
     let mut b = Builder {
@@ -199,10 +203,29 @@ pub(super) fn build_glb(
         bin: Vec::new(),
     };
     let mut primitives = Vec::new();
+    let mut color_targets = Vec::new();
     let mut offset = 0;
     for part in &shape.parts {
         let material = part.material.map(|m| &shape.materials[m]);
-        let colors = colors.map(|c| &c[offset..offset + part.positions.len()]);
+        let n = part.positions.len();
+        // Per frame, each vertex's colour: its base colour, or FILLED where unobserved.
+        let frame_colors: Option<Vec<Vec<[f32; 3]>>> = observed.map(|obs| {
+            obs.iter()
+                .map(|seen| {
+                    (offset..offset + n)
+                        .map(|i| match (seen[i], colors) {
+                            (false, _) => FILLED,
+                            (true, Some(c)) => c[i],
+                            (true, None) => OBSERVED,
+                        })
+                        .collect()
+                })
+                .collect()
+        });
+        let colors = match &frame_colors {
+            Some(fc) => Some(&fc[0][..]),
+            None => colors.map(|c| &c[offset..offset + n]),
+        };
         primitives.push(part_primitive(
             &mut b,
             part,
@@ -212,7 +235,22 @@ pub(super) fn build_glb(
             material,
             &shape.path,
         )?);
-        offset += part.positions.len();
+        // glTF's morph targets may carry COLOR_n (spec 2.0.1); gltf-json's type has no
+        // field for it, so the accessors are added to the document below.
+        color_targets.push(frame_colors.map(|fc| {
+            fc.iter()
+                .map(|c| {
+                    let delta: Vec<f32> = c
+                        .iter()
+                        .zip(&fc[0])
+                        .flat_map(|(a, o)| [a[0] - o[0], a[1] - o[1], a[2] - o[2]])
+                        .collect();
+                    b.floats(&delta, 3, json::accessor::Type::Vec3, false, None)
+                        .value()
+                })
+                .collect::<Vec<usize>>()
+        }));
+        offset += n;
     }
     let t = frames.len();
     let mesh = b.root.push(json::Mesh {
@@ -247,10 +285,25 @@ pub(super) fn build_glb(
         extensions: None,
         extras: Default::default(),
     });
-    let text = json::serialize::to_string(&b.root)
-        .map_err(|e| DomaError::InvalidData(format!("cannot serialise the glTF document: {e}")))?;
+    let bad = |e: serde_json::Error| {
+        DomaError::InvalidData(format!("cannot serialise the glTF document: {e}"))
+    };
+    let mut doc = serde_json::to_value(&b.root).map_err(bad)?;
+    for (p, targets) in color_targets.iter().enumerate() {
+        let Some(targets) = targets else { continue };
+        for (k, &accessor) in targets.iter().enumerate() {
+            doc["meshes"][0]["primitives"][p]["targets"][k]["COLOR_0"] = accessor.into();
+        }
+    }
+    let text = serde_json::to_string(&doc).map_err(bad)?;
     glb(text.into_bytes(), b.bin)
 }
+
+/// The vertex colour of an observed point when nothing else colours it.
+const OBSERVED: [f32; 3] = [0.75, 0.75, 0.78];
+
+/// The vertex colour of a point the field fills (the viewer's too).
+pub const FILLED: [f32; 3] = [0.85, 0.3, 0.85];
 
 /// One part of the shape as a primitive: its first frame's positions (and normals, UVs,
 /// colours) as the base, and one morph target per frame holding the displacements from
@@ -270,7 +323,17 @@ fn part_primitive(
     let slice = |f: &Vec<[f32; 3]>| f[offset..offset + n].to_vec();
     let base = slice(&frames[0]);
     let points = part.triangles.is_empty();
-    let normals_of = |v: &[[f32; 3]]| vertex_normals(v, &part.triangles);
+    // glTF's normals are unit vectors: a vertex on no triangle (or on degenerate ones
+    // alone) faces +z rather than having none.
+    let normals_of = |v: &[[f32; 3]]| {
+        let mut n = vertex_normals(v, &part.triangles);
+        for v in &mut n {
+            if !v.iter().map(|c| c * c).sum::<f32>().is_normal() {
+                *v = [0.0, 0.0, 1.0];
+            }
+        }
+        n
+    };
     let base_normals = (!points).then(|| normals_of(&base));
     let vec3 = |b: &mut Builder, v: &[f32], bounds: bool| {
         b.floats(v, 3, Type::Vec3, bounds, Some(Target::ArrayBuffer))
@@ -456,7 +519,7 @@ mod tests {
                     .collect()
             })
             .collect();
-        let bytes = build_glb(&shape, &frames, None, 10.0).unwrap();
+        let bytes = build_glb(&shape, &frames, None, None, 10.0).unwrap();
         let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
         let doc: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
         assert_eq!(

@@ -14,8 +14,11 @@
 //! The canonical shape is a user's mesh (`--mesh`, read with its UVs and materials, a
 //! diffuse PNG/JPEG texture embedded), else the run's own first frame with its faces, else
 //! the run's points (a `POINTS` primitive). `color_by_error` adds vertex colours: each
-//! vertex's mean end-point error over the frames, on a blue-to-red ramp (the vertices
-//! must then be the run's points, in order).
+//! vertex's mean end-point error over the frames where it is observed, on a blue-to-red
+//! ramp (the vertices must then be the run's points, in order). The run's own points of
+//! tracks with gaps are coloured per frame: grey (or their error colour) where observed,
+//! magenta ([`glb::FILLED`]) where the field fills them, through `COLOR_0` morph targets.
+//! `up` turns the data's up axis onto glTF's +y.
 
 use std::path::Path;
 
@@ -39,6 +42,8 @@ pub struct ExportOptions {
     pub color_by_error: bool,
     /// Keyframes per second of the animation (default 24).
     pub fps: Option<f32>,
+    /// The data's up axis, turned onto glTF's +y (default: the data's y stays up).
+    pub up: Option<crate::view::Axis>,
 }
 
 /// What was written.
@@ -103,6 +108,7 @@ pub fn export_gltf(
     let canonical: Vec<[f32; 3]> = shape.positions().into_iter().map(to_norm).collect();
     let mut frames: Vec<Vec<[f32; 3]>> = Vec::with_capacity(range.len());
     let mut error_sum = vec![0f64; canonical.len()];
+    let mut error_count = vec![0usize; canonical.len()];
     crate::warp::warp_frames(&field, &canonical, range.clone(), total, device, |k, y| {
         if let Some(v) = y.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
             return Err(DomaError::InvalidData(format!(
@@ -112,16 +118,23 @@ pub fn export_gltf(
         if options.color_by_error && are_points {
             let truth = own.trajectories.frame(k);
             for (i, p) in y.iter().enumerate() {
-                error_sum[i] += (0..3)
-                    .map(|c| (p[c] as f64 - truth[3 * i + c] as f64).abs())
-                    .sum::<f64>();
+                if own.trajectories.is_observed(k, i) {
+                    error_sum[i] += (0..3)
+                        .map(|c| (p[c] as f64 - truth[3 * i + c] as f64).abs())
+                        .sum::<f64>();
+                    error_count[i] += 1;
+                }
             }
         }
         frames.push(y.into_iter().map(to_data).collect());
         Ok(())
     })?;
     let colors = (options.color_by_error && are_points).then(|| {
-        let mean: Vec<f64> = error_sum.iter().map(|e| e / frames.len() as f64).collect();
+        let mean: Vec<f64> = error_sum
+            .iter()
+            .zip(&error_count)
+            .map(|(e, &n)| if n > 0 { e / n as f64 } else { 0.0 })
+            .collect();
         let max = mean.iter().copied().fold(0.0, f64::max).max(1e-12);
         mean.iter()
             .map(|&e| {
@@ -139,7 +152,28 @@ pub fn export_gltf(
              every key time is a finite number"
         )));
     }
-    let glb = build_glb(&shape, &frames, colors.as_deref(), fps)?;
+    if let Some(up) = options.up {
+        // A cyclic relabelling of the axes (a rotation) that puts `up` on glTF's +y.
+        let perm = [[2, 0, 1], [0, 1, 2], [1, 2, 0]][up.index()];
+        for frame in &mut frames {
+            for p in frame.iter_mut() {
+                *p = perm.map(|c| p[c]);
+            }
+        }
+    }
+    // The run's own points of masked data: which are observed in each exported frame.
+    let observed: Option<Vec<Vec<bool>>> =
+        (mesh.is_none() && own.trajectories.observed().is_some()).then(|| {
+            range
+                .clone()
+                .map(|k| {
+                    (0..own.trajectories.points())
+                        .map(|i| own.trajectories.is_observed(k, i))
+                        .collect()
+                })
+                .collect()
+        });
+    let glb = build_glb(&shape, &frames, colors.as_deref(), observed.as_deref(), fps)?;
     crate::io::write_atomic(out, &glb)?;
     Ok(ExportSummary {
         vertices: canonical.len(),

@@ -38,9 +38,30 @@ struct ViewData {
     /// The ramp's top: the 95th percentile of the errors (larger ones saturate).
     error_max: f64,
     error_units: String,
-    /// The vertical axis, 0..3: the longest side of the box when it is clearly the longest
-    /// (Z-up characters), else y.
+    /// The vertical axis, 0..3: the user's, else the longest side of the box when it is
+    /// clearly the longest (Z-up characters), else y.
     up: usize,
+    /// `[T, V]` uint8: 1 where the run's data observed the point, 0 where the field fills
+    /// it; null for complete data or a user's mesh.
+    observed: Option<String>,
+}
+
+/// A coordinate axis, for `--up`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Axis {
+    /// x.
+    X,
+    /// y.
+    Y,
+    /// z.
+    Z,
+}
+
+impl Axis {
+    /// The axis' index, 0..3.
+    pub fn index(self) -> usize {
+        self as usize
+    }
 }
 
 fn b64<T: bytemuck::Pod>(values: &[T]) -> String {
@@ -49,11 +70,14 @@ fn b64<T: bytemuck::Pod>(values: &[T]) -> String {
 
 /// The viewer page of the run in `run`: its own points (with its faces, if any) against
 /// the truth, or the user's `mesh` (any OBJ in the data's units) warped; `frames` (default
-/// all of the run's).
+/// all of the run's); `up` the vertical axis (default: guessed from the box). Where the
+/// run's data did not observe a point, it is drawn in the "filled" colour, its error is not
+/// counted, and the true layer shows it where the field put it.
 pub fn view_html(
     run: &RunDir,
     mesh: Option<&Path>,
     frames: Option<std::ops::Range<usize>>,
+    up: Option<Axis>,
     device: &Device,
 ) -> Result<String> {
     let OpenRun {
@@ -91,16 +115,33 @@ pub fn view_html(
     let mut pred = Vec::with_capacity(range.len() * v * 3);
     let mut truth = Vec::new();
     let mut error = Vec::new();
+    let masked = with_truth && own.trajectories.observed().is_some();
+    let mut observed: Vec<u8> = Vec::new();
+    let mut seen_errors = Vec::new();
     crate::warp::warp_frames(&field, &canonical, range.clone(), total, device, |k, y| {
         if with_truth {
             let t = own.trajectories.frame(k);
             for (i, p) in y.iter().enumerate() {
+                let seen = own.trajectories.is_observed(k, i);
                 let e: f64 = (0..3)
                     .map(|c| (p[c] as f64 - t[3 * i + c] as f64).abs())
                     .sum();
-                error.push((e * EPE_SCALE) as f32);
+                let e = if seen { (e * EPE_SCALE) as f32 } else { 0.0 };
+                error.push(e);
+                if seen {
+                    seen_errors.push(e);
+                }
+                if masked {
+                    observed.push(u8::from(seen));
+                }
+                // An unobserved point has no truth: the true layer shows the field's.
+                let q = if seen {
+                    [t[3 * i], t[3 * i + 1], t[3 * i + 2]]
+                } else {
+                    *p
+                };
+                truth.extend(to_data(&q));
             }
-            truth.extend(as_points(t).iter().flat_map(to_data));
         }
         pred.extend(y.iter().flat_map(to_data));
         Ok(())
@@ -113,7 +154,7 @@ pub fn view_html(
         )));
     }
     let error_max = {
-        let mut sorted = error.clone();
+        let mut sorted = seen_errors;
         sorted.sort_by(f32::total_cmp);
         sorted
             .get(sorted.len() * 95 / 100)
@@ -121,7 +162,7 @@ pub fn view_html(
             .unwrap_or(0.0)
             .max(1e-6) as f64
     };
-    let up = {
+    let up = up.map(Axis::index).unwrap_or_else(|| {
         let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
         for p in pred.chunks_exact(3) {
             for c in 0..3 {
@@ -137,7 +178,7 @@ pub fn view_html(
             .filter(|&c| c != longest)
             .all(|c| ext[longest] > 1.3 * ext[c]);
         if clearly { longest } else { 1 }
-    };
+    });
     let name = format!(
         "{} — {}",
         run.dir
@@ -158,6 +199,7 @@ pub fn view_html(
         error_max,
         error_units: "×1e-4, normalised units".into(),
         up,
+        observed: masked.then(|| b64(&observed)),
     };
     let json = serde_json::to_string(&data)
         .map_err(|e| DomaError::InvalidData(format!("cannot serialise the view: {e}")))?;
@@ -189,11 +231,12 @@ pub fn write_view(
     run: &RunDir,
     mesh: Option<&Path>,
     frames: Option<std::ops::Range<usize>>,
+    up: Option<Axis>,
     out: &Path,
     device: &Device,
 ) -> Result<usize> {
     crate::io::check_writable(out)?;
-    let html = view_html(run, mesh, frames, device)?;
+    let html = view_html(run, mesh, frames, up, device)?;
     crate::io::write_atomic(out, html.as_bytes())?;
     Ok(html.len())
 }

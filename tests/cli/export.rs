@@ -160,8 +160,14 @@ fn exported_glb_files_pass_the_khronos_validator() {
     let mesh_run = fitted(&dir.join("mesh"), FAERIE, "112..120");
     let cloud_run = fitted(&dir.join("cloud"), FLUID, "0..6");
     let tex = textured_box(&dir);
+    let masked_run = crate::view::masked_run(&dir);
     let glb = |name: &str| dir.join(name);
     for (run, extra, name) in [
+        (
+            &masked_run,
+            vec!["--up", "z", "--color-by-error"],
+            "masked.glb",
+        ),
         (&mesh_run, vec![], "mesh.glb"),
         (
             &mesh_run,
@@ -193,9 +199,26 @@ fn exported_glb_files_pass_the_khronos_validator() {
         doc["animations"][0]["channels"][0]["target"]["path"],
         "weights"
     );
-    let files: Vec<PathBuf> = ["mesh.glb", "mesh_error.glb", "cloud.glb", "textured.glb"]
-        .map(glb)
-        .to_vec();
+    // Tracks with gaps: every target recolours the filled points.
+    let doc = glb_json(&glb("masked.glb"));
+    let targets = doc["meshes"][0]["primitives"][0]["targets"]
+        .as_array()
+        .unwrap();
+    assert!(
+        targets
+            .iter()
+            .all(|t| t["COLOR_0"].is_u64() && t["POSITION"].is_u64())
+    );
+    assert!(doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"].is_u64());
+    let files: Vec<PathBuf> = [
+        "mesh.glb",
+        "mesh_error.glb",
+        "cloud.glb",
+        "textured.glb",
+        "masked.glb",
+    ]
+    .map(glb)
+    .to_vec();
     let Some(reports) = validate("exported_glb_files_pass_the_khronos_validator", &files) else {
         return;
     };

@@ -163,3 +163,67 @@ fn the_viewer_renders_a_mesh_run_and_a_point_run_in_chromium() {
         check_page(&page, &dir, last);
     }
 }
+
+/// A tracker's view of the faerie's "wave" clip (a TAPVid-3D file), fitted with its mesh.
+pub(crate) fn masked_run(dir: &Path) -> std::path::PathBuf {
+    use doma::data::layout::Layout;
+    use doma::data::mesh::read_obj;
+    use doma::data::tracker::{TrackerConfig, simulate};
+    use doma::data::traj::read_traj;
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("data");
+    let truth = read_traj(root.join("md2_faerie.traj"))
+        .unwrap()
+        .select_frames(112..120, 1)
+        .unwrap();
+    let obj = root.join("md2_faerie.obj");
+    let faces = read_obj(&obj).unwrap().faces;
+    let npz = dir.join("clip.npz");
+    simulate(&truth, &faces, &TrackerConfig::default())
+        .unwrap()
+        .write(&npz, Layout::TapVid3d)
+        .unwrap();
+    let run = dir.join("masked");
+    doma(&[
+        "fit",
+        npz.to_str().unwrap(),
+        "--mesh",
+        obj.to_str().unwrap(),
+        "--drop-unobserved",
+        "--iters",
+        "3",
+        "--quiet",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    run
+}
+
+#[test]
+fn the_viewer_shows_the_filled_points_of_tracks_with_gaps_in_their_own_colour() {
+    if !common::tool_or_skip(
+        "the_viewer_shows_the_filled_points_of_tracks_with_gaps_in_their_own_colour",
+        "chromium (apt-get install chromium)",
+        Path::new(CHROMIUM).is_file(),
+    ) {
+        return;
+    }
+    let dir = temp("filled");
+    let run = masked_run(&dir);
+    let page = dir.join("masked.html");
+    doma(&[
+        "view",
+        run.to_str().unwrap(),
+        "--out",
+        page.to_str().unwrap(),
+        "--up",
+        "y",
+    ]);
+    let html = std::fs::read_to_string(&page).unwrap();
+    assert!(html.contains("\"up\":1") && !html.contains("\"observed\":null"));
+    let shot = screenshot(&page, "frame=0", &dir);
+    // The filled colour (217, 77, 217), shaded on the mesh.
+    let magenta = scene_pixels(&shot)
+        .filter(|&(_, _, p)| p[1] < 100 && p[0] > 100 && p[2] > 100 && p[0].abs_diff(p[2]) < 30)
+        .count();
+    assert!(magenta > 100, "{magenta} filled-colour pixels");
+}
