@@ -166,6 +166,20 @@ impl Trajectories {
         Ok(self)
     }
 
+    /// These trajectories with other canonical positions (`[N, 3]`, finite): those a fit
+    /// learned for the tracks unseen in the reference frame.
+    pub fn with_canonical(mut self, canonical: Vec<f32>) -> Result<Self> {
+        if canonical.len() != self.points * 3 || canonical.iter().any(|v| !v.is_finite()) {
+            return Err(DomaError::InvalidData(format!(
+                "{} canonical coordinates (finite?) for {} points",
+                canonical.len(),
+                self.points
+            )));
+        }
+        self.canonical = Some(canonical);
+        Ok(self)
+    }
+
     /// The observed mask `[T, N]`; `None` when every entry is observed.
     pub fn observed(&self) -> Option<&[bool]> {
         self.observed.as_deref()

@@ -42,7 +42,7 @@ pub fn complete_run(
 ) -> Result<Completion> {
     let config = run.load_config()?;
     let field = run.load_field(&config, device)?;
-    let sequence = config.load()?;
+    let sequence = run.load_data(&config)?;
     // The input again, clipped and kept as the fit's data was, for its own values.
     let (mut input, _) = read_tracks(&config.data, &config.tracks)?;
     if let Some([a, b]) = config.frames {

@@ -109,7 +109,7 @@ pub fn gap_report(
 pub fn eval_run(run: &RunDir, data: Option<&Path>, device: &Device) -> Result<Report> {
     let config = run.load_config()?;
     let field = run.load_field(&config, device)?;
-    let own = config.load()?;
+    let own = run.load_data(&config)?;
     let (truth, what) = match data {
         None => (
             config.split(&own.trajectories)?.1,

@@ -6,7 +6,6 @@ use burn::tensor::Device;
 
 use super::{Report, RunConfig, RunDir, RunLock, evaluate, gap_report};
 use crate::checkpoint::{Precision, save_json};
-use crate::data::Trajectories;
 use crate::data::sequence::Sequence;
 use crate::field::model::Model;
 use crate::io::write_atomic;
@@ -46,7 +45,7 @@ pub fn fit_run(
         }
     };
     let sequence = config.load()?;
-    let (train, test) = config.split(&sequence.trajectories)?;
+    let (train, _) = config.split(&sequence.trajectories)?;
     let ad = device.clone().autodiff();
     let fit = &config.fit;
     let field = fit.model.init(fit.seed, train.canonical(), &ad);
@@ -71,7 +70,7 @@ pub fn fit_run(
     }
     match trainer.run_with(hooks)? {
         Outcome::Finished(fitted) => {
-            finish(run, &config, &sequence, &fitted, &test, device).map(FitOutcome::Finished)
+            finish(run, &config, &sequence, &fitted, device).map(FitOutcome::Finished)
         }
         Outcome::Interrupted { iterations_done } => Ok(FitOutcome::Interrupted { iterations_done }),
     }
@@ -98,16 +97,33 @@ fn start(run: &RunDir, config: RunConfig) -> Result<(RunConfig, RunLock)> {
     Ok((config, lock))
 }
 
-/// Writes `model.bpk` and `report.json` (the EPE on the held-out points `test`).
+/// Writes `model.bpk`, `canonical.npy` when the fit learned canonical positions, and
+/// `report.json` (the EPE on the held-out points).
 fn finish(
     run: &RunDir,
     config: &RunConfig,
     sequence: &Sequence,
     fitted: &Fitted<Model>,
-    test: &Trajectories,
     device: &Device,
 ) -> Result<Report> {
     let encoded = fitted.field.encode(Precision::F32)?;
+    // The learned canonical positions of the training tracks go into every track's.
+    let sequence = match &fitted.canonical {
+        Some(learned) => {
+            let (train, _) = config.split_indices(sequence.trajectories.points())?;
+            let mut all = sequence.trajectories.canonical().to_vec();
+            for (r, &i) in train.iter().enumerate() {
+                all[3 * i..3 * i + 3].copy_from_slice(&learned[3 * r..3 * r + 3]);
+            }
+            crate::data::npy::write_npy(run.canonical(), &[all.len() / 3, 3], &all)?;
+            &Sequence {
+                trajectories: sequence.trajectories.clone().with_canonical(all)?,
+                ..sequence.clone()
+            }
+        }
+        None => sequence,
+    };
+    let test = &config.split(&sequence.trajectories)?.1;
     write_atomic(&run.model(), &encoded)?;
     let what = "the held-out points of the fitted data";
     let report = Report {

@@ -7,6 +7,7 @@
 //! | `history.json` | one [`crate::train::IterationRecord`] per finished iteration |
 //! | `model.bpk` | the fitted field's parameters (burnpack), once the fit is done |
 //! | `report.json` | [`Report`]: the metrics on the held-out points |
+//! | `canonical.npy` | the canonical positions `[N, 3]` (normalised) of every track, where the fit learned those of tracks unseen in the reference frame |
 //!
 //! `.lock` holds the process id of the fit that holds the folder ([`RunLock`]).
 //!
@@ -267,6 +268,38 @@ impl RunDir {
     pub fn report(&self) -> PathBuf {
         self.dir.join("report.json")
     }
+    /// `canonical.npy`.
+    pub fn canonical(&self) -> PathBuf {
+        self.dir.join("canonical.npy")
+    }
+
+    /// The run's data as [`RunConfig::load`] gives it, with the canonical positions the fit
+    /// learned (`canonical.npy`), if it learned any.
+    pub fn load_data(&self, config: &RunConfig) -> Result<Sequence> {
+        let mut data = config.load()?;
+        let path = self.canonical();
+        if path.is_file() {
+            let array = crate::data::npy::read_npy(&path)?;
+            let points = data.trajectories.points();
+            if array.shape != [points, 3] {
+                return Err(DomaError::Malformed {
+                    path,
+                    reason: format!(
+                        "shape {:?}, but the run's data has {points} tracks",
+                        array.shape
+                    ),
+                });
+            }
+            data.trajectories =
+                data.trajectories
+                    .with_canonical(array.data)
+                    .map_err(|e| DomaError::Malformed {
+                        path,
+                        reason: e.to_string(),
+                    })?;
+        }
+        Ok(data)
+    }
 
     /// The run's config; a folder without one is not a run.
     pub fn load_config(&self) -> Result<RunConfig> {
@@ -327,7 +360,7 @@ impl RunDir {
     pub fn open(&self, frames: Option<std::ops::Range<usize>>, device: &Device) -> Result<OpenRun> {
         let config = self.load_config()?;
         let field = self.load_field(&config, device)?;
-        let data = config.load()?;
+        let data = self.load_data(&config)?;
         let total = data.trajectories.frames();
         let frames = frames.unwrap_or(0..total);
         if frames.start >= frames.end || frames.end > total {

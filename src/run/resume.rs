@@ -17,6 +17,10 @@ struct ResumeMeta {
     iterations_done: usize,
     history: Vec<IterationRecord>,
     rng: RngState,
+    /// The objective's learned state (the canonical positions of tracks unseen in the
+    /// reference frame, with Adam's moments); absent before there was any.
+    #[serde(default)]
+    objective: Vec<f32>,
 }
 
 impl RunDir {
@@ -25,6 +29,7 @@ impl RunDir {
             iterations_done: snapshot.iterations_done,
             history: snapshot.history.clone(),
             rng: snapshot.rng.clone(),
+            objective: snapshot.objective.clone(),
         };
         let json = serde_json::to_vec(&meta)
             .map_err(|e| DomaError::InvalidData(format!("cannot serialise the checkpoint: {e}")))?;
@@ -72,6 +77,7 @@ impl RunDir {
             rng: meta.rng,
             iterations_done: meta.iterations_done,
             history: meta.history,
+            objective: meta.objective,
         })
     }
 }

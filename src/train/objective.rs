@@ -2,7 +2,7 @@
 //! order, the schedule, Adam and the random stream; an [`Objective`] turns the field and
 //! a frame into losses.
 
-use burn::tensor::{Device, Int, Tensor, TensorData};
+use burn::tensor::{Device, Gradients, IndexingUpdateOp, Int, Tensor, TensorData};
 use rand::Rng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -41,6 +41,49 @@ pub trait Objective<M>: Send {
         iteration: usize,
         rng: &mut ChaCha8Rng,
     ) -> Result<(Tensor<1>, Tensor<1>)>;
+
+    /// Called after each step's backward pass with its gradients and learning rate: an
+    /// objective with parameters of its own updates them here. The default has none.
+    fn after_backward(&mut self, _grads: &Gradients, _lr: f64) {}
+
+    /// The objective's own learned state, for a checkpoint (empty when it has none).
+    fn state(&self) -> Result<Vec<f32>> {
+        Ok(Vec::new())
+    }
+
+    /// Puts an [`Objective::state`] back.
+    fn restore_state(&mut self, state: &[f32]) -> Result<()> {
+        if state.is_empty() {
+            Ok(())
+        } else {
+            Err(crate::DomaError::InvalidData(format!(
+                "the checkpoint holds {} values of an objective that learns none",
+                state.len()
+            )))
+        }
+    }
+
+    /// The canonical positions `[N, 3]` of its data, where it learned some of them.
+    fn learned_canonical(&self) -> Result<Option<Vec<f32>>> {
+        Ok(None)
+    }
+}
+
+/// Adam's moment decays and ε for the learned canonical positions: the field's own
+/// ([`super::config::default_adam`]).
+const ADAM: (f64, f64, f64) = (0.9, 0.999, 1e-8);
+
+/// The canonical positions of the training tracks not observed in the reference frame,
+/// learned with the field (docs/design.md §7): `x = x_placed + δ`, one `δ` per track,
+/// updated by Adam at the field's learning rate.
+struct LearnedPositions {
+    /// The tracks' rows `[M]`.
+    rows: Tensor<1, Int>,
+    /// `δ`, `[M, 3]`, an autodiff leaf.
+    delta: Tensor<2>,
+    /// Adam's first and second moments (off the graph), and its steps.
+    moments: Option<(Tensor<2>, Tensor<2>)>,
+    steps: usize,
 }
 
 /// Fitting trajectories (Sec. 3; docs/reference.md §5): the trajectory L1 of the training points
@@ -69,6 +112,8 @@ pub struct TrajectoryObjective<'a> {
     frame_rows: Vec<Option<Option<Tensor<1, Int>>>>,
     /// Each frame's confidence weights `[N, 1]`, when the data has them.
     frame_weights: Option<Vec<Tensor<2>>>,
+    /// The learned canonical positions of tracks unseen in the reference frame.
+    learned: Option<LearnedPositions>,
 }
 
 /// The rows of an iteration's steps end to end, each step's `(start, len)` in them, and
@@ -135,6 +180,21 @@ impl<'a> TrajectoryObjective<'a> {
                 )
             })
             .collect();
+        // Tracks unseen in the reference frame start where their neighbours' motion places
+        // them, and learn their canonical position with the field.
+        let learned = data.observed_in_frame(data.reference()).and_then(|seen| {
+            let rows: Vec<i64> = (0..data.points())
+                .filter(|&i| !seen[i])
+                .map(|i| i as i64)
+                .collect();
+            let m = rows.len();
+            (m > 0).then(|| LearnedPositions {
+                rows: Tensor::<1, Int>::from_data(TensorData::new(rows, [m]), &ad),
+                delta: Tensor::<2>::zeros([m, 3], &ad).require_grad(),
+                moments: None,
+                steps: 0,
+            })
+        });
         let frame_weights = data.weights_in_frame(0).map(|_| {
             (0..data.frames())
                 .map(|k| {
@@ -161,6 +221,7 @@ impl<'a> TrajectoryObjective<'a> {
             prepared_rows: None,
             frame_rows,
             frame_weights,
+            learned,
         })
     }
 }
@@ -168,6 +229,74 @@ impl<'a> TrajectoryObjective<'a> {
 impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
     fn frames(&self) -> usize {
         self.data.frames()
+    }
+
+    fn after_backward(&mut self, grads: &Gradients, lr: f64) {
+        self.learn_positions(grads, lr);
+    }
+
+    /// `δ`, then Adam's two moments (zeros before the first step), then the step count.
+    fn state(&self) -> Result<Vec<f32>> {
+        let Some(l) = &self.learned else {
+            return Ok(Vec::new());
+        };
+        let mut out: Vec<f32> = crate::readback::to_vec(l.delta.clone().inner())?;
+        let n = out.len();
+        match &l.moments {
+            Some((m, v)) => {
+                out.extend(crate::readback::to_vec::<f32, 2, _>(m.clone())?);
+                out.extend(crate::readback::to_vec::<f32, 2, _>(v.clone())?);
+            }
+            None => out.extend(std::iter::repeat_n(0.0, 2 * n)),
+        }
+        out.push(l.steps as f32);
+        Ok(out)
+    }
+
+    fn restore_state(&mut self, state: &[f32]) -> Result<()> {
+        let Some(l) = self.learned.as_mut() else {
+            return if state.is_empty() {
+                Ok(())
+            } else {
+                Err(crate::DomaError::InvalidData(format!(
+                    "the checkpoint holds {} learned values; this fit learns none",
+                    state.len()
+                )))
+            };
+        };
+        let m = l.rows.dims()[0];
+        if state.len() != 9 * m + 1 {
+            return Err(crate::DomaError::InvalidData(format!(
+                "the checkpoint holds {} values for the learned positions of {m} tracks",
+                state.len()
+            )));
+        }
+        let part = |i: usize| {
+            Tensor::<2>::from_data(
+                TensorData::new(state[3 * m * i..3 * m * (i + 1)].to_vec(), [m, 3]),
+                &self.ad,
+            )
+            .inner()
+        };
+        l.steps = state[9 * m] as usize;
+        l.delta = part(0).autodiff().require_grad();
+        l.moments = (l.steps > 0).then(|| (part(1), part(2)));
+        Ok(())
+    }
+
+    fn learned_canonical(&self) -> Result<Option<Vec<f32>>> {
+        let Some(l) = &self.learned else {
+            return Ok(None);
+        };
+        let delta: Vec<f32> = crate::readback::to_vec(l.delta.clone().inner())?;
+        let rows: Vec<i64> = crate::readback::to_vec(l.rows.clone())?;
+        let mut x = self.data.canonical().to_vec();
+        for (j, &r) in rows.iter().enumerate() {
+            for c in 0..3 {
+                x[3 * r as usize + c] += delta[3 * j + c];
+            }
+        }
+        Ok(Some(x))
     }
 
     /// Draws every step's `L_H` samples now, in step order, and uploads them in one
@@ -244,10 +373,22 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
         let mut l1 = None;
         let mut out = None;
         let weights = self.frame_weights.as_ref().map(|w| w[k].clone());
+        let x0_all = match &self.learned {
+            None => self.x0.clone(),
+            Some(l) => {
+                let offsets = Tensor::<2>::zeros(self.x0.dims(), &self.ad).select_assign(
+                    0,
+                    l.rows.clone(),
+                    l.delta.clone(),
+                    IndexingUpdateOp::Add,
+                );
+                self.x0.clone() + offsets
+            }
+        };
         if let Some((x0, target, weights)) = match rows {
-            StepRows::All => Some((self.x0.clone(), self.targets[k].clone(), weights)),
+            StepRows::All => Some((x0_all, self.targets[k].clone(), weights)),
             StepRows::Rows(rows) => Some((
-                self.x0.clone().select(0, (*rows).clone()),
+                x0_all.select(0, (*rows).clone()),
                 self.targets[k].clone().select(0, (*rows).clone()),
                 weights.map(|w| w.select(0, *rows)),
             )),
@@ -314,6 +455,37 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
 }
 
 impl TrajectoryObjective<'_> {
+    /// Adam's update of the learned positions from this step's gradient, on the device.
+    fn learn_positions(&mut self, grads: &Gradients, lr: f64) {
+        let Some(l) = self.learned.as_mut() else {
+            return;
+        };
+        let Some(g) = l.delta.grad(grads) else {
+            return;
+        };
+        let (b1, b2, eps) = ADAM;
+        let (m, v) = match l.moments.take() {
+            Some((m, v)) => (m, v),
+            None => (g.zeros_like(), g.zeros_like()),
+        };
+        let m = m.mul_scalar(b1) + g.clone().mul_scalar(1.0 - b1);
+        let v = v.mul_scalar(b2) + g.square().mul_scalar(1.0 - b2);
+        l.steps += 1;
+        let t = l.steps as i32;
+        let step = m
+            .clone()
+            .div_scalar(1.0 - b1.powi(t))
+            .div(
+                v.clone()
+                    .div_scalar(1.0 - b2.powi(t))
+                    .sqrt()
+                    .add_scalar(eps),
+            )
+            .mul_scalar(lr);
+        l.delta = (l.delta.clone().inner() - step).autodiff().require_grad();
+        l.moments = Some((m, v));
+    }
+
     /// A step's training rows on frame `k`: `take` distinct rows of all the training points
     /// when the frame observes all of them, else of its observed ones (fewer when it has
     /// fewer).

@@ -32,6 +32,9 @@ pub struct Fitted<M> {
     pub seconds: f64,
     /// Optimiser steps taken (`iterations × T`).
     pub steps: usize,
+    /// The canonical positions `[N, 3]` of the training data where the fit learned some
+    /// (tracks unseen in the reference frame, docs/design.md §7); `None`: the data's own.
+    pub canonical: Option<Vec<f32>>,
 }
 
 /// How [`super::Trainer::run_with`] ended.
@@ -96,6 +99,8 @@ pub struct TrainerSnapshot {
     pub iterations_done: usize,
     /// Their records.
     pub history: Vec<IterationRecord>,
+    /// The objective's own learned state ([`super::Objective::state`]; empty if none).
+    pub objective: Vec<f32>,
 }
 
 impl<M> Outcome<M> {

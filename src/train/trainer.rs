@@ -130,7 +130,9 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
             }
         };
         let losses = Tensor::cat(vec![primary.detach(), total.clone().detach()], 0);
-        let grads = GradientsParams::from_grads(total.backward(), &field);
+        let grads = total.backward();
+        self.objective.after_backward(&grads, lr);
+        let grads = GradientsParams::from_grads(grads, &field);
         self.field = Some(self.optim.step(lr, field, grads));
         Ok(losses)
     }
@@ -188,6 +190,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
             rng: RngState::of(&self.rng),
             iterations_done: self.history.len(),
             history: self.history.clone(),
+            objective: self.objective.state()?,
         })
     }
 
@@ -218,6 +221,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
             .map_err(|e| {
                 DomaError::InvalidData(format!("the saved Adam state is unreadable: {e}"))
             })?;
+        self.objective.restore_state(&snapshot.objective)?;
         self.rng = snapshot.rng.restore();
         self.history = snapshot.history.clone();
         self.clock = None;
@@ -278,7 +282,9 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         bar.finish_and_clear();
         let field = self.field.take().expect("the field is always put back");
         let frames = self.objective.frames();
+        let canonical = self.objective.learned_canonical()?;
         Ok(Outcome::Finished(Fitted {
+            canonical,
             field: field.valid(),
             seconds: self.history.last().map_or(0.0, |r| r.seconds),
             steps: self.history.len() * frames,

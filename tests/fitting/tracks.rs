@@ -181,3 +181,55 @@ fn a_run_config_written_before_tracker_support_still_opens() {
     let again = eval_run(&run, None, &Device::flex()).unwrap();
     assert_eq!(again.epe_x1e4.to_bits(), report.epe_x1e4.to_bits());
 }
+
+#[test]
+fn learned_canonical_positions_resume_bit_for_bit_and_are_used_by_eval() {
+    let v = view();
+    let dir = common::scratch("doma-learned");
+    let npz = dir.join("clip.npz");
+    v.write(&npz, Layout::TapVid3d).unwrap();
+    let config = || {
+        let fit = FitConfig::doma(DomaFieldConfig::new(Variant::Affinity).with_hidden(32))
+            .with_iterations(4)
+            .with_jacobian(JacobianKind::Analytic)
+            .with_seed(5);
+        let mut c = RunConfig::new(npz.clone(), fit);
+        c.test_fraction = 0.25;
+        c.drop_unobserved = true;
+        c.checkpoint_every = 1;
+        c
+    };
+    let never = AtomicBool::new(false);
+    let device = Device::flex();
+    let _g = common::backward_lock();
+    let whole = RunDir::new(dir.join("whole"));
+    let report = match fit_run(&whole, Some(config()), &device, &never, None, false).unwrap() {
+        FitOutcome::Finished(r) => r,
+        other => panic!("{other:?}"),
+    };
+    let parts = RunDir::new(dir.join("parts"));
+    assert!(matches!(
+        fit_run(&parts, Some(config()), &device, &never, Some(2), false).unwrap(),
+        FitOutcome::Interrupted { iterations_done: 2 }
+    ));
+    let resumed = match fit_run(&parts, None, &device, &never, None, false).unwrap() {
+        FitOutcome::Finished(r) => r,
+        other => panic!("{other:?}"),
+    };
+    let bytes = |run: &RunDir, p: fn(&RunDir) -> PathBuf| std::fs::read(p(run)).unwrap();
+    assert_eq!(bytes(&whole, RunDir::model), bytes(&parts, RunDir::model));
+    assert_eq!(
+        bytes(&whole, RunDir::canonical),
+        bytes(&parts, RunDir::canonical)
+    );
+    assert_eq!(report.epe_x1e4.to_bits(), resumed.epe_x1e4.to_bits());
+    // The learned positions moved off their neighbour placement, and eval reads them.
+    let placed = whole.load_config().unwrap().load().unwrap();
+    let learned = whole.load_data(&whole.load_config().unwrap()).unwrap();
+    assert_ne!(
+        placed.trajectories.canonical(),
+        learned.trajectories.canonical()
+    );
+    let again = eval_run(&whole, None, &device).unwrap();
+    assert_eq!(again.epe_x1e4.to_bits(), report.epe_x1e4.to_bits());
+}
