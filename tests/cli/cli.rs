@@ -680,3 +680,55 @@ fn a_scaling_cell_reports_its_step_time_and_peak_memory() {
     // A fit of a few hundred points still loads the binary and Burn: some MiB.
     assert!(cell["peak_mib"].as_f64().unwrap() > 1.0, "{cell}");
 }
+
+#[test]
+fn tracker_flags_that_do_not_fit_the_data_are_refused_naming_the_file_or_flag() {
+    let dir = common::scratch("doma-cli-tracks");
+    let faerie = concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj");
+    let npz = dir.join("clip.npz");
+    let positions: Vec<f32> = (0..2 * 3 * 3).map(|i| (i % 5) as f32).collect();
+    doma::data::npy::write_npz(&npz, &[("tracks", &[2, 3, 3], &positions)]).unwrap();
+    let npz = npz.to_str().unwrap();
+    let out = dir.join("run");
+    let out = out.to_str().unwrap();
+    for (args, needles) in [
+        (
+            vec!["fit", faerie, "--frames", "0..4", "--layout", "tapvid3d"],
+            vec!["md2_faerie.traj", "--layout"],
+        ),
+        (
+            vec!["fit", npz, "--frame", "camera"],
+            vec!["clip.npz", "--frame needs a tracker layout"],
+        ),
+        (
+            vec!["fit", npz, "--layout", "pointodyssey"],
+            vec!["clip.npz", "no key \"trajs_3d\""],
+        ),
+        (
+            vec!["fit", faerie, "--frames", "0..4", "--reference-frame", "4"],
+            vec!["md2_faerie.traj", "reference frame 4"],
+        ),
+        (
+            vec!["fit", faerie, "--holdout-observations", "1.5"],
+            vec!["--holdout-observations"],
+        ),
+        (
+            vec!["fit", faerie, "--robust", "huber:-1"],
+            vec!["--robust"],
+        ),
+    ] {
+        let (code, err) = doma_code(&[&args[..], &["--out", out, "--iters", "1"]].concat());
+        // 2 for a flag clap refuses, 1 for data the flags do not fit.
+        assert!(matches!(code, Some(1 | 2)), "{args:?}: {err}");
+        if code == Some(1) {
+            assert_eq!(err.trim().lines().count(), 1, "{args:?}: {err}");
+        }
+        for n in needles {
+            assert!(err.contains(n), "{args:?}: {err} lacks {n}");
+        }
+        assert!(
+            !std::path::Path::new(out).exists(),
+            "{args:?} left a run folder"
+        );
+    }
+}
