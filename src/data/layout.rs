@@ -17,7 +17,6 @@ use serde::{Deserialize, Serialize};
 use super::npy::{npz_member_header, npz_members, read_npz_member, read_npz_trajectories};
 use super::tracks::Tracks;
 use crate::{DomaError, Result};
-use doma_formats::npy::NpyArray;
 use doma_formats::npz::NpzMember;
 
 /// The layout of a `.npz` file.
@@ -163,19 +162,8 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
         }
     };
     let half = header.is_half();
-    let read_mask = |key: &str| -> Result<Vec<bool>> {
-        let m = member(key)?;
-        let h = npz_member_header(&bytes, m).map_err(malformed)?;
-        if h.shape != [t, n] {
-            return Err(malformed(format!(
-                "{key} has shape {:?}, but {tracks_key} of shape [{t}, {n}, 3] needs [{t}, {n}]",
-                h.shape
-            )));
-        }
-        let a: NpyArray = read_npz_member(&bytes, m).map_err(malformed)?;
-        Ok(a.data.into_iter().map(|v| v != 0.0).collect())
-    };
-    let read_weights = |key: &str| -> Result<Vec<f32>> {
+    // A `[T, N]` array beside the tracks: a mask or the confidence weights.
+    let read_entries = |key: &str| -> Result<Vec<f32>> {
         let m = member(key)?;
         let h = npz_member_header(&bytes, m).map_err(malformed)?;
         if h.shape != [t, n] {
@@ -185,6 +173,9 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
             )));
         }
         Ok(read_npz_member(&bytes, m).map_err(malformed)?.data)
+    };
+    let read_mask = |key: &str| -> Result<Vec<bool>> {
+        Ok(read_entries(key)?.iter().map(|&v| v != 0.0).collect())
     };
     let observed = match layout {
         Layout::PointOdyssey => {
@@ -223,7 +214,7 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
     })?;
     match &file.confidence {
         Some(key) => tracks
-            .with_weights(read_weights(key)?)
+            .with_weights(read_entries(key)?)
             .map_err(|reason| malformed(format!("{key}: {reason}"))),
         None => Ok(tracks),
     }

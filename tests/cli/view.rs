@@ -166,21 +166,9 @@ fn the_viewer_renders_a_mesh_run_and_a_point_run_in_chromium() {
 
 /// A tracker's view of the faerie's "wave" clip (a TAPVid-3D file), fitted with its mesh.
 pub(crate) fn masked_run(dir: &Path) -> std::path::PathBuf {
-    use doma::data::layout::Layout;
-    use doma::data::mesh::read_obj;
-    use doma::data::tracker::{TrackerConfig, simulate};
-    use doma::data::traj::read_traj;
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("data");
-    let truth = read_traj(root.join("md2_faerie.traj"))
-        .unwrap()
-        .select_frames(112..120, 1)
-        .unwrap();
-    let obj = root.join("md2_faerie.obj");
-    let faces = read_obj(&obj).unwrap().faces;
+    let (view, obj) = common::faerie_tracker_view(112..120);
     let npz = dir.join("clip.npz");
-    simulate(&truth, &faces, &TrackerConfig::default())
-        .unwrap()
-        .write(&npz, Layout::TapVid3d)
+    view.write(&npz, doma::data::layout::Layout::TapVid3d)
         .unwrap();
     let run = dir.join("masked");
     doma(&[

@@ -143,3 +143,24 @@ pub fn tool_or_skip(test: &str, tool: &str, present: bool) -> bool {
     eprintln!("SKIPPED {test}: {tool} is not installed (see .ci/run)");
     false
 }
+
+/// The shipped faerie's frames `frames` (one motion: 112..123 is its "wave" clip) as a
+/// simulated tracker sees them (`doma::data::tracker`), and the mesh's OBJ path.
+pub fn faerie_tracker_view(
+    frames: std::ops::Range<usize>,
+) -> (doma::data::tracker::TrackerView, PathBuf) {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("data");
+    let truth = doma::data::traj::read_traj(root.join("md2_faerie.traj"))
+        .unwrap()
+        .select_frames(frames, 1)
+        .unwrap();
+    let obj = root.join("md2_faerie.obj");
+    let faces = doma::data::mesh::read_obj(&obj).unwrap().faces;
+    let view = doma::data::tracker::simulate(
+        &truth,
+        &faces,
+        &doma::data::tracker::TrackerConfig::default(),
+    )
+    .unwrap();
+    (view, obj)
+}

@@ -9,10 +9,9 @@ use std::sync::atomic::AtomicBool;
 
 use burn::tensor::Device;
 use doma::data::layout::{Layout, TrackFile, read_npz_tracks};
-use doma::data::mesh::read_obj;
 use doma::data::npy::read_npz;
-use doma::data::tracker::{TrackerConfig, TrackerView, simulate};
-use doma::data::traj::{read_traj, write_traj};
+use doma::data::tracker::TrackerView;
+use doma::data::traj::write_traj;
 use doma::field::{DomaFieldConfig, Variant};
 use doma::jacobian::JacobianKind;
 use doma::run::{FitOutcome, Report, RunConfig, RunDir, complete_run, eval_run, fit_run};
@@ -21,19 +20,8 @@ use doma::train::{FitConfig, WithSchedule};
 use doma_formats::npy::NpyValues;
 use doma_formats::npz::encode_npz_values;
 
-fn shipped(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("data")
-        .join(name)
-}
-
 fn view() -> TrackerView {
-    let truth = read_traj(shipped("md2_faerie.traj"))
-        .unwrap()
-        .select_frames(112..120, 1)
-        .unwrap();
-    let mesh = read_obj(shipped("md2_faerie.obj")).unwrap();
-    simulate(&truth, &mesh.faces, &TrackerConfig::default()).unwrap()
+    common::faerie_tracker_view(112..120).0
 }
 
 fn fit(data: &Path, run: &RunDir, edit: impl FnOnce(&mut RunConfig)) -> Report {

@@ -4,31 +4,18 @@
 
 use crate::common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use doma::data::layout::{CoordFrame, Layout, TrackFile, read_npz_tracks};
-use doma::data::mesh::read_obj;
 use doma::data::sequence::{LoadOptions, load_sequence_with};
-use doma::data::tracker::{TrackerConfig, TrackerView, simulate};
-use doma::data::traj::read_traj;
+use doma::data::tracker::TrackerView;
 use doma_formats::npy::NpyValues;
 use doma_formats::npy::f32_to_f16;
 use doma_formats::npz::encode_npz_values;
 
-fn shipped(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("data")
-        .join(name)
-}
-
 /// The faerie's "wave" clip as a tracker sees it.
 fn view() -> TrackerView {
-    let truth = read_traj(shipped("md2_faerie.traj"))
-        .unwrap()
-        .select_frames(112..123, 1)
-        .unwrap();
-    let mesh = read_obj(shipped("md2_faerie.obj")).unwrap();
-    simulate(&truth, &mesh.faces, &TrackerConfig::default()).unwrap()
+    common::faerie_tracker_view(112..123).0
 }
 
 fn read(path: &Path, file: &TrackFile) -> doma::Result<doma::data::tracks::Tracks> {
