@@ -40,12 +40,15 @@ pub fn evaluate(
     })
 }
 
-/// The gap-filling report of `field` fitted to `data` under `config`: on the held-out
-/// observations of the training tracks, the field's EPE beside linear interpolation's and
-/// the k-NN baseline's ([`GapReport`]); `None` when nothing was held out.
+/// The gap-filling report of `field` fitted under `config`: on the held-out observations
+/// of the training tracks, the field's EPE beside linear interpolation's and the k-NN
+/// baseline's ([`GapReport`]); `None` when nothing was held out. `placed` is the run's data
+/// as loaded (the baselines use its canonical positions, nothing the fit learned), `data`
+/// the same with the canonical positions the fit learned ([`RunDir::load_data`]).
 pub fn gap_report(
     field: &dyn MotionField,
     config: &RunConfig,
+    placed: &Sequence,
     data: &Sequence,
     device: &Device,
 ) -> Result<Option<GapReport>> {
@@ -54,6 +57,7 @@ pub fn gap_report(
     };
     let (train_idx, _) = config.split_indices(data.trajectories.points())?;
     let train = data.trajectories.select_points(&train_idx)?;
+    let baseline = placed.trajectories.select_points(&train_idx)?;
     let mut row = vec![usize::MAX; data.trajectories.points()];
     for (r, &i) in train_idx.iter().enumerate() {
         row[i] = r;
@@ -77,11 +81,11 @@ pub fn gap_report(
     let linear: Vec<[f32; 3]> = entries
         .iter()
         .map(|&(k, r)| {
-            let p = &train.frame(k)[3 * r..3 * r + 3];
+            let p = &baseline.frame(k)[3 * r..3 * r + 3];
             [p[0], p[1], p[2]]
         })
         .collect();
-    let neighbours = neighbour_motion(&train, &entries)?;
+    let neighbours = neighbour_motion(&baseline, &entries)?;
     // The field's prediction, frame by frame over the frames that have entries.
     let canonical = as_points(train.canonical());
     let mut predicted = vec![[0f32; 3]; entries.len()];
@@ -134,7 +138,10 @@ pub fn eval_run(run: &RunDir, data: Option<&Path>, device: &Device) -> Result<Re
     };
     let report = evaluate(&field, &truth, &what, device)?;
     let gaps = match data {
-        None => gap_report(&field, &config, &own, device)?,
+        None if own.held_out.is_some() => {
+            gap_report(&field, &config, &config.load()?, &own, device)?
+        }
+        None => None,
         Some(_) => None,
     };
     Ok(Report {

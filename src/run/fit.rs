@@ -108,6 +108,7 @@ fn finish(
 ) -> Result<Report> {
     let encoded = fitted.field.encode(Precision::F32)?;
     // The learned canonical positions of the training tracks go into every track's.
+    let placed = sequence;
     let sequence = match &fitted.canonical {
         Some(learned) => {
             let (train, _) = config.split_indices(sequence.trajectories.points())?;
@@ -130,7 +131,7 @@ fn finish(
         checkpoint_bytes: encoded.len() as u64,
         iterations: fitted.history.len(),
         seconds: fitted.seconds,
-        held_out_observations: gap_report(&fitted.field, config, sequence, device)?,
+        held_out_observations: gap_report(&fitted.field, config, placed, sequence, device)?,
         ..evaluate(&fitted.field, test, what, device)?
     };
     save_json(&report, &run.report())?;
