@@ -17,8 +17,8 @@
 //! vertex's mean end-point error over the frames where it is observed, on a blue-to-red
 //! ramp (the vertices must then be the run's points, in order). The run's own points of
 //! tracks with gaps are coloured per frame: grey (or their error colour) where observed,
-//! magenta ([`glb::FILLED`]) where the field fills them, through `COLOR_0` morph targets.
-//! `up` turns the data's up axis onto glTF's +y.
+//! magenta (RGB 0.85, 0.3, 0.85, the viewer's colour too) where the field fills them,
+//! through `COLOR_0` morph targets. `up` turns the data's up axis onto glTF's +y.
 
 use std::path::Path;
 
