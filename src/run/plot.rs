@@ -16,8 +16,8 @@ use crate::{DomaError, Result};
 /// Writes the run's plots into `RUN_DIR/plots/`, each as `.png` and `.svg`: `loss`
 /// (trajectory and total loss per iteration, log scale), `epe_per_frame` (held-out EPE per
 /// frame) and, for each of `frames` (default: the middle and the last frame),
-/// `points_frame_KKKK` (three views of the held-out points coloured by error). Returns the
-/// PNG paths written.
+/// `points_frame_KKKK` (three views of the held-out points observed in frame KKKK, coloured
+/// by error; a frame where none is observed is skipped). Returns the PNG paths written.
 pub fn plot_run(run: &RunDir, frames: Option<&[usize]>, device: &Device) -> Result<Vec<PathBuf>> {
     let config = run.load_config()?;
     let field = run.load_field(&config, device)?;
@@ -41,7 +41,19 @@ pub fn plot_run(run: &RunDir, frames: Option<&[usize]>, device: &Device) -> Resu
     }
     let canonical = as_points(test.canonical());
     for &k in chosen {
-        let (truth, pred) = (as_points(test.frame(k)), as_points(predicted.frame(k)));
+        // Only the points observed in frame k have a truth to show an error against.
+        let seen: Vec<usize> = (0..test.points())
+            .filter(|&i| test.is_observed(k, i))
+            .collect();
+        if seen.is_empty() {
+            continue;
+        }
+        let pick = |p: Vec<[f32; 3]>| -> Vec<[f32; 3]> { seen.iter().map(|&i| p[i]).collect() };
+        let (truth, pred) = (
+            pick(as_points(test.frame(k))),
+            pick(as_points(predicted.frame(k))),
+        );
+        let canonical = pick(canonical.clone());
         let mut errors: Vec<f64> = truth
             .iter()
             .zip(&pred)
@@ -123,9 +135,11 @@ fn epe_plot(per_frame: &[f64], dir: &Path) -> Result<PathBuf> {
     let series = [Series {
         name: "EPE",
         color: [30, 170, 90],
+        // A frame with no observed held-out point (NaN) has no value to draw.
         points: per_frame
             .iter()
             .enumerate()
+            .filter(|(_, e)| !e.is_nan())
             .map(|(k, e)| (k as f64, e * EPE_SCALE))
             .collect(),
     }];

@@ -86,6 +86,12 @@ fn held_out_observations_are_reported_beside_both_baselines_and_eval_repeats_the
     let again = eval_run(&run, None, &Device::flex()).unwrap();
     assert_eq!(again.held_out_observations, Some(gaps));
     assert_eq!(again.epe_x1e4.to_bits(), report.epe_x1e4.to_bits());
+    // The plots of a run with gaps: the points observed in each plotted frame.
+    let plots = doma::run::plot_run(&run, None, &Device::flex()).unwrap();
+    assert!(
+        plots.len() >= 3 && plots.iter().all(|p| p.is_file()),
+        "{plots:?}"
+    );
 }
 
 #[test]
