@@ -35,6 +35,16 @@ pub struct RunInfo {
     pub iterations_done: usize,
     /// Iterations configured.
     pub iterations: usize,
+    /// For tracks with gaps: the entries the fit saw, of `frames × points`.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub observed_entries: Option<usize>,
+    /// For tracks with gaps: the frame of the canonical positions, and the tracks not
+    /// observed there (placed by their neighbours, learned with the field).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub reference_frame: Option<usize>,
+    /// See `reference_frame`.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub tracks_unseen_in_reference: Option<usize>,
 }
 
 /// Describes the run in `run`.
@@ -46,6 +56,11 @@ pub fn info(run: &RunDir) -> Result<RunInfo> {
     } else {
         Vec::new()
     };
+    let data = &seq.trajectories;
+    let masked = data.observed().is_some();
+    let unseen = (0..data.points())
+        .filter(|&i| !data.is_observed(data.reference(), i))
+        .count();
     let model = &config.fit.model;
     let shape = match model {
         ModelConfig::Doma(c) => Some(&c.shape),
@@ -63,5 +78,8 @@ pub fn info(run: &RunDir) -> Result<RunInfo> {
         points: seq.trajectories.points(),
         iterations_done: history.len(),
         iterations: config.fit.schedule.iterations,
+        observed_entries: masked.then(|| data.observed_count()),
+        reference_frame: masked.then(|| data.reference()),
+        tracks_unseen_in_reference: masked.then_some(unseen),
     })
 }

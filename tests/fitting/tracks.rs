@@ -86,6 +86,11 @@ fn held_out_observations_are_reported_beside_both_baselines_and_eval_repeats_the
     let again = eval_run(&run, None, &Device::flex()).unwrap();
     assert_eq!(again.held_out_observations, Some(gaps));
     assert_eq!(again.epe_x1e4.to_bits(), report.epe_x1e4.to_bits());
+    // info tells what the fit saw.
+    let about = doma::run::info(&run).unwrap();
+    assert!(about.observed_entries.unwrap() < about.frames * about.points);
+    assert!(about.reference_frame.unwrap() < about.frames);
+    assert!(about.tracks_unseen_in_reference.is_some());
     // The plots of a run with gaps: the points observed in each plotted frame.
     let plots = doma::run::plot_run(&run, None, &Device::flex()).unwrap();
     assert!(
