@@ -180,6 +180,22 @@ impl Trajectories {
         Ok(self)
     }
 
+    /// These trajectories with every coordinate, of the positions and of the canonical
+    /// positions, mapped by `f(value, axis)` (a change of units or frame); the mask, the
+    /// reference frame and the weights are kept. Refuses a result that is not finite.
+    pub fn map_coordinates(&self, f: impl Fn(f32, usize) -> f32) -> Result<Self> {
+        let map =
+            |v: &[f32]| -> Vec<f32> { v.iter().enumerate().map(|(i, &x)| f(x, i % 3)).collect() };
+        let mut out = Trajectories::new(self.frames, self.points, map(&self.positions))?;
+        out.observed = self.observed.clone();
+        out.reference = self.reference;
+        out.weights = self.weights.clone();
+        if let Some(c) = &self.canonical {
+            out = out.with_canonical(map(c))?;
+        }
+        Ok(out)
+    }
+
     /// The observed mask `[T, N]`; `None` when every entry is observed.
     pub fn observed(&self) -> Option<&[bool]> {
         self.observed.as_deref()

@@ -5,15 +5,15 @@ use std::path::Path;
 use burn::tensor::Device;
 
 use super::{GapReport, Report, RunConfig, RunDir};
-use crate::Result;
 use crate::checkpoint::load_json;
 use crate::data::Trajectories;
 use crate::data::mesh::as_points;
-use crate::data::sequence::{Sequence, load_sequence};
+use crate::data::sequence::{LoadOptions, Sequence, load_sequence_with};
 use crate::data::tracks::neighbour_motion;
 use crate::field::MotionField;
 use crate::metrics::{EPE_SCALE, field_epe_per_frame, mean_over_frames};
 use crate::train::IterationRecord;
+use crate::{DomaError, Result};
 
 /// The EPE report of `field` on `truth` (normalised coordinates).
 pub fn evaluate(
@@ -120,13 +120,33 @@ pub fn eval_run(run: &RunDir, data: Option<&Path>, device: &Device) -> Result<Re
             "the held-out points of the fitted data".to_string(),
         ),
         Some(path) => {
-            let other = load_sequence(path, None, None, 1)?;
+            // Read as the run read its own data (a tracker's layout and frame for a
+            // tracker's .npz, dropped tracks).
+            let npz = path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("npz"));
+            let other = load_sequence_with(
+                path,
+                &LoadOptions {
+                    stride: 1,
+                    file: if npz {
+                        config.tracks.clone()
+                    } else {
+                        Default::default()
+                    },
+                    drop_unobserved: config.drop_unobserved,
+                    ..LoadOptions::default()
+                },
+            )?;
             // Undo the other file's own normalisation, apply the run's.
-            let denorm = denormalize(&other.trajectories, other.center, other.scale);
-            (
-                normalize_with(&denorm, own.center, own.scale),
-                format!("every point of {}", path.display()),
-            )
+            let in_run_units = |e: DomaError| DomaError::Malformed {
+                path: path.to_path_buf(),
+                reason: format!("in the run's normalisation: {e}"),
+            };
+            let denorm = denormalize(&other.trajectories, other.center, other.scale)
+                .map_err(in_run_units)?;
+            let renorm = normalize_with(&denorm, own.center, own.scale).map_err(in_run_units)?;
+            (renorm, format!("every point of {}", path.display()))
         }
     };
     let bytes = std::fs::metadata(run.model()).map(|m| m.len()).unwrap_or(0);
@@ -153,20 +173,10 @@ pub fn eval_run(run: &RunDir, data: Option<&Path>, device: &Device) -> Result<Re
     })
 }
 
-fn map_points(t: &Trajectories, f: impl Fn(f32, usize) -> f32) -> Trajectories {
-    let positions = t
-        .positions()
-        .iter()
-        .enumerate()
-        .map(|(i, &v)| f(v, i % 3))
-        .collect();
-    Trajectories::new(t.frames(), t.points(), positions).expect("an affine map keeps the shape")
+fn denormalize(t: &Trajectories, center: [f32; 3], scale: f32) -> Result<Trajectories> {
+    t.map_coordinates(|v, c| v * scale + center[c])
 }
 
-fn denormalize(t: &Trajectories, center: [f32; 3], scale: f32) -> Trajectories {
-    map_points(t, |v, c| v * scale + center[c])
-}
-
-fn normalize_with(t: &Trajectories, center: [f32; 3], scale: f32) -> Trajectories {
-    map_points(t, |v, c| (v - center[c]) / scale)
+fn normalize_with(t: &Trajectories, center: [f32; 3], scale: f32) -> Result<Trajectories> {
+    t.map_coordinates(|v, c| (v - center[c]) / scale)
 }

@@ -232,3 +232,27 @@ fn learned_canonical_positions_resume_bit_for_bit_and_are_used_by_eval() {
     let again = eval_run(&whole, None, &device).unwrap();
     assert_eq!(again.epe_x1e4.to_bits(), report.epe_x1e4.to_bits());
 }
+
+#[test]
+fn eval_on_another_tracker_file_reads_it_as_the_run_read_its_own() {
+    let v = view();
+    let dir = common::scratch("doma-eval-other");
+    let npz = dir.join("clip.npz");
+    v.write(&npz, Layout::TapVid3d).unwrap();
+    let run = RunDir::new(dir.join("run"));
+    fit(&npz, &run, |c| c.drop_unobserved = true);
+    // The same file as new data: its never-observed tracks are dropped as the run's were
+    // (the default reading refuses them), and every frame has observed entries to measure.
+    let report = eval_run(&run, Some(&npz), &Device::flex()).unwrap();
+    let kept = doma::data::sequence::load_sequence_with(
+        &npz,
+        &doma::data::sequence::LoadOptions {
+            drop_unobserved: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(report.points, kept.trajectories.points());
+    assert!(report.epe_x1e4.is_finite() && report.epe_x1e4 > 0.0);
+    assert!(report.epe_per_frame_x1e4.iter().all(|e| e.is_finite()));
+}
