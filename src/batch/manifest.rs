@@ -16,9 +16,10 @@
 //! Every field of an entry, and of `defaults`, is a [`RunSpec`] field: `data`, `config`,
 //! `model` (`trans`, `se3`, `scaled-se3`, `affinity`, `dpf`), `backend`, `jacobian`,
 //! `iterations`, `h_weight` (a number or `"auto"`), `seed`, `mesh`, `frames` (`[start,
-//! end)`), `stride`, `test_fraction`, `checkpoint_every`, `points_per_step`, and for
-//! tracker output `layout`, `frame`, `count_hidden`, `reference_frame`, `drop_unobserved`,
-//! `holdout_observations`, `confidence`, `data_penalty`; an entry also
+//! end)`), `stride`, `test_fraction`, `checkpoint_every`, `points_per_step`,
+//! `frames_per_step`, and for tracker output `layout`, `frame`, `count_hidden`,
+//! `reference_frame`, `drop_unobserved`, `holdout_observations`, `confidence`,
+//! `data_penalty`; an entry also
 //! has a `name`, its run folder's name (default: the data file's stem). Relative paths are
 //! relative to the manifest's folder. Unknown fields are refused.
 

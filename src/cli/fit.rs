@@ -24,7 +24,7 @@ pub struct FitArgs {
     #[arg(long, required_unless_present = "resume", conflicts_with = "resume")]
     pub out: Option<PathBuf>,
     /// Continue the interrupted run in this folder from its last checkpoint.
-    #[arg(long, conflicts_with_all = ["data", "config", "variant", "iters", "test_fraction", "mesh", "frames", "stride", "jacobian", "h_weight", "seed", "checkpoint_every", "points_per_step", "layout", "frame", "count_hidden", "reference_frame", "drop_unobserved", "holdout_observations", "confidence", "robust"])]
+    #[arg(long, conflicts_with_all = ["data", "config", "variant", "iters", "test_fraction", "mesh", "frames", "stride", "jacobian", "h_weight", "seed", "checkpoint_every", "points_per_step", "frames_per_step", "layout", "frame", "count_hidden", "reference_frame", "drop_unobserved", "holdout_observations", "confidence", "robust"])]
     pub resume: Option<PathBuf>,
     /// A fit config (JSON, the `fit` part of a run's config.json; missing fields take
     /// their defaults); flags override it.
@@ -66,6 +66,10 @@ pub struct FitArgs {
     /// them, the paper's protocol), so that a step's memory does not grow with the tracks.
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
     pub points_per_step: Option<u64>,
+    /// Frames per Adam step: each step minimises the sum of B frames' losses (default 1,
+    /// the paper's protocol).
+    #[arg(long, value_name = "B", value_parser = clap::value_parser!(u64).range(1..))]
+    pub frames_per_step: Option<u64>,
     /// The layout of a tracker's .npz (default: detected from its keys).
     #[arg(long, value_enum)]
     pub layout: Option<Layout>,
@@ -144,6 +148,7 @@ impl FitArgs {
             test_fraction: self.test_fraction,
             checkpoint_every: self.checkpoint_every.map(|k| k as usize),
             points_per_step: self.points_per_step.map(|k| k as usize),
+            frames_per_step: self.frames_per_step.map(|b| b as usize),
             layout: self.layout,
             frame: self.frame,
             count_hidden: self.count_hidden.then_some(true),

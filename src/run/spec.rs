@@ -111,6 +111,9 @@ pub struct RunSpec {
     /// Training points per step (`FitConfig::points_per_step`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub points_per_step: Option<usize>,
+    /// Frames per Adam step (`FitConfig::frames_per_step`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames_per_step: Option<usize>,
     /// The layout of a tracker's `.npz` (default: detected from its keys).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub layout: Option<Layout>,
@@ -157,6 +160,7 @@ impl RunSpec {
             test_fraction: self.test_fraction.or(d.test_fraction),
             checkpoint_every: self.checkpoint_every.or(d.checkpoint_every),
             points_per_step: self.points_per_step.or(d.points_per_step),
+            frames_per_step: self.frames_per_step.or(d.frames_per_step),
             layout: self.layout.or(d.layout),
             frame: self.frame.or(d.frame),
             count_hidden: self.count_hidden.or(d.count_hidden),
@@ -219,6 +223,9 @@ impl RunSpec {
         }
         if self.points_per_step.is_some() {
             fit.points_per_step = self.points_per_step;
+        }
+        if self.frames_per_step.is_some() {
+            fit.frames_per_step = self.frames_per_step;
         }
         if let Some(p) = self.data_penalty {
             fit.loss.data_penalty = (p != DataPenalty::L1).then_some(p);

@@ -210,6 +210,10 @@ pub struct FitConfig {
     /// a step's memory and time do not grow with the number of tracks (`None`: every
     /// training point, the paper's protocol).
     pub points_per_step: Option<usize>,
+    /// Frames per Adam step: each step minimises the sum of that many frames' losses, so an
+    /// iteration takes `⌈T / frames⌉` steps (`None`: one frame per step, the paper's
+    /// protocol).
+    pub frames_per_step: Option<usize>,
 }
 
 impl FitConfig {
@@ -241,6 +245,11 @@ impl FitConfig {
         if self.points_per_step == Some(0) {
             return Err(DomaError::InvalidConfig(
                 "points per step must be at least 1".into(),
+            ));
+        }
+        if self.frames_per_step == Some(0) {
+            return Err(DomaError::InvalidConfig(
+                "frames per step must be at least 1".into(),
             ));
         }
         self.model.validate()?;
