@@ -174,7 +174,9 @@ fn a_run_config_written_before_tracker_support_still_opens() {
     ] {
         assert!(top.remove(key).is_some(), "{key}");
     }
-    let loss = top["fit"]["loss"].as_object_mut().unwrap();
+    let fit = top["fit"].as_object_mut().unwrap();
+    assert!(fit.remove("frames_per_step").is_some());
+    let loss = fit["loss"].as_object_mut().unwrap();
     assert!(loss.remove("data_penalty").is_some());
     std::fs::write(run.config(), serde_json::to_string(&config).unwrap()).unwrap();
     let again = eval_run(&run, None, &Device::flex()).unwrap();
