@@ -658,4 +658,34 @@ mod tests {
         let read = |t| crate::readback::to_vec::<f64, 1, _>(t).unwrap()[0];
         assert_eq!((read(l1), read(total)), (0.0, 0.0));
     }
+
+    /// What `Trainer::step_frames` minimises: the sum of the frames' losses, whose
+    /// gradient is the sum of theirs.
+    #[test]
+    fn the_gradient_of_a_batch_of_frames_is_the_sum_of_theirs() {
+        let data = data();
+        let device = Device::flex();
+        let ad = device.clone().autodiff();
+        let config = FitConfig::doma(DomaFieldConfig::new(Variant::Affinity).with_hidden(16))
+            .with_jacobian(JacobianKind::Analytic);
+        let field = DomaFieldConfig::new(Variant::Affinity)
+            .with_hidden(16)
+            .init(1, &ad);
+        let mut objective = TrajectoryObjective::new(&field, &config, &data, &device).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let mut loss = |k: usize| objective.step_loss(&field, k, 0, &mut rng).unwrap().1;
+        let grad = |total: Tensor<1>| -> Vec<f64> {
+            let grads = total.backward();
+            let layer = &field.siren.sine[0];
+            crate::readback::to_vec(layer.weight.val().grad(&grads).expect("a gradient")).unwrap()
+        };
+        let (g0, g2) = (grad(loss(0)), grad(loss(2)));
+        let batch = grad(loss(0) + loss(2));
+        for ((a, b), s) in g0.iter().zip(&g2).zip(&batch) {
+            assert!(
+                (a + b - s).abs() <= 1e-6 * (1.0 + s.abs()),
+                "{a} + {b} vs {s}"
+            );
+        }
+    }
 }

@@ -121,15 +121,13 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
     /// and total loss as a `[2]` tensor; reading it is left to the caller, so that a step
     /// does not force a device sync.
     pub fn step(&mut self, k: usize, lr: f64) -> Result<Tensor<1>> {
-        match self.device.clone() {
-            Some(device) => crate::backend::on_worker(&device, || self.step_here(k, lr)),
-            None => self.step_here(k, lr),
-        }
+        self.step_frames(&[k], lr)
     }
 
     /// One Adam step on the sum of the losses of `frames` at learning rate `lr`: the
-    /// gradient is the sum of the frames' gradients, and one frame is [`Trainer::step`]
-    /// exactly. Returns the (detached) summed primary and total loss as a `[2]` tensor.
+    /// gradient is the sum of the frames' gradients (one frame adds nothing to its own
+    /// loss, so it is the paper's step). Returns the (detached) summed primary and total
+    /// loss as a `[2]` tensor.
     pub fn step_frames(&mut self, frames: &[usize], lr: f64) -> Result<Tensor<1>> {
         match self.device.clone() {
             Some(device) => {
@@ -174,27 +172,6 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         Ok(losses)
     }
 
-    fn step_here(&mut self, k: usize, lr: f64) -> Result<Tensor<1>> {
-        let field = self.field.take().expect("the field is always put back");
-        let iteration = self.history.len();
-        let losses = self
-            .objective
-            .step_loss(&field, k, iteration, &mut self.rng);
-        let (primary, total) = match losses {
-            Ok(l) => l,
-            Err(e) => {
-                self.field = Some(field);
-                return Err(e);
-            }
-        };
-        let losses = Tensor::cat(vec![primary.detach(), total.clone().detach()], 0);
-        let grads = total.backward();
-        self.objective.after_backward(&grads, lr);
-        let grads = GradientsParams::from_grads(grads, &field);
-        self.field = Some(self.optim.step(lr, field, grads));
-        Ok(losses)
-    }
-
     /// The next iteration: every frame once, in a fresh random order. Reads the losses
     /// back once, stops with [`DomaError::NonFiniteLoss`] if any step's loss is not
     /// finite, and records the iteration.
@@ -208,16 +185,9 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         self.objective.prepare_iteration(&order, &mut self.rng);
         let mut step_losses = Vec::with_capacity(order.len());
         let mut first_frames = Vec::with_capacity(order.len());
-        if self.frames_per_step == 1 {
-            for &k in &order {
-                step_losses.push(self.step(k, lr)?);
-            }
-            first_frames = order.clone();
-        } else {
-            for frames in order.chunks(self.frames_per_step) {
-                step_losses.push(self.step_frames(frames, lr)?);
-                first_frames.push(frames[0]);
-            }
+        for frames in order.chunks(self.frames_per_step) {
+            step_losses.push(self.step_frames(frames, lr)?);
+            first_frames.push(frames[0]);
         }
         let (trajectory_loss, total_loss) =
             read_step_losses(step_losses, &first_frames, order.len(), iteration)?;
@@ -396,82 +366,4 @@ fn read_step_losses(
     // Per frame: a step's losses are the sums over its frames.
     let mean = |c: usize| losses.iter().skip(c).step_by(2).sum::<f64>() / frames as f64;
     Ok((mean(0), mean(1)))
-}
-
-#[cfg(test)]
-mod tests {
-    use burn::tensor::{Device, Tensor};
-    use rand::SeedableRng;
-    use rand_chacha::ChaCha8Rng;
-
-    use super::*;
-    use crate::field::{DomaFieldConfig, Variant};
-    use crate::jacobian::JacobianKind;
-    use crate::siren::WithSirenShape;
-    use crate::train::Objective;
-
-    /// 30 points moving on their own paths over 4 frames.
-    fn data() -> Trajectories {
-        let (t, n) = (4, 30);
-        let pos = (0..t * n * 3)
-            .map(|i| ((i * 7919 % 101) as f32 / 101.0) - 0.5)
-            .collect();
-        Trajectories::new(t, n, pos).unwrap()
-    }
-
-    fn config() -> FitConfig {
-        FitConfig::doma(DomaFieldConfig::new(Variant::Affinity).with_hidden(16))
-            .with_jacobian(JacobianKind::Analytic)
-            .with_smoothness_weight(0.1)
-            .with_seed(4)
-    }
-
-    fn weights(t: &Trainer<Model, TrajectoryObjective<'_>>) -> Vec<u8> {
-        t.field()
-            .clone()
-            .valid()
-            .encode(crate::checkpoint::Precision::F32)
-            .unwrap()
-    }
-
-    #[test]
-    fn a_step_of_one_frame_is_the_one_frame_step_exactly() {
-        let data = data();
-        let device = Device::flex();
-        let mut a = Trainer::from_config(&config(), &data, &device).unwrap();
-        let mut b = Trainer::from_config(&config(), &data, &device).unwrap();
-        for (k, lr) in [(2, 1e-3), (0, 5e-4), (3, 1e-3)] {
-            let la: Vec<f64> = crate::readback::to_vec(a.step(k, lr).unwrap()).unwrap();
-            let lb: Vec<f64> = crate::readback::to_vec(b.step_frames(&[k], lr).unwrap()).unwrap();
-            assert_eq!(la, lb);
-        }
-        assert_eq!(weights(&a), weights(&b));
-    }
-
-    #[test]
-    fn the_gradient_of_a_batch_of_frames_is_the_sum_of_theirs() {
-        let data = data();
-        let device = Device::flex();
-        let ad = device.clone().autodiff();
-        let config = config().with_smoothness_weight(0.0);
-        let field = DomaFieldConfig::new(Variant::Affinity)
-            .with_hidden(16)
-            .init(1, &ad);
-        let mut objective = TrajectoryObjective::new(&field, &config, &data, &device).unwrap();
-        let mut rng = ChaCha8Rng::seed_from_u64(0);
-        let mut loss = |k: usize| objective.step_loss(&field, k, 0, &mut rng).unwrap().1;
-        let grad = |total: Tensor<1>| -> Vec<f64> {
-            let grads = total.backward();
-            let layer = &field.siren.sine[0];
-            crate::readback::to_vec(layer.weight.val().grad(&grads).expect("a gradient")).unwrap()
-        };
-        let (g1, g3) = (grad(loss(1)), grad(loss(3)));
-        let batch = grad(loss(1) + loss(3));
-        for ((a, b), s) in g1.iter().zip(&g3).zip(&batch) {
-            assert!(
-                (a + b - s).abs() <= 1e-6 * (1.0 + s.abs()),
-                "{a} + {b} vs {s}"
-            );
-        }
-    }
 }
