@@ -117,9 +117,15 @@ fn finish(
                 all[3 * i..3 * i + 3].copy_from_slice(&learned[3 * r..3 * r + 3]);
             }
             crate::data::npy::write_npy(run.canonical(), &[all.len() / 3, 3], &all)?;
+            // Field by field: `..sequence.clone()` would copy the trajectories twice.
             &Sequence {
+                name: sequence.name.clone(),
                 trajectories: sequence.trajectories.clone().with_canonical(all)?,
-                ..sequence.clone()
+                faces: sequence.faces.clone(),
+                center: sequence.center,
+                scale: sequence.scale,
+                held_out: sequence.held_out.clone(),
+                kept: sequence.kept.clone(),
             }
         }
         None => sequence,
