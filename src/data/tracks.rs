@@ -261,11 +261,8 @@ impl Tracks {
                 self.frames
             )));
         }
-        let filled = if self.observed.iter().all(|&o| o) {
-            self.positions
-        } else {
-            interpolate(self.frames, self.points, &self.positions, &self.observed)
-        };
+        let mut filled = self.positions;
+        interpolate(self.frames, self.points, &mut filled, &self.observed);
         let canonical = canonical_positions(self.frames, self.points, &filled, &self.observed, r)?;
         let data = Trajectories::new(self.frames, self.points, filled)?.with_observations(
             self.observed,
@@ -279,12 +276,12 @@ impl Tracks {
     }
 }
 
-/// Every entry of `positions` (`[T, N, 3]`) that `observed` (`[T, N]`) does not mark,
-/// replaced by its track's linear interpolation in frame index between the nearest
-/// observations before and after, or held at the first or last observation past the ends.
-/// A track with no observation is left as it is.
-pub fn interpolate(frames: usize, points: usize, positions: &[f32], observed: &[bool]) -> Vec<f32> {
-    let mut out = positions.to_vec();
+/// Replaces, in place, every entry of `positions` (`[T, N, 3]`) that `observed` (`[T, N]`)
+/// does not mark by its track's linear interpolation in frame index between the nearest
+/// observations before and after, or holds it at the first or last observation past the
+/// ends. Only observed entries are read, so the writes never feed later reads. A track with
+/// no observation is left as it is.
+pub fn interpolate(frames: usize, points: usize, positions: &mut [f32], observed: &[bool]) {
     let mut seen = Vec::with_capacity(frames);
     for i in 0..points {
         seen.clear();
@@ -292,7 +289,7 @@ pub fn interpolate(frames: usize, points: usize, positions: &[f32], observed: &[
         if seen.is_empty() || seen.len() == frames {
             continue;
         }
-        let at = |k: usize, c: usize| positions[3 * (k * points + i) + c];
+        let at = |p: &[f32], k: usize, c: usize| p[3 * (k * points + i) + c];
         let mut next = 0;
         for k in 0..frames {
             if observed[k * points + i] {
@@ -302,20 +299,21 @@ pub fn interpolate(frames: usize, points: usize, positions: &[f32], observed: &[
                 next += 1;
             }
             for c in 0..3 {
-                out[3 * (k * points + i) + c] = match (next.checked_sub(1), seen.get(next)) {
-                    (Some(p), Some(&b)) => {
-                        let a = seen[p];
+                let p = &*positions;
+                let value = match (next.checked_sub(1), seen.get(next)) {
+                    (Some(q), Some(&b)) => {
+                        let a = seen[q];
                         let w = (k - a) as f32 / (b - a) as f32;
-                        at(a, c) + w * (at(b, c) - at(a, c))
+                        at(p, a, c) + w * (at(p, b, c) - at(p, a, c))
                     }
-                    (Some(p), None) => at(seen[p], c),
-                    (None, Some(&b)) => at(b, c),
+                    (Some(q), None) => at(p, seen[q], c),
+                    (None, Some(&b)) => at(p, b, c),
                     (None, None) => unreachable!("the track has an observation"),
                 };
+                positions[3 * (k * points + i) + c] = value;
             }
         }
     }
-    out
 }
 
 /// The canonical position of every track in frame `r`: its observation there, else its
@@ -498,7 +496,8 @@ mod tests {
         for k in [0, 2, 4] {
             poisoned[3 * k] = f32::NAN;
         }
-        let out = interpolate(5, 1, &poisoned, &observed);
+        interpolate(5, 1, &mut poisoned, &observed);
+        let out = poisoned;
         assert_eq!(&out[6..9], &[2.0, 4.0, 0.0]);
         assert_eq!(&out[0..3], &[1.0, 2.0, 0.0]);
         assert_eq!(&out[12..15], &[3.0, 6.0, 0.0]);
