@@ -4,6 +4,7 @@
 //! |---|---|---|---|
 //! | PointOdyssey `anno.npz` | `trajs_3d` `[T, N, 3]` (f16) | `valids` and `visibs` `[T, N]` (bool) | world; `extrinsics` `[T, 4, 4]` (world to camera) |
 //! | TAPVid-3D clip | `tracks_XYZ` `[T, N, 3]` | `visibility` `[T, N]` (bool) | camera |
+//! | masked (doma's own: `doma complete`, the Python package) | `tracks` `[T, N, 3]` | `observed` `[T, N]` (bool) | as given |
 //!
 //! Any other archive is read as plain trajectories (one member, or the one named).
 //! PointOdyssey's `trajs_3d` holds ground truth even where a point is hidden; an entry
@@ -33,6 +34,9 @@ pub enum Layout {
     #[value(name = "tapvid3d")]
     #[serde(rename = "tapvid3d")]
     TapVid3d,
+    /// doma's own tracks with a mask: `tracks` `[T, N, 3]` and `observed` `[T, N]`, which
+    /// `doma complete` writes and the Python package fits from.
+    Masked,
 }
 
 impl std::fmt::Display for Layout {
@@ -41,19 +45,22 @@ impl std::fmt::Display for Layout {
             Layout::Plain => "plain",
             Layout::PointOdyssey => "pointodyssey",
             Layout::TapVid3d => "tapvid3d",
+            Layout::Masked => "masked",
         })
     }
 }
 
 impl Layout {
     /// The layout that `keys` (an archive's member names) show: PointOdyssey's
-    /// `trajs_3d`, TAPVid-3D's `tracks_XYZ`, else plain.
+    /// `trajs_3d`, TAPVid-3D's `tracks_XYZ`, `tracks` beside `observed`, else plain.
     pub fn detect<'a>(keys: impl IntoIterator<Item = &'a str>) -> Layout {
         let keys: Vec<&str> = keys.into_iter().collect();
         if keys.contains(&"trajs_3d") {
             Layout::PointOdyssey
         } else if keys.contains(&"tracks_XYZ") {
             Layout::TapVid3d
+        } else if keys.contains(&"tracks") && keys.contains(&"observed") {
+            Layout::Masked
         } else {
             Layout::Plain
         }
@@ -65,6 +72,7 @@ impl Layout {
             Layout::Plain => &[],
             Layout::PointOdyssey => &["trajs_3d", "valids", "visibs"],
             Layout::TapVid3d => &["tracks_XYZ", "visibility"],
+            Layout::Masked => &["tracks", "observed"],
         }
     }
 }
@@ -122,7 +130,11 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
     let usage =
         |what: &str| DomaError::Usage(format!("{what}: {} is read as {layout}", path.display()));
     match (layout, file.frame) {
-        (Layout::Plain, Some(_)) => return Err(usage("--frame needs a tracker layout")),
+        (Layout::Plain | Layout::Masked, Some(_)) => {
+            return Err(usage(
+                "--frame needs a tracker layout that records its frame (pointodyssey, tapvid3d)",
+            ));
+        }
         (Layout::TapVid3d, Some(CoordFrame::World)) => {
             return Err(usage(
                 "--frame world: TAPVid-3D's tracks are in the camera frame and it stores no camera pose",
@@ -187,7 +199,9 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
                 valid.iter().zip(visible).map(|(&a, b)| a && b).collect()
             }
         }
-        _ => read_mask("visibility")?,
+        Layout::TapVid3d => read_mask("visibility")?,
+        Layout::Masked => read_mask("observed")?,
+        Layout::Plain => unreachable!("plain archives returned above"),
     };
     let mut positions = read_npz_member(&bytes, tracks_member)
         .map_err(malformed)?

@@ -87,7 +87,8 @@ impl TrackerView {
 
     /// Writes the view as a `.npz` in `layout` (PointOdyssey: `trajs_3d` as f16 in the world
     /// frame, `visibs`, `valids`, `extrinsics`, `intrinsics`; TAPVid-3D: `tracks_XYZ` in the
-    /// camera frame, `visibility`, `queries_xyt`, `fx_fy_cx_cy`), atomically.
+    /// camera frame, `visibility`, `queries_xyt`, `fx_fy_cx_cy`; masked: `tracks` in the
+    /// world frame and `observed`), atomically.
     pub fn write(&self, path: &Path, layout: Layout) -> Result<()> {
         let (t, n) = (self.truth.frames(), self.truth.points());
         let (s3, s2) = ([t, n, 3], [t, n]);
@@ -124,6 +125,10 @@ impl TrackerView {
                     ("fx_fy_cx_cy", &[4], NpyValues::F32(&[f, f, c, c])),
                 ])
             }
+            Layout::Masked => doma_formats::npz::encode_npz_values(&[
+                ("tracks", &s3, NpyValues::F32(self.truth.positions())),
+                ("observed", &s2, NpyValues::Bool(&self.observed())),
+            ]),
             Layout::Plain => {
                 return Err(DomaError::Usage(
                     "a simulated tracker writes a tracker's layout, not plain trajectories".into(),

@@ -95,7 +95,7 @@ pub fn complete_run(
     let (tracks_key, mask_key) = match layout {
         Some(Layout::PointOdyssey) => ("trajs_3d", "visibs"),
         Some(Layout::TapVid3d) => ("tracks_XYZ", "visibility"),
-        Some(Layout::Plain) | None => ("tracks", "observed"),
+        Some(Layout::Plain | Layout::Masked) | None => ("tracks", "observed"),
     };
     let (shape3, shape2, shape1) = ([t, n, 3], [t, n], [n]);
     let mut members: Vec<(&str, &[usize], NpyValues)> = vec![

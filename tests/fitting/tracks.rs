@@ -139,6 +139,16 @@ fn a_completed_file_has_the_input_s_shape_order_and_observations() {
         done.filled,
         observed.data.iter().filter(|&&o| o == 0.0).count()
     );
+    // The default keys are the masked layout, so the completed file is data for a new fit.
+    let again = read_npz_tracks(&out, &TrackFile::default()).unwrap();
+    assert_eq!(again.positions(), &tracks.data[..]);
+    assert!(
+        again
+            .observed()
+            .iter()
+            .zip(&observed.data)
+            .all(|(&a, &b)| a == (b == 1.0))
+    );
     // In PointOdyssey's layout the file reads back as tracks whose every entry is valid.
     let po = dir.join("done_po.npz");
     complete_run(&run, &po, Some(Layout::PointOdyssey), &Device::flex()).unwrap();

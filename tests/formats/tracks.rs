@@ -131,6 +131,30 @@ fn tapvid3d_round_trips_in_its_camera_frame_exactly() {
     }
 }
 
+#[test]
+fn the_masked_layout_round_trips_exactly_and_refuses_a_frame() {
+    let v = view();
+    let dir = common::scratch("doma-masked");
+    let path = dir.join("tracks.npz");
+    v.write(&path, Layout::Masked).unwrap();
+    let tracks = read(&path, &TrackFile::default()).unwrap();
+    assert_eq!(tracks.positions(), v.truth.positions());
+    assert_eq!(tracks.observed(), &v.observed()[..]);
+    let err = read(
+        &path,
+        &TrackFile {
+            frame: Some(CoordFrame::Camera),
+            ..TrackFile::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("--frame") && err.contains("tracks.npz") && err.contains("masked"),
+        "{err}"
+    );
+}
+
 /// A PointOdyssey-like archive of 2 frames × 3 tracks with the given members replaced.
 fn archive(path: &Path, trajs: &[f32], visibs: (&[usize], &[bool]), drop: Option<&str>) {
     let valids = [true; 6];
