@@ -1,0 +1,319 @@
+"""doma: motion fields fitted to point trajectories (DOMA, CVPR 2024), from NumPy.
+
+One small SIREN ``f(x, t)`` is fitted to observed 3-D tracks; it outputs a local
+transformation ``(A, u)`` and moves any point ``x`` of the reference frame to
+``y = A x + u`` (Eq. 4 of the paper). This package calls the Rust library in process: a
+fit from Python is the fit of ``doma fit`` on the same data, with the same run folder,
+and the command line can ``eval``, ``warp``, ``export`` and ``view`` it.
+
+>>> import numpy as np, doma
+>>> t = np.linspace(0, 1, 10)[:, None, None]
+>>> x = np.random.default_rng(0).normal(size=(1, 300, 3))
+>>> tracks = x + t * [0.5, 0.0, 0.0]                   # [T, N, 3], a translation
+>>> field = doma.fit(tracks, iters=20, progress=False)
+>>> field.warp(x[0], 9).shape                         # every point at frame 9
+(300, 3)
+
+Arrays: any float array is accepted; a C-contiguous ``float32`` one is read in place,
+anything else (``float64``, Fortran order, a strided view) is converted once. Results
+are new ``float32`` arrays. The GIL is released while Rust works; Ctrl-C stops a fit at
+the end of its iteration with its checkpoint saved.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from typing import Any, Optional, Sequence, Union
+
+import numpy as np
+
+from . import _native
+
+__version__: str = _native.__version__
+__all__ = ["Field", "Tracks", "fit", "load", "read_tracks", "resume"]
+
+PathLike = Union[str, "os.PathLike[str]"]
+Frames = Union[float, Sequence[float], np.ndarray]
+
+#: The models ``fit`` accepts: the DOMA variants (Eq. 4, 10–12) and the DPF baseline.
+VARIANTS = ("trans", "se3", "scaled-se3", "affinity", "dpf")
+#: The compute backends.
+BACKENDS = ("flex", "ndarray", "wgpu")
+#: How the spatial Jacobian inside L_H is computed.
+JACOBIANS = ("analytic", "autodiff")
+
+
+def _float_array(value: Any, name: str, shape: Sequence[Optional[int]]) -> np.ndarray:
+    """``value`` as a C-contiguous float32 array of ``shape`` (None: any length)."""
+    array = np.asarray(value)
+    if array.dtype.kind != "f":
+        raise ValueError(f"{name} must be a float array (float16, float32 or float64), not {array.dtype}")
+    if array.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, array.shape)):
+        want = ", ".join("any" if s is None else str(s) for s in shape)
+        raise ValueError(f"{name} has shape {list(array.shape)}, not [{want}]")
+    return np.ascontiguousarray(array, dtype=np.float32)
+
+
+def _frames(t: Frames) -> tuple[list[float], bool]:
+    """The frame times of ``t`` (a number, or a 1-D array of them) and whether it was one."""
+    array = np.asarray(t)
+    if array.dtype.kind not in "iuf":
+        raise ValueError(f"t must be a frame index or an array of them, not {array.dtype}")
+    if array.ndim > 1:
+        raise ValueError(f"t has shape {list(array.shape)}; give a frame index or a 1-D array of them")
+    return [float(v) for v in array.reshape(-1)], array.ndim == 0
+
+
+class Field:
+    """A fitted motion field and its run folder (from :func:`fit`, :func:`load` or :func:`resume`).
+
+    Points are in the data's own units and frame; ``t`` is a frame index of the fitted
+    clip (``0 … frames - 1``; fractional values lie between frames), or a 1-D array of them.
+    """
+
+    def __init__(self, native: _native.Field) -> None:
+        self._native = native
+
+    def warp(self, points: Any, t: Frames) -> np.ndarray:
+        """Moves reference-frame ``points`` ([M, 3]) to frame ``t``: ``y = A x + u`` (Eq. 4).
+
+        Returns [M, 3], or [K, M, 3] for K frames. Memory holds the input, the output and
+        one chunk of 16,384 points' activations, however large M is.
+        """
+        x = _float_array(points, "points", (None, 3))
+        frames, one = _frames(t)
+        out = np.empty((len(frames), x.shape[0], 3), dtype=np.float32)
+        self._native.warp_into(x, frames, out)
+        return out[0] if one else out
+
+    def jacobian(self, points: Any, t: Frames) -> np.ndarray:
+        """The Jacobian ``∂y/∂x`` of the warp at ``points`` ([M, 3]) and frame ``t``.
+
+        Returns [M, 3, 3] (or [K, M, 3, 3]) with ``J[m, i, j] = ∂y_i/∂x_j``: the local
+        deformation gradient, ``A`` plus the terms of A's and u's variation (Eq. 6).
+        """
+        x = _float_array(points, "points", (None, 3))
+        frames, one = _frames(t)
+        out = np.empty((len(frames), x.shape[0], 3, 3), dtype=np.float32)
+        self._native.jacobian_into(x, frames, out)
+        return out[0] if one else out
+
+    def evaluate(self, data: Optional[PathLike] = None) -> dict:
+        """The metrics of ``doma eval``: on the run's held-out points, or on ``data``."""
+        return json.loads(self._native.evaluate(None if data is None else os.fspath(data)))
+
+    def save(self, run_dir: PathLike) -> None:
+        """Copies the run into the new folder ``run_dir``, which the CLI and :func:`load` open."""
+        self._native.save(os.fspath(run_dir))
+
+    @property
+    def run_dir(self) -> Optional[str]:
+        """The run folder, or None for the temporary one of a fit without ``out``."""
+        d = self._native.run_dir
+        return None if d is None else os.fspath(d)
+
+    @property
+    def frames(self) -> int:
+        """The frames of the fitted clip."""
+        return self._native.frames
+
+    @property
+    def tracks(self) -> int:
+        """The tracks of the fitted data (training and held-out)."""
+        return self._native.tracks
+
+    @property
+    def model(self) -> str:
+        """The model's name in the paper, e.g. ``DOMA-Affinity``."""
+        return self._native.model
+
+    @property
+    def backend(self) -> str:
+        """The backend it runs on: ``flex``, ``ndarray`` or ``wgpu``."""
+        return self._native.backend
+
+    @property
+    def config(self) -> dict:
+        """The run's ``config.json``."""
+        return json.loads(self._native.config)
+
+    @property
+    def report(self) -> Optional[dict]:
+        """The run's ``report.json`` (the EPE × 10⁴ on held-out points), None before the fit ends."""
+        text = self._native.report
+        return None if text is None else json.loads(text)
+
+    @property
+    def normalisation(self) -> tuple[np.ndarray, float]:
+        """``(center, scale)``: the field works on ``(x - center) / scale``."""
+        center, scale = self._native.normalisation
+        return np.asarray(center, dtype=np.float32), float(scale)
+
+    def __repr__(self) -> str:
+        where = self.run_dir or "a temporary folder"
+        return f"<doma.Field {self.model} on {self.backend}, {self.tracks} tracks × {self.frames} frames, in {where}>"
+
+
+def fit(
+    tracks: Any,
+    observed: Any = None,
+    *,
+    variant: str = "affinity",
+    reg: Optional[str] = None,
+    h_weight: Union[float, str, None] = None,
+    iters: int = 1000,
+    backend: str = "flex",
+    jacobian: str = "analytic",
+    seed: int = 0,
+    test_fraction: float = 0.75,
+    points_per_step: Optional[int] = None,
+    frames_per_step: Optional[int] = None,
+    reference_frame: Optional[int] = None,
+    drop_unobserved: bool = False,
+    holdout_observations: Optional[float] = None,
+    robust: Optional[str] = None,
+    checkpoint_every: int = 50,
+    progress: bool = True,
+    out: Optional[PathLike] = None,
+) -> Field:
+    """Fits a motion field to ``tracks``, as ``doma fit`` does.
+
+    Args:
+        tracks: [T, N, 3] positions (any float dtype). Entries that ``observed`` marks
+            False are never read (NaN is fine there).
+        observed: optional [T, N] bool mask of the entries a tracker saw.
+        variant: ``trans``, ``se3``, ``scaled-se3``, ``affinity`` (the DOMA variants) or ``dpf``.
+        reg: None, or ``"h"`` for the smoothness loss L_H (Eq. 13).
+        h_weight: L_H's weight with ``reg="h"`` (default 0.1), or ``"auto"`` to choose it by
+            validation on held-out training points.
+        iters: iterations (passes over all frames; the paper: 1000).
+        backend: ``flex``, ``ndarray`` or ``wgpu``.
+        jacobian: ``analytic`` (fused, hand-derived) or ``autodiff``.
+        seed: seed of the weights, the split and the frame order.
+        test_fraction: the fraction of tracks held out for the report (the paper: 0.75).
+        points_per_step, frames_per_step: a random subset of K training points per step;
+            B frames per Adam step (defaults: all points, one frame: the paper's protocol).
+        reference_frame: the frame whose positions are the input ``x`` (default: the most
+            observed one).
+        drop_unobserved: go on without tracks never observed rather than refuse them.
+        holdout_observations: hide this fraction of the observations, in spans, and
+            report the EPE on them (``report["held_out_observations"]``).
+        robust: ``"huber[:delta]"`` or ``"charbonnier[:eps]"``, a robust trajectory loss.
+        checkpoint_every: iterations between checkpoints.
+        progress: show a progress bar on stderr.
+        out: the run folder to write (it must not hold a run); default a temporary one,
+            removed with the field (:meth:`Field.save` keeps it).
+
+    Raises:
+        ValueError: bad shapes, dtypes, values or options. FileExistsError: ``out`` holds
+        a run. KeyboardInterrupt: Ctrl-C; the checkpoint is saved (see :func:`resume`).
+    """
+    positions = _float_array(tracks, "tracks", (None, None, 3))
+    mask = None
+    if observed is not None:
+        mask_array = np.asarray(observed)
+        if mask_array.dtype != np.bool_:
+            raise ValueError(f"observed must be a bool array, not {mask_array.dtype}")
+        if mask_array.shape != positions.shape[:2]:
+            raise ValueError(
+                f"observed has shape {list(mask_array.shape)}, but tracks of shape "
+                f"{list(positions.shape)} need {list(positions.shape[:2])}"
+            )
+        mask = np.ascontiguousarray(mask_array).view(np.uint8)
+    model = variant.replace("_", "-").lower()
+    if model not in VARIANTS:
+        raise ValueError(f"variant {variant!r} is not one of {', '.join(VARIANTS)}")
+    for name, value, choices in (("backend", backend, BACKENDS), ("jacobian", jacobian, JACOBIANS)):
+        if value not in choices:
+            raise ValueError(f"{name} {value!r} is not one of {', '.join(choices)}")
+    if reg not in (None, "h"):
+        raise ValueError(f"reg {reg!r} is not None or 'h' (the smoothness loss L_H)")
+    if reg is None and h_weight is not None:
+        raise ValueError("h_weight applies with reg='h'")
+    spec: dict[str, Any] = {
+        "model": model,
+        "backend": backend,
+        "jacobian": jacobian,
+        "iterations": _count(iters, "iters"),
+        "seed": _count(seed, "seed", minimum=0),
+        "test_fraction": float(test_fraction),
+        "checkpoint_every": _count(checkpoint_every, "checkpoint_every"),
+    }
+    if reg == "h":
+        spec["h_weight"] = 0.1 if h_weight is None else h_weight
+    for key, value in (("points_per_step", points_per_step), ("frames_per_step", frames_per_step)):
+        if value is not None:
+            spec[key] = _count(value, key)
+    if reference_frame is not None:
+        spec["reference_frame"] = _count(reference_frame, "reference_frame", minimum=0)
+    if drop_unobserved:
+        spec["drop_unobserved"] = True
+    if holdout_observations is not None:
+        spec["holdout_observations"] = float(holdout_observations)
+    native = _native.fit(
+        positions,
+        mask,
+        json.dumps(spec),
+        robust,
+        None if out is None else os.fspath(out),
+        bool(progress),
+    )
+    return Field(native)
+
+
+def _count(value: Any, name: str, minimum: int = 1) -> int:
+    """``value`` as an integer of at least ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{name} must be an integer of at least {minimum}, not {value!r}")
+    return int(value)
+
+
+def resume(run_dir: PathLike, *, progress: bool = True) -> Field:
+    """Continues the interrupted fit in ``run_dir`` (from Python or ``doma fit``) to its end."""
+    return Field(_native.resume(os.fspath(run_dir), bool(progress)))
+
+
+def load(run_dir: PathLike, *, backend: Optional[str] = None) -> Field:
+    """Opens a fitted run folder (``doma fit``'s, or ``fit(out=...)``'s) on its backend or ``backend``."""
+    return Field(_native.load(os.fspath(run_dir), backend))
+
+
+@dataclass(frozen=True)
+class Tracks:
+    """A sequence file read as ``doma fit`` reads it."""
+
+    #: [T, N, 3] float32 positions; NaN where not observed.
+    tracks: np.ndarray
+    #: [T, N] bool: the entries the file observes (all True for complete formats).
+    observed: np.ndarray
+    #: [F, 3] uint32 triangle indices, where the format has faces; else None.
+    faces: Optional[np.ndarray]
+    #: [T, N] float32 confidence weights with ``confidence=KEY``; else None.
+    weights: Optional[np.ndarray]
+
+
+def read_tracks(
+    path: PathLike,
+    *,
+    layout: Optional[str] = None,
+    frame: Optional[str] = None,
+    count_hidden: bool = False,
+    confidence: Optional[str] = None,
+) -> Tracks:
+    """Reads ``.traj``, ``.anime``, ``.npy``, ``.npz`` (plain, PointOdyssey, TAPVid-3D,
+    masked) or a folder of OBJ frames.
+
+    ``layout`` forces an ``.npz`` layout (default: detected from its keys); ``frame``
+    (``world``/``camera``), ``count_hidden`` and ``confidence`` are those of ``doma fit``.
+    """
+    positions, (t, n), observed, faces, weights = _native.read_tracks(
+        os.fspath(path), layout, frame, bool(count_hidden), confidence
+    )
+    return Tracks(
+        tracks=np.frombuffer(positions, dtype=np.float32).reshape(t, n, 3),
+        observed=np.frombuffer(observed, dtype=np.bool_).reshape(t, n),
+        faces=None if faces is None else np.frombuffer(faces, dtype=np.uint32).reshape(-1, 3),
+        weights=None if weights is None else np.frombuffer(weights, dtype=np.float32).reshape(t, n),
+    )

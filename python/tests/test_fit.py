@@ -1,0 +1,106 @@
+"""A fit from NumPy, its warp and Jacobian, and the run folder it shares with the CLI."""
+
+import gc
+import json
+import pathlib
+import subprocess
+import threading
+
+import numpy as np
+import pytest
+
+import doma
+
+
+def test_a_short_fit_moves_points_and_reports_the_held_out_error(fitted, clip):
+    report = fitted.report
+    assert report["iterations"] == 30 and np.isfinite(report["epe_x1e4"])
+    assert (fitted.frames, fitted.tracks, fitted.backend) == (20, 366, "flex")
+    moved = fitted.warp(clip[0], 19)
+    assert moved.shape == (366, 3) and moved.dtype == np.float32
+    # Closer to where the points went than to where they were.
+    fit_error = np.abs(moved - clip[19]).sum(1).mean()
+    still = np.abs(clip[0] - clip[19]).sum(1).mean()
+    assert fit_error < 0.5 * still, (fit_error, still)
+    # Several frames at once are the frames one by one, exactly.
+    many = fitted.warp(clip[0], [0, 7.5, 19])
+    assert many.shape == (3, 366, 3)
+    assert np.array_equal(many[2], moved)
+    assert np.array_equal(many[1], fitted.warp(clip[0], 7.5))
+
+
+def test_the_jacobian_matches_finite_differences_of_the_warp(fitted, clip):
+    x = clip[0][::7].astype(np.float64)
+    jac = fitted.jacobian(x, 11)
+    assert jac.shape == (len(x), 3, 3) and jac.dtype == np.float32
+    # Central differences of the float32 warp; the faerie is about 52 units tall.
+    eps = 0.05
+    numeric = np.stack(
+        [
+            (fitted.warp(x + eps * e, 11).astype(np.float64) - fitted.warp(x - eps * e, 11)) / (2 * eps)
+            for e in np.eye(3)
+        ],
+        axis=-1,
+    )
+    assert np.abs(numeric - jac).max() < 5e-3 * max(1.0, np.abs(jac).max())
+    assert np.array_equal(fitted.jacobian(x, [3, 11])[1], jac)
+
+
+def test_the_gil_is_released_during_a_fit(clip):
+    count = 0
+    stop = threading.Event()
+
+    def spin():
+        nonlocal count
+        while not stop.is_set():
+            count += 1
+
+    thread = threading.Thread(target=spin)
+    thread.start()
+    before = count
+    doma.fit(clip, iters=40, progress=False)
+    during = count - before
+    stop.set()
+    thread.join()
+    # With the GIL held, the other thread would not run at all while Rust fits.
+    assert during > 10_000, during
+
+
+def test_a_run_saved_and_loaded_warps_the_same(fitted, clip, tmp_path):
+    fitted.save(tmp_path / "copy")
+    again = doma.load(tmp_path / "copy")
+    assert np.array_equal(again.warp(clip[0], 5), fitted.warp(clip[0], 5))
+    assert again.evaluate() == fitted.evaluate()
+    # The copy carries its own data: removing the original's leaves it whole.
+    assert again.config["data"].startswith(str(tmp_path / "copy"))
+    with pytest.raises(FileExistsError, match="already holds a run"):
+        fitted.save(tmp_path / "copy")
+
+
+def test_a_temporary_run_is_removed_with_its_field(clip):
+    field = doma.fit(clip, iters=2, progress=False)
+    assert field.run_dir is None
+    run = pathlib.Path(field.config["data"]).parent
+    assert (run / "model.bpk").is_file()
+    del field
+    gc.collect()
+    assert not run.exists()
+
+
+def test_a_cli_run_and_a_python_run_agree_to_the_last_bit(clip, cli, tmp_path):
+    data = tmp_path / "clip.npy"
+    np.save(data, clip)
+    run = tmp_path / "cli_run"
+    subprocess.run([cli, "fit", data, "--out", run, "--iters", "25", "--quiet"], check=True, capture_output=True)
+    # The CLI's run, opened in Python: the same metrics as `doma eval`.
+    cli_eval = json.loads(subprocess.run([cli, "eval", run], check=True, capture_output=True).stdout)
+    opened = doma.load(run)
+    assert opened.evaluate()["epe_x1e4"] == cli_eval["epe_x1e4"]
+    # The same fit from NumPy: the same report, and `doma eval` opens its run.
+    py_run = tmp_path / "py_run"
+    field = doma.fit(clip, iters=25, progress=False, out=py_run)
+    cli_report = json.loads((run / "report.json").read_text())
+    assert field.report["epe_x1e4"] == cli_report["epe_x1e4"]
+    assert field.report["epe_per_frame_x1e4"] == cli_report["epe_per_frame_x1e4"]
+    again = json.loads(subprocess.run([cli, "eval", py_run], check=True, capture_output=True).stdout)
+    assert again["epe_x1e4"] == field.evaluate()["epe_x1e4"] == cli_report["epe_x1e4"]

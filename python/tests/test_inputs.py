@@ -1,0 +1,96 @@
+"""What the package accepts (dtypes, layouts, masks) and what it refuses, with the message."""
+
+import numpy as np
+import pytest
+
+import doma
+
+
+def test_any_float_layout_warps_as_float32_in_c_order(fitted, clip):
+    x = clip[0]
+    reference = fitted.warp(x, 4)
+    for variant in (
+        x.astype(np.float64),
+        np.asfortranarray(x),
+        np.repeat(x, 2, axis=0)[::2],  # a strided view
+        x.astype(np.float16).astype(np.float32),
+    ):
+        got = fitted.warp(variant, 4)
+        if variant.dtype == np.float32 and np.array_equal(variant, x):
+            assert np.array_equal(got, reference)
+        else:
+            np.testing.assert_allclose(got, reference, atol=0.05)
+    assert fitted.warp(np.empty((0, 3)), 4).shape == (0, 3)
+
+
+def test_tracks_with_a_mask_fit_and_read_back(clip, tmp_path):
+    rng = np.random.default_rng(1)
+    observed = rng.random(clip.shape[:2]) > 0.3
+    observed[:, :] |= np.arange(clip.shape[1]) % 5 == 0  # every track seen somewhere
+    tracks = np.where(observed[..., None], clip, np.nan)
+    field = doma.fit(tracks, observed, iters=5, progress=False, out=tmp_path / "run")
+    assert field.config["tracks"]["layout"] == "masked"
+    back = doma.read_tracks(field.config["data"])
+    assert np.array_equal(back.observed, observed)
+    assert np.array_equal(np.isnan(back.tracks[..., 0]), ~observed)
+    assert np.array_equal(back.tracks[observed], clip[observed])
+
+
+def test_read_tracks_reads_every_shipped_format(tmp_path):
+    from conftest import ROOT
+
+    seq = doma.read_tracks(ROOT / "data" / "md2_faerie.traj")
+    assert seq.tracks.shape == (198, 366, 3) and seq.observed.all()
+    assert seq.faces is None and seq.weights is None
+    np.save(tmp_path / "a.npy", seq.tracks[:3])
+    assert np.array_equal(doma.read_tracks(tmp_path / "a.npy").tracks, seq.tracks[:3])
+
+
+@pytest.mark.parametrize(
+    "call, error, message",
+    [
+        (lambda c: doma.fit(c.astype(np.int32)), ValueError, "float array"),
+        (lambda c: doma.fit(c[..., :2]), ValueError, r"shape \[20, 366, 2\], not \[any, any, 3\]"),
+        (lambda c: doma.fit(c, np.ones((20, 366), np.uint8)), ValueError, "bool array"),
+        (lambda c: doma.fit(c, np.ones((20, 365), bool)), ValueError, r"observed has shape \[20, 365\]"),
+        (lambda c: doma.fit(np.where(np.arange(366)[:, None] == 9, np.nan, c)), ValueError, r"tracks\[0, 9, 0\] is NaN"),
+        (lambda c: doma.fit(c, variant="affine"), ValueError, "variant 'affine'"),
+        (lambda c: doma.fit(c, backend="cuda"), ValueError, "backend 'cuda' is not one of flex"),
+        (lambda c: doma.fit(c, iters=0), ValueError, "iters must be an integer"),
+        (lambda c: doma.fit(c, h_weight=0.1), ValueError, "reg='h'"),
+        (lambda c: doma.fit(c, robust="l2"), ValueError, "l2"),
+        (lambda c: doma.fit(c, test_fraction=1.0), ValueError, "test fraction"),
+        (lambda c: doma.fit(c[:, :1]), ValueError, "does not split 1 points"),
+        (lambda c: doma.read_tracks("/nonexistent/x.traj"), FileNotFoundError, "/nonexistent/x.traj"),
+        (lambda c: doma.read_tracks("x.npz", layout="po"), ValueError, 'layout "po" is not one of'),
+        (lambda c: doma.load("/nonexistent/run"), ValueError, "not a doma run folder"),
+    ],
+)
+def test_bad_input_is_refused_with_a_clear_message(clip, call, error, message):
+    with pytest.raises(error, match=message):
+        call(clip)
+
+
+def test_a_bad_frame_or_points_are_refused(fitted, clip):
+    with pytest.raises(ValueError, match=r"frame 20 is outside the field's frames, 0 to 19"):
+        fitted.warp(clip[0], 20)
+    with pytest.raises(ValueError, match="t must be a frame index"):
+        fitted.warp(clip[0], "3")
+    with pytest.raises(ValueError, match=r"points has shape \[366\], not \[any, 3\]"):
+        fitted.jacobian(clip[0, :, 0], 3)
+    bad = clip[0].copy()
+    bad[4, 1] = np.inf
+    with pytest.raises(ValueError, match=r"points\[4, 1\] is inf"):
+        fitted.warp(bad, 3)
+
+
+def test_a_file_that_is_not_a_sequence_names_itself(tmp_path):
+    path = tmp_path / "broken.traj"
+    path.write_bytes(b"TRAJ\x01\x00")
+    with pytest.raises(ValueError, match="broken.traj"):
+        doma.read_tracks(path)
+
+
+def test_a_fit_into_a_run_folder_is_refused(fitted, clip):
+    with pytest.raises(FileExistsError, match="already holds a run"):
+        doma.fit(clip, iters=1, progress=False, out=fitted.run_dir)

@@ -1,0 +1,96 @@
+"""What needs a process of its own: Ctrl-C during a fit, and the peak memory of a warp."""
+
+import os
+import pathlib
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+
+import doma
+
+CLIP = "doma.read_tracks({data!r}).tracks[112:132]"
+
+
+def python(code: str, *args: str) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-c", textwrap.dedent(code), *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def test_ctrl_c_stops_a_fit_with_its_checkpoint_and_no_lock(tmp_path):
+    from conftest import ROOT
+
+    run = tmp_path / "run"
+    child = python(
+        f"""
+        import sys, doma
+        clip = {CLIP.format(data=str(ROOT / "data" / "md2_faerie.traj"))}
+        try:
+            doma.fit(clip, iters=400, checkpoint_every=1, progress=False, out=sys.argv[1])
+            sys.exit("the fit ended before Ctrl-C came")
+        except KeyboardInterrupt as e:
+            print("\\n".join(getattr(e, "__notes__", [])))
+        # The same process takes the run's lock again: the interrupted fit let it go.
+        field = doma.resume(sys.argv[1], progress=False)
+        print("iterations", field.report["iterations"])
+        """,
+        str(run),
+    )
+    deadline = time.monotonic() + 120
+    while not (run / "resume.ckpt").is_file():
+        assert child.poll() is None, child.communicate()
+        assert time.monotonic() < deadline, "no checkpoint within two minutes"
+        time.sleep(0.01)
+    child.send_signal(signal.SIGINT)
+    out, err = child.communicate(timeout=120)
+    assert child.returncode == 0, (out, err)
+    assert "its checkpoint is in" in out and "doma.resume" in out, out
+    assert out.strip().endswith("iterations 400"), out
+
+
+def test_a_warp_of_two_million_points_holds_no_copy_of_them(tmp_path, fitted):
+    measure = python(
+        """
+        import sys, numpy as np, doma
+        def status(key):
+            for line in open("/proc/self/status"):
+                if line.startswith(key):
+                    return int(line.split()[1]) * 1024
+        field = doma.load(sys.argv[1])
+        x = (np.random.default_rng(0).normal(size=(2_000_000, 3)) * 10).astype(np.float32)
+        field.warp(x[:20_000], 0)  # the first chunk's buffers and the thread pool
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")  # the peak starts again from here
+        base = status("VmRSS:")
+        y = field.warp(x, 3)
+        print(status("VmHWM:") - base, y.nbytes, x.nbytes)
+        """,
+        fitted.run_dir,
+    )
+    out, err = measure.communicate(timeout=300)
+    assert measure.returncode == 0, err
+    growth, output, given = map(int, out.split())
+    # The output, plus one chunk's activations (reused), and no copy of the input.
+    assert growth < output + given // 2, (growth, output, given)
+
+
+def test_the_example_fits_and_plots_without_a_display(tmp_path):
+    from conftest import ROOT
+
+    example = ROOT / "python" / "examples" / "fit_and_plot.py"
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    env.pop("DISPLAY", None)
+    done = subprocess.run(
+        [sys.executable, example, tmp_path, "--iters", "20"], env=env, capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr
+    png = tmp_path / "fit_and_plot.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "EPE" in done.stdout
