@@ -121,21 +121,20 @@ impl Field {
             }
             let model = self.model.lock().unwrap_or_else(|e| e.into_inner());
             let field = model.as_field();
-            let mut normalised = Vec::with_capacity(3 * chunk.min(m));
             for (k, &t) in ts.iter().enumerate() {
                 let frame_out = &mut output[k * m * width..(k + 1) * m * width];
                 for (rows, out_rows) in input
                     .chunks(3 * chunk)
                     .zip(frame_out.chunks_mut(width * chunk))
                 {
-                    normalised.clear();
-                    normalised.extend(
-                        rows.iter()
-                            .enumerate()
-                            .map(|(i, &v)| (v - center[i % 3]) / scale),
-                    );
+                    // Burn takes the chunk's buffer; one allocation per chunk, no copy of it.
+                    let normalised: Vec<f32> = rows
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &v)| (v - center[i % 3]) / scale)
+                        .collect();
                     let x = Tensor::<2>::from_data(
-                        TensorData::new(normalised.clone(), [rows.len() / 3, 3]),
+                        TensorData::new(normalised, [rows.len() / 3, 3]),
                         &self.device,
                     );
                     each(field, x, t, out_rows)?;
