@@ -104,3 +104,16 @@ def test_a_cli_run_and_a_python_run_agree_to_the_last_bit(clip, cli, tmp_path):
     assert field.report["epe_per_frame_x1e4"] == cli_report["epe_per_frame_x1e4"]
     again = json.loads(subprocess.run([cli, "eval", py_run], check=True, capture_output=True).stdout)
     assert again["epe_x1e4"] == field.evaluate()["epe_x1e4"] == cli_report["epe_x1e4"]
+
+
+def test_a_recipe_and_a_stop_on_convergence_go_into_the_run_config(clip, tmp_path):
+    field = doma.fit(
+        clip, reg="h", recipe="fast", iters=6, until_converged=2, progress=False, out=tmp_path / "run"
+    )
+    fit = json.loads((tmp_path / "run" / "config.json").read_text())["fit"]
+    assert fit["recipe"] == "fast"
+    assert fit["schedule"]["decay"] == "cosine" and fit["schedule"]["iterations"] == 6
+    assert fit["until_converged"]["patience"] == 2
+    assert fit["points_per_step"] is not None
+    assert field.config["fit"] == fit
+    assert np.isfinite(field.report["epe_x1e4"])

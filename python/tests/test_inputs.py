@@ -58,6 +58,8 @@ def test_read_tracks_reads_every_shipped_format(tmp_path):
         (lambda c: doma.fit(c, backend="cuda"), ValueError, "backend 'cuda' is not one of flex"),
         (lambda c: doma.fit(c, iters=0), ValueError, "iters must be an integer"),
         (lambda c: doma.fit(c, h_weight=0.1), ValueError, "reg='h'"),
+        (lambda c: doma.fit(c, recipe="fastest"), ValueError, "recipe 'fastest' is not one of paper, fast"),
+        (lambda c: doma.fit(c, until_converged=0), ValueError, "until_converged must be an integer"),
         (lambda c: doma.fit(c, robust="l2"), ValueError, "l2"),
         (lambda c: doma.fit(c, test_fraction=1.0), ValueError, "test fraction"),
         (lambda c: doma.fit(c[:, :1]), ValueError, "does not split 1 points"),

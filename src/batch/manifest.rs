@@ -19,7 +19,8 @@
 //! end)`), `stride`, `test_fraction`, `checkpoint_every`, `points_per_step`,
 //! `frames_per_step`, and for tracker output `layout`, `frame`, `count_hidden`,
 //! `reference_frame`, `drop_unobserved`, `holdout_observations`, `confidence`,
-//! `data_penalty`; an entry also
+//! `data_penalty`, and `recipe` (`paper`, `fast`) and `until_converged` (a patience in
+//! iterations); an entry also
 //! has a `name`, its run folder's name (default: the data file's stem). Relative paths are
 //! relative to the manifest's folder. Unknown fields are refused.
 

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use crate::backend::BackendKind;
-use crate::cli::{ClipArgs, WeightSearchArgs, fraction, weight};
+use crate::cli::{ClipArgs, RecipeArgs, WeightSearchArgs, fraction, weight};
 use crate::data::layout::{CoordFrame, Layout};
 use crate::field::Variant;
 use crate::jacobian::JacobianKind;
@@ -24,7 +24,7 @@ pub struct FitArgs {
     #[arg(long, required_unless_present = "resume", conflicts_with = "resume")]
     pub out: Option<PathBuf>,
     /// Continue the interrupted run in this folder from its last checkpoint.
-    #[arg(long, conflicts_with_all = ["data", "config", "variant", "iters", "test_fraction", "mesh", "frames", "stride", "jacobian", "h_weight", "seed", "checkpoint_every", "points_per_step", "frames_per_step", "layout", "frame", "count_hidden", "reference_frame", "drop_unobserved", "holdout_observations", "confidence", "robust"])]
+    #[arg(long, conflicts_with_all = ["data", "config", "variant", "iters", "test_fraction", "mesh", "frames", "stride", "jacobian", "h_weight", "seed", "checkpoint_every", "points_per_step", "frames_per_step", "layout", "frame", "count_hidden", "reference_frame", "drop_unobserved", "holdout_observations", "confidence", "robust", "recipe", "until_converged"])]
     pub resume: Option<PathBuf>,
     /// A fit config (JSON, the `fit` part of a run's config.json; missing fields take
     /// their defaults); flags override it.
@@ -100,6 +100,9 @@ pub struct FitArgs {
     /// `charbonnier[:EPSILON]` (normalised units, default 0.01), or `l1` (the paper's).
     #[arg(long, value_name = "PENALTY", value_parser = data_penalty)]
     pub robust: Option<DataPenalty>,
+    /// The recipe and the stop on convergence.
+    #[command(flatten)]
+    pub recipe: RecipeArgs,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -157,6 +160,8 @@ impl FitArgs {
             holdout_observations: self.holdout_observations,
             confidence: self.confidence.clone(),
             data_penalty: self.robust,
+            recipe: self.recipe.recipe,
+            until_converged: self.recipe.until_converged.map(|p| p as usize),
         }
     }
 

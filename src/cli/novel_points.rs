@@ -1,7 +1,7 @@
 //! `doma novel-points`: Tab. 1 (fit 25 % of an animated mesh's vertices, predict the rest).
 
 use crate::Result;
-use crate::cli::{ExperimentArgs, RegWeightArgs, SequenceArgs};
+use crate::cli::{ExperimentArgs, RecipeArgs, RegWeightArgs, SequenceArgs};
 use crate::experiments::meshes::{self, MeshRecord, NovelPointsJob};
 use crate::experiments::synthetic::Regularizer;
 use crate::field::Variant;
@@ -26,9 +26,12 @@ pub struct NovelPointsArgs {
     /// Baselines to run too (comma-separated): mlp, mlp-pe6, dct-nerf, bone-cloud.
     #[arg(long, value_enum, value_delimiter = ',')]
     pub baselines: Vec<Baseline>,
-    /// Iterations per fit (the paper: 1000).
-    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..))]
-    pub iters: u64,
+    /// Iterations per fit (default: the recipe's, the paper's 1000).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub iters: Option<u64>,
+    /// The recipe and the stop on convergence.
+    #[command(flatten)]
+    pub recipe: RecipeArgs,
     /// The regularisers (comma-separated): none, h (smoothness, Eq. 13), e (elasticity);
     /// one row per model and regulariser.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "none")]
@@ -51,7 +54,8 @@ impl NovelPointsArgs {
             sequence: self.sequence.load(1)?,
             variants: self.variant.clone(),
             baselines: self.baselines.clone(),
-            iterations: self.iters as usize,
+            iterations: self.recipe.iterations(self.iters),
+            recipe: self.recipe.choice(),
             train_fraction: 0.25,
             samples: self.samples as usize,
             backend: self.common.backend,
@@ -77,7 +81,12 @@ pub(crate) fn finish(records: &[MeshRecord], common: &ExperimentArgs) -> Result<
 pub fn run(args: &NovelPointsArgs) -> Result<()> {
     args.common.check_json()?;
     let job = args.job()?;
-    SequenceArgs::announce("novel_points", &job.sequence, args.iters, job.backend);
+    SequenceArgs::announce(
+        "novel_points",
+        &job.sequence,
+        job.iterations as u64,
+        job.backend,
+    );
     let records = meshes::novel_points(&job, |r| {
         let weight = r
             .weight

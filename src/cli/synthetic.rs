@@ -1,7 +1,7 @@
 //! `doma synthetic`: the synthetic benchmark of Tab. 2.
 
 use crate::Result;
-use crate::cli::{ExperimentArgs, RegWeightArgs, Selection, selection};
+use crate::cli::{ExperimentArgs, RecipeArgs, RegWeightArgs, Selection, selection};
 use crate::data::synthetic::Motion;
 use crate::experiments::synthetic::{self, Regularizer, SyntheticJob};
 use crate::field::Variant;
@@ -26,9 +26,13 @@ pub struct SyntheticArgs {
     /// The regularisers' weights, fixed or searched.
     #[command(flatten)]
     pub weights: RegWeightArgs,
-    /// Iterations (passes over all 20 frames); 1000 is the paper's budget.
-    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..), allow_negative_numbers = true)]
-    pub iters: u64,
+    /// Iterations (passes over all 20 frames; default: the recipe's, 1000 for the paper's
+    /// budget).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..), allow_negative_numbers = true)]
+    pub iters: Option<u64>,
+    /// The recipe and the stop on convergence.
+    #[command(flatten)]
+    pub recipe: RecipeArgs,
     /// The hidden width of the SIREN.
     #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u64).range(1..))]
     pub hidden: u64,
@@ -59,7 +63,8 @@ impl SyntheticArgs {
             reg: self.reg,
             h_weight: fixed(self.weights.h_weight),
             e_weight: fixed(self.weights.e_weight),
-            iterations: self.iters as usize,
+            iterations: self.recipe.iterations(self.iters),
+            recipe: self.recipe.choice(),
             hidden: self.hidden as usize,
             backend: self.common.backend,
             jacobian: self.jacobian,

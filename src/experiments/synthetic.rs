@@ -11,7 +11,7 @@ use crate::jacobian::JacobianKind;
 use crate::metrics::{EPE_SCALE, evaluate_epe};
 use crate::prelude::*;
 use crate::train::select::{Penalty, WeightChoice, WeightSearch, choose_weight};
-use crate::train::{FitConfig, Trainer};
+use crate::train::{FitConfig, RecipeChoice, Trainer};
 
 /// The regulariser of a run: the rows "", "-E" and "-H" of Tab. 2.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -49,8 +49,10 @@ pub struct SyntheticJob {
     pub h_weight: f64,
     /// `w_E` when `reg` is `E`.
     pub e_weight: f64,
-    /// Iterations per fit.
+    /// Iterations per fit (the budget: a fit that stops on convergence runs fewer).
     pub iterations: usize,
+    /// The recipe and the stop on convergence (its iterations give way to `iterations`).
+    pub recipe: RecipeChoice,
     /// Hidden width.
     pub hidden: usize,
     /// The backend.
@@ -100,7 +102,9 @@ impl SyntheticJob {
             Regularizer::H => (self.h_weight, 0.0),
             Regularizer::E => (0.0, self.e_weight),
         };
-        FitConfig::doma(DomaFieldConfig::new(variant).with_hidden(self.hidden))
+        let base = FitConfig::doma(DomaFieldConfig::new(variant).with_hidden(self.hidden));
+        self.recipe
+            .apply(base)
             .with_iterations(self.iterations)
             .with_smoothness_weight(w_h)
             .with_elasticity_weight(w_e)

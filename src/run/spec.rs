@@ -17,7 +17,7 @@ use crate::jacobian::JacobianKind;
 use crate::loss::DataPenalty;
 use crate::train::select::Weight;
 use crate::train::select::{Penalty, WeightChoice, WeightSearch, choose_weight};
-use crate::train::{FitConfig, SmoothnessSampling};
+use crate::train::{FitConfig, Recipe, RecipeChoice, SmoothnessSampling};
 use crate::{DomaError, Result};
 
 /// The model of a fit named in a few letters: a DOMA variant, or the frame-wise DPF
@@ -139,6 +139,13 @@ pub struct RunSpec {
     /// The trajectory loss's per-coordinate penalty.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub data_penalty: Option<DataPenalty>,
+    /// A named recipe, applied over the config before the other fields.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub recipe: Option<Recipe>,
+    /// Stop once the EPE on held-back training tracks has not improved for this many
+    /// iterations.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub until_converged: Option<usize>,
 }
 
 impl RunSpec {
@@ -169,6 +176,8 @@ impl RunSpec {
             holdout_observations: self.holdout_observations.or(d.holdout_observations),
             confidence: self.confidence.or(d.confidence),
             data_penalty: self.data_penalty.or(d.data_penalty),
+            recipe: self.recipe.or(d.recipe),
+            until_converged: self.until_converged.or(d.until_converged),
         }
     }
 
@@ -209,6 +218,12 @@ impl RunSpec {
             }
             None => {}
         }
+        // After the model (whose variant sets the `L_H` sampling), before the flags.
+        let mut fit = RecipeChoice {
+            recipe: self.recipe,
+            until_converged: self.until_converged,
+        }
+        .apply(fit);
         if let Some(j) = self.jacobian {
             fit.jacobian = j;
         }

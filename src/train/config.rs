@@ -18,8 +18,19 @@ pub fn default_adam() -> AdamConfig {
     AdamConfig::new().with_epsilon(1e-8)
 }
 
+/// The shape of the learning rate after its flat (or warm-up) start.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Decay {
+    /// The authors' LambdaLR: a linear decay towards 0 at the end of the budget.
+    Linear,
+    /// A half cosine from the base rate towards 0 at the end of the budget.
+    Cosine,
+}
+
 /// The learning-rate schedule: `iterations` passes over the frames, Adam's base rate, and
-/// the authors' LambdaLR (flat, then a linear decay).
+/// the authors' LambdaLR (flat, then a linear decay), or a linear warm-up followed by a
+/// cosine decay for shorter budgets.
 #[derive(Config, Debug, PartialEq)]
 pub struct ScheduleConfig {
     /// Iterations (passes over all frames); the paper's budget is 1000.
@@ -32,13 +43,31 @@ pub struct ScheduleConfig {
     /// a fit, 0 for a registration).
     #[config(default = 10)]
     pub lr_flat_iterations: usize,
+    /// The decay after the start (`None`: the authors' linear one; a config without the
+    /// field reads as `None`).
+    pub decay: Option<Decay>,
+    /// With [`Decay::Cosine`]: iterations of linear warm-up from `lr / warmup` to `lr`
+    /// (`None` or 0: none).
+    pub warmup_iterations: Option<usize>,
 }
 
 impl ScheduleConfig {
     /// The learning-rate factor during iteration `e` (0-based): 1 for the first
     /// `lr_flat_iterations + 1` iterations, then a linear decay,
     /// `1 − (e − flat) / (iterations − flat + 1)` (the authors' LambdaLR).
+    ///
+    /// With [`Decay::Cosine`]: `(e + 1) / w` during the `w` warm-up iterations, then
+    /// `½ (1 + cos(π (e − w) / (iterations − w)))`.
     pub fn lr_factor(&self, e: usize) -> f64 {
+        if self.decay == Some(Decay::Cosine) {
+            let warmup = self.warmup_iterations.unwrap_or(0);
+            if e < warmup {
+                return (e + 1) as f64 / warmup as f64;
+            }
+            let span = self.iterations.saturating_sub(warmup).max(1) as f64;
+            let p = ((e - warmup) as f64 / span).min(1.0);
+            return 0.5 * (1.0 + (std::f64::consts::PI * p).cos());
+        }
         let flat = self.lr_flat_iterations;
         if e <= flat {
             1.0
@@ -65,7 +94,124 @@ impl ScheduleConfig {
                 self.learning_rate
             )));
         }
+        if self.decay == Some(Decay::Cosine)
+            && self.warmup_iterations.unwrap_or(0) >= self.iterations
+        {
+            return Err(DomaError::InvalidConfig(format!(
+                "{} warm-up iterations leave none of the {} to decay over",
+                self.warmup_iterations.unwrap_or(0),
+                self.iterations
+            )));
+        }
         Ok(())
+    }
+}
+
+/// Stopping a fit once the EPE on held-back training tracks stops improving: usable on a
+/// user's data, where no ground truth exists. The held-back tracks are not fitted.
+///
+/// In JSON, every field but `patience` may be left out (its default is used).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Convergence {
+    /// Stop when the validation EPE has not improved for this many iterations.
+    pub patience: usize,
+    /// The fraction of the training tracks held back (drawn among those seen in the
+    /// reference frame); default 0.1.
+    #[serde(default = "Convergence::default_fraction")]
+    pub validation_fraction: f64,
+    /// Iterations between two validation EPEs; default 10.
+    #[serde(default = "Convergence::default_every")]
+    pub every: usize,
+    /// The relative drop below the best EPE so far that counts as an improvement; default
+    /// 0.01.
+    #[serde(default = "Convergence::default_min_improvement")]
+    pub min_improvement: f64,
+}
+
+impl Convergence {
+    fn default_fraction() -> f64 {
+        0.1
+    }
+    fn default_every() -> usize {
+        10
+    }
+    fn default_min_improvement() -> f64 {
+        0.01
+    }
+
+    /// Stop after `patience` iterations without improvement; the other fields at their
+    /// defaults.
+    pub fn new(patience: usize) -> Self {
+        Convergence {
+            patience,
+            validation_fraction: Self::default_fraction(),
+            every: Self::default_every(),
+            min_improvement: Self::default_min_improvement(),
+        }
+    }
+
+    /// Sets the held-back fraction.
+    pub fn with_validation_fraction(mut self, fraction: f64) -> Self {
+        self.validation_fraction = fraction;
+        self
+    }
+
+    /// Sets the iterations between two validation EPEs.
+    pub fn with_every(mut self, every: usize) -> Self {
+        self.every = every;
+        self
+    }
+
+    /// Sets the relative improvement that counts.
+    pub fn with_min_improvement(mut self, min_improvement: f64) -> Self {
+        self.min_improvement = min_improvement;
+        self
+    }
+
+    /// Refuses a zero patience or period, and a fraction outside (0, 1).
+    pub fn validate(&self) -> Result<()> {
+        if self.patience == 0 || self.every == 0 {
+            return Err(DomaError::InvalidConfig(
+                "the patience and the validation period must be at least 1 iteration".into(),
+            ));
+        }
+        if !(self.validation_fraction > 0.0 && self.validation_fraction < 1.0) {
+            return Err(DomaError::InvalidConfig(format!(
+                "the validation fraction {} is not strictly between 0 and 1",
+                self.validation_fraction
+            )));
+        }
+        if !(self.min_improvement.is_finite() && (0.0..1.0).contains(&self.min_improvement)) {
+            return Err(DomaError::InvalidConfig(format!(
+                "the minimum improvement {} is not in [0, 1)",
+                self.min_improvement
+            )));
+        }
+        Ok(())
+    }
+
+    /// Whether the fit whose validation EPEs so far are `epes` (iteration count after
+    /// which each was measured, EPE) has converged: its best EPE (each improvement at least
+    /// `min_improvement` below the previous best) is `patience` iterations or more behind
+    /// its latest.
+    pub fn converged(&self, epes: impl IntoIterator<Item = (usize, f64)>) -> bool {
+        let mut best: Option<(usize, f64)> = None;
+        let mut last = None;
+        for (done, epe) in epes {
+            last = Some(done);
+            let improved = match best {
+                None => epe.is_finite(),
+                Some((_, b)) => epe < b * (1.0 - self.min_improvement),
+            };
+            if improved {
+                best = Some((done, epe));
+            }
+        }
+        match (best, last) {
+            (Some((at, _)), Some(last)) => last - at >= self.patience,
+            _ => false,
+        }
     }
 }
 
@@ -214,6 +360,12 @@ pub struct FitConfig {
     /// iteration takes `⌈T / frames⌉` steps (`None`: one frame per step, the paper's
     /// protocol).
     pub frames_per_step: Option<usize>,
+    /// Stop early once the EPE on held-back training tracks stops improving (`None`: run
+    /// the whole budget, the paper's protocol).
+    pub until_converged: Option<Convergence>,
+    /// The name of the recipe the settings came from ([`super::Recipe`]); a label only:
+    /// the settings themselves are the other fields.
+    pub recipe: Option<super::Recipe>,
 }
 
 impl FitConfig {
@@ -251,6 +403,9 @@ impl FitConfig {
             return Err(DomaError::InvalidConfig(
                 "frames per step must be at least 1".into(),
             ));
+        }
+        if let Some(c) = &self.until_converged {
+            c.validate()?;
         }
         self.model.validate()?;
         self.model.check_jacobian(self.jacobian)
@@ -296,6 +451,34 @@ impl FitConfig {
         if let Value::Object(g) = &mut given {
             g.remove("model");
         }
+        if let Some(field) = unknown_field(&given, &merged, "") {
+            return Err(malformed(format!("no fit config has the field `{field}`")));
+        }
+        merge(&mut merged, given);
+        let config: FitConfig =
+            serde_json::from_value(merged).map_err(|e| malformed(e.to_string()))?;
+        config.validate().map_err(|e| malformed(e.to_string()))?;
+        Ok(config)
+    }
+}
+
+impl FitConfig {
+    /// `self` with the fields that the JSON file `path` gives overlaid, object by object
+    /// (a recipe written as a file: `{"schedule": {"iterations": 200}}`). A field that no
+    /// fit config has is refused; errors name the file and the field.
+    pub fn overlaid(&self, path: &Path) -> Result<Self> {
+        let text = crate::io::read_input_text(path, crate::io::InputKind::Config)?;
+        let malformed = |reason: String| DomaError::Malformed {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let given: Value =
+            serde_json::from_str(&text).map_err(|e| malformed(format!("not JSON: {e}")))?;
+        if !given.is_object() {
+            return Err(malformed("a fit config is a JSON object".into()));
+        }
+        let mut merged = serde_json::to_value(self)
+            .map_err(|e| malformed(format!("cannot serialise the config: {e}")))?;
         if let Some(field) = unknown_field(&given, &merged, "") {
             return Err(malformed(format!("no fit config has the field `{field}`")));
         }

@@ -11,17 +11,22 @@
 mod config;
 mod hooks;
 mod objective;
+mod recipe;
 mod record;
 pub mod select;
 mod trainer;
 
 pub(crate) use config::unknown_field;
 pub use config::{
-    FitConfig, LossConfig, ScheduleConfig, SmoothnessSampling, WithSchedule, check_weights,
-    default_adam,
+    Convergence, Decay, FitConfig, LossConfig, ScheduleConfig, SmoothnessSampling, WithSchedule,
+    check_weights, default_adam,
 };
 pub use hooks::Hooks;
 pub use objective::{Objective, TrajectoryObjective};
+pub use recipe::{
+    FAST_ITERATIONS, FAST_LR_FACTOR, FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, FAST_WARMUP,
+    Recipe, RecipeChoice,
+};
 pub use record::{Fitted, IterationRecord, Outcome, RngState, TrainerSnapshot, gaussian};
 pub use trainer::Trainer;
 

@@ -2,12 +2,14 @@
 //! order, the schedule, Adam and the random stream; an [`Objective`] turns the field and
 //! a frame into losses.
 
+use std::borrow::Cow;
+
 use burn::tensor::{Device, Gradients, IndexingUpdateOp, Int, Tensor, TensorData};
 use rand::Rng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
-use super::config::{FitConfig, LossConfig, SmoothnessSampling};
+use super::config::{Convergence, FitConfig, LossConfig, SmoothnessSampling};
 use super::record::gaussian;
 use crate::Result;
 use crate::data::Trajectories;
@@ -67,6 +69,12 @@ pub trait Objective<M>: Send {
     fn learned_canonical(&self) -> Result<Option<Vec<f32>>> {
         Ok(None)
     }
+
+    /// The EPE of `field` (a validation copy) on the tracks the objective holds back from
+    /// the fit, when it holds some back ([`super::Convergence`]); the default holds none.
+    fn validation_epe(&self, _field: &M) -> Result<Option<f64>> {
+        Ok(None)
+    }
 }
 
 /// Adam's moment decays and ε for the learned canonical positions: the field's own
@@ -89,7 +97,13 @@ struct LearnedPositions {
 /// Fitting trajectories (Sec. 3; docs/reference.md §5): the trajectory L1 of the training points
 /// in frame `k`, plus `w_H · L_H` (Eq. 13) and `w_E ·` elasticity.
 pub struct TrajectoryObjective<'a> {
-    data: &'a Trajectories,
+    /// The fitted tracks: all the training tracks, or those not held back.
+    data: Cow<'a, Trajectories>,
+    /// All the training tracks, and the rows of the fitted ones when some are held back.
+    full: &'a Trajectories,
+    fit_rows: Option<Vec<usize>>,
+    /// The held-back tracks of [`Convergence`], and the device that evaluates them.
+    validation: Option<(Trajectories, Device)>,
     loss: LossConfig,
     sampling: SmoothnessSampling,
     method: Box<dyn JacobianMethod>,
@@ -143,6 +157,19 @@ impl<'a> TrajectoryObjective<'a> {
         config.loss.validate()?;
         config.smoothness_sampling.validate()?;
         crate::field::check_method(field, config.jacobian)?;
+        let full = data;
+        let (data, fit_rows, validation) = match &config.until_converged {
+            None => (Cow::Borrowed(full), None, None),
+            Some(c) => {
+                c.validate()?;
+                let (fit, held) = held_back(full, c, config.seed)?;
+                (
+                    Cow::Owned(full.select_points(&fit)?),
+                    Some(fit),
+                    Some((full.select_points(&held)?, device.clone())),
+                )
+            }
+        };
         let method = config.jacobian.method();
         let ad = device.clone().autodiff();
         let sampling = config.smoothness_sampling.clone();
@@ -203,21 +230,27 @@ impl<'a> TrajectoryObjective<'a> {
                 })
                 .collect()
         });
+        let x0 = data.canonical_tensor(&ad);
+        let subset = config.points_per_step.filter(|&k| k < data.points());
+        let targets = (0..data.frames())
+            .map(|k| data.frame_tensor(k, &ad))
+            .collect();
         Ok(TrajectoryObjective {
             data,
+            full,
+            fit_rows,
+            validation,
             loss: config.loss.clone(),
             sampling,
             method,
             x0_host,
-            x0: data.canonical_tensor(&ad),
-            targets: (0..data.frames())
-                .map(|k| data.frame_tensor(k, &ad))
-                .collect(),
+            x0,
+            targets,
             ad,
             separate_h,
             warp_needs_jacobian,
             prepared: None,
-            subset: config.points_per_step.filter(|&k| k < data.points()),
+            subset,
             prepared_rows: None,
             frame_rows,
             frame_weights,
@@ -290,13 +323,23 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
         };
         let delta: Vec<f32> = crate::readback::to_vec(l.delta.clone().inner())?;
         let rows: Vec<i64> = crate::readback::to_vec(l.rows.clone())?;
-        let mut x = self.data.canonical().to_vec();
+        // Rows of the fitted tracks, as rows of all the training tracks.
+        let row = |r: usize| self.fit_rows.as_ref().map_or(r, |f| f[r]);
+        let mut x = self.full.canonical().to_vec();
         for (j, &r) in rows.iter().enumerate() {
+            let i = row(r as usize);
             for c in 0..3 {
-                x[3 * r as usize + c] += delta[3 * j + c];
+                x[3 * i + c] += delta[3 * j + c];
             }
         }
         Ok(Some(x))
+    }
+
+    fn validation_epe(&self, field: &M) -> Result<Option<f64>> {
+        match &self.validation {
+            Some((tracks, device)) => crate::metrics::evaluate_epe(field, tracks, device).map(Some),
+            None => Ok(None),
+        }
     }
 
     /// Draws every step's `L_H` samples now, in step order, and uploads them in one
@@ -501,6 +544,38 @@ impl TrajectoryObjective<'_> {
             _ => step_rows(self.data.points(), take, rng),
         }
     }
+}
+
+/// The seeded split of the training tracks for [`Convergence`]: the rows fitted and the
+/// rows held back, both in increasing order. The held-back rows are drawn among the tracks
+/// seen in the reference frame, whose canonical positions are observed, not learned.
+fn held_back(data: &Trajectories, c: &Convergence, seed: u64) -> Result<(Vec<usize>, Vec<usize>)> {
+    let eligible: Vec<usize> = match data.observed_in_frame(data.reference()) {
+        Some(seen) => (0..data.points()).filter(|&i| seen[i]).collect(),
+        None => (0..data.points()).collect(),
+    };
+    // Its own stream: neither the train/test split's nor the weight search's.
+    let (_, held) = crate::data::sequence::split_indices(
+        eligible.len(),
+        1.0 - c.validation_fraction,
+        seed ^ 0xC0_4E_26ED,
+    )
+    .map_err(|_| {
+        crate::DomaError::InvalidConfig(format!(
+            "holding back {} of {} tracks seen in the reference frame leaves no track to \
+             validate on or none to fit",
+            c.validation_fraction,
+            eligible.len()
+        ))
+    })?;
+    let mut held: Vec<usize> = held.into_iter().map(|j| eligible[j]).collect();
+    held.sort_unstable();
+    let mut is_held = vec![false; data.points()];
+    for &i in &held {
+        is_held[i] = true;
+    }
+    let fit = (0..data.points()).filter(|&i| !is_held[i]).collect();
+    Ok((fit, held))
 }
 
 /// A step's training rows: `k` distinct rows of `n`, drawn uniformly.

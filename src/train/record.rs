@@ -19,6 +19,10 @@ pub struct IterationRecord {
     pub total_loss: f64,
     /// Seconds since the fit started (over all resumed parts).
     pub seconds: f64,
+    /// The EPE on the held-back tracks after this iteration, when the fit stops on
+    /// convergence ([`super::Convergence`]) and measured it here.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub validation_epe: Option<f64>,
 }
 
 /// A fitted field and how the fit went.

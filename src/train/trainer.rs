@@ -13,7 +13,7 @@ use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
-use super::config::{FitConfig, ScheduleConfig};
+use super::config::{Convergence, FitConfig, ScheduleConfig};
 use super::hooks::Hooks;
 use super::objective::{Objective, TrajectoryObjective};
 use super::record::{Fitted, IterationRecord, Outcome, RngState, TrainerSnapshot};
@@ -40,6 +40,8 @@ pub struct Trainer<M, O> {
     device: Option<Device>,
     /// Frames per Adam step (1: the paper's one frame per step).
     frames_per_step: usize,
+    /// When to stop before the budget, on the objective's held-back tracks.
+    convergence: Option<Convergence>,
 }
 
 impl<'a, M: MotionField + Module> Trainer<M, TrajectoryObjective<'a>> {
@@ -53,14 +55,16 @@ impl<'a, M: MotionField + Module> Trainer<M, TrajectoryObjective<'a>> {
     ) -> Result<Self> {
         let objective = TrajectoryObjective::new(&field, config, data, device)?;
         let rng = ChaCha8Rng::seed_from_u64(config.seed.wrapping_add(0x00D0_4A5E));
-        Ok(Trainer::with_objective(
+        let mut trainer = Trainer::with_objective(
             field,
             objective,
             &config.optimizer,
             config.schedule.clone(),
             rng,
         )
-        .frames_per_step(config.frames_per_step.unwrap_or(1)))
+        .frames_per_step(config.frames_per_step.unwrap_or(1));
+        trainer.convergence = config.until_converged.clone();
+        Ok(trainer)
     }
 }
 
@@ -101,6 +105,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
             progress: false,
             clock: None,
             frames_per_step: 1,
+            convergence: None,
         }
     }
 
@@ -197,8 +202,31 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
             trajectory_loss,
             total_loss,
             seconds: offset + started.elapsed().as_secs_f64(),
+            validation_epe: None,
         });
+        // The validation EPE is part of the fit's cost, so it runs inside its clock.
+        if let Some(every) = self.convergence.as_ref().map(|c| c.every)
+            && (iteration + 1) % every == 0
+        {
+            let epe = self
+                .objective
+                .validation_epe(&self.field().clone().valid())?;
+            let record = self.history.last_mut().expect("just pushed");
+            record.validation_epe = epe;
+            record.seconds = offset + started.elapsed().as_secs_f64();
+        }
         Ok(self.history.last().expect("just pushed"))
+    }
+
+    /// Whether the fit has converged by its [`Convergence`] (never without one).
+    pub fn converged(&self) -> bool {
+        self.convergence.as_ref().is_some_and(|c| {
+            c.converged(
+                self.history
+                    .iter()
+                    .filter_map(|r| Some((r.iteration + 1, r.validation_epe?))),
+            )
+        })
     }
 
     /// The field being fitted (parameters on the autodiff device).
@@ -288,8 +316,9 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
     pub fn run_with(mut self, mut hooks: Hooks<'_, M>) -> Result<Outcome<M>> {
         let total = self.schedule.iterations;
         let bar = self.progress_bar();
-        while self.history.len() < total {
+        while self.history.len() < total && !self.converged() {
             let record = self.iteration()?.clone();
+            let converged = self.converged();
             let done = record.iteration + 1;
             bar.set_message(format!(
                 "{} {:.2e}  loss {:.2e}",
@@ -299,18 +328,18 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
             ));
             bar.set_position(done as u64);
             if let Some((every, observe)) = &mut hooks.observe
-                && (done % *every == 0 || done == total)
+                && (done % *every == 0 || done == total || converged)
             {
                 observe(&record, self.field().clone().valid())?;
             }
             let stop = hooks.interrupt.is_some_and(|f| f.load(Ordering::SeqCst))
                 || hooks.stop_after == Some(done);
             if let Some((every, save)) = &mut hooks.checkpoint
-                && (done % *every == 0 || done == total || stop)
+                && (done % *every == 0 || done == total || stop || converged)
             {
                 save(&self.snapshot()?)?;
             }
-            if stop && done < total {
+            if stop && done < total && !converged {
                 bar.abandon();
                 return Ok(Outcome::Interrupted {
                     iterations_done: done,

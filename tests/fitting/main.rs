@@ -7,6 +7,7 @@ mod common;
 mod alignment;
 mod experiments_small;
 mod fit;
+mod recipe;
 mod run;
 mod tracks;
 mod weight_search;

@@ -16,7 +16,7 @@ use doma::field::{DomaFieldConfig, Variant};
 use doma::jacobian::JacobianKind;
 use doma::run::{FitOutcome, Report, RunConfig, RunDir, complete_run, eval_run, fit_run};
 use doma::siren::WithSirenShape;
-use doma::train::{FitConfig, WithSchedule};
+use doma::train::{Convergence, FitConfig, WithSchedule};
 use doma_formats::npy::NpyValues;
 use doma_formats::npz::encode_npz_values;
 
@@ -185,7 +185,13 @@ fn a_run_config_written_before_tracker_support_still_opens() {
         assert!(top.remove(key).is_some(), "{key}");
     }
     let fit = top["fit"].as_object_mut().unwrap();
-    assert!(fit.remove("frames_per_step").is_some());
+    for key in ["frames_per_step", "until_converged", "recipe"] {
+        assert!(fit.remove(key).is_some(), "{key}");
+    }
+    let schedule = fit["schedule"].as_object_mut().unwrap();
+    for key in ["decay", "warmup_iterations"] {
+        assert!(schedule.remove(key).is_some(), "{key}");
+    }
     let loss = fit["loss"].as_object_mut().unwrap();
     assert!(loss.remove("data_penalty").is_some());
     std::fs::write(run.config(), serde_json::to_string(&config).unwrap()).unwrap();
@@ -267,4 +273,27 @@ fn eval_on_another_tracker_file_reads_it_as_the_run_read_its_own() {
     assert_eq!(report.points, kept.trajectories.points());
     assert!(report.epe_x1e4.is_finite() && report.epe_x1e4 > 0.0);
     assert!(report.epe_per_frame_x1e4.iter().all(|e| e.is_finite()));
+}
+
+#[test]
+fn a_fit_that_holds_tracks_back_for_convergence_keeps_every_tracks_canonical_position() {
+    let v = view();
+    let dir = common::scratch("doma-converge-tracks");
+    let npz = dir.join("clip.npz");
+    v.write(&npz, Layout::TapVid3d).unwrap();
+    let run = RunDir::new(dir.join("run"));
+    let report = fit(&npz, &run, |c| {
+        c.drop_unobserved = true;
+        c.fit.schedule.iterations = 6;
+        c.fit.until_converged = Some(Convergence::new(2).with_every(2));
+    });
+    assert!(report.epe_x1e4.is_finite());
+    let history: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(run.history()).unwrap()).unwrap();
+    assert!(history.len() <= 6);
+    assert!(history[1]["validation_epe"].as_f64().unwrap().is_finite());
+    // The held-back tracks are left where the data placed them; eval reads the run's
+    // canonical positions for every training track and repeats the report.
+    let again = eval_run(&run, None, &Device::flex()).unwrap();
+    assert_eq!(again.epe_x1e4.to_bits(), report.epe_x1e4.to_bits());
 }

@@ -16,7 +16,7 @@ use crate::jacobian::JacobianKind;
 use crate::metrics::{EPE_SCALE, evaluate_epe};
 use crate::prelude::*;
 use crate::train::select::{Penalty, Weight, WeightChoice, WeightSearch, choose_weight};
-use crate::train::{FitConfig, Fitted, Trainer};
+use crate::train::{FitConfig, Fitted, RecipeChoice, Trainer};
 use crate::warp::warp_points;
 use crate::{DomaError, Result};
 
@@ -29,8 +29,10 @@ pub struct NovelPointsJob {
     pub variants: Vec<Variant>,
     /// The baselines (Tab. 1's other rows).
     pub baselines: Vec<Baseline>,
-    /// Iterations per fit.
+    /// Iterations per fit (the budget: a fit that stops on convergence runs fewer).
     pub iterations: usize,
+    /// The recipe and the stop on convergence (its iterations give way to `iterations`).
+    pub recipe: RecipeChoice,
     /// The fraction of vertices used for training (the paper: 0.25).
     pub train_fraction: f64,
     /// Surface samples per mesh and frame for CD/CDN (the paper: 10⁶).
@@ -162,8 +164,9 @@ impl NovelPointsJob {
             ModelConfig::Doma(field) => FitConfig::doma(field.clone()),
             other => FitConfig::new(other.clone()),
         };
-        base.with_iterations(self.iterations)
-            .with_learning_rate(lr)
+        self.recipe
+            .apply(base.with_learning_rate(lr))
+            .with_iterations(self.iterations)
             .with_jacobian(jacobian)
             .with_seed(self.seed)
     }
