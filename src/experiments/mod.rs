@@ -6,6 +6,7 @@ pub mod meshes;
 pub mod scaling;
 pub mod speed;
 pub mod synthetic;
+pub mod time_to_accuracy;
 
 use serde::{Deserialize, Serialize};
 
