@@ -292,15 +292,16 @@ mod tests {
 /// A named recipe and a stop on convergence, for every subcommand that starts fits.
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct RecipeArgs {
-    /// A named recipe: `paper` (the paper's protocol, the default) or `fast` (600
-    /// iterations at three times the learning rate, warm-up and cosine decay, 128 training
-    /// points and 64 `L_H` samples per step; docs/speed.md). Other flags override its
-    /// settings; they all go into the run's config.
+    /// A named recipe: `paper` (the paper's protocol, the default) or `fast` (1.5 times the
+    /// learning rate, warm-up and cosine decay, 256 training points and 64 `L_H` samples
+    /// per step; docs/speed.md). Other flags override its settings; they all go into the
+    /// run's config.
     #[arg(long, value_enum)]
     pub recipe: Option<crate::train::Recipe>,
     /// Stop once the EPE on a held-back tenth of the training tracks (checked every 10
-    /// iterations) has not improved by 1 % for PATIENCE iterations; the held-back tracks
-    /// are not fitted.
+    /// iterations) has not improved by 1 % for PATIENCE iterations, after a cool-down of
+    /// PATIENCE more iterations whose learning rate falls linearly to 0; the held-back
+    /// tracks are not fitted.
     #[arg(long, value_name = "PATIENCE", value_parser = clap::value_parser!(u64).range(1..))]
     pub until_converged: Option<u64>,
 }
@@ -312,17 +313,5 @@ impl RecipeArgs {
             recipe: self.recipe,
             until_converged: self.until_converged.map(|p| p as usize),
         }
-    }
-
-    /// The budget: `--iters` when given, else the recipe's (1000 for the paper's).
-    pub fn iterations(&self, given: Option<u64>) -> usize {
-        given.map_or_else(
-            || {
-                self.recipe
-                    .unwrap_or(crate::train::Recipe::Paper)
-                    .iterations()
-            },
-            |i| i as usize,
-        )
     }
 }

@@ -26,9 +26,9 @@ pub struct NovelPointsArgs {
     /// Baselines to run too (comma-separated): mlp, mlp-pe6, dct-nerf, bone-cloud.
     #[arg(long, value_enum, value_delimiter = ',')]
     pub baselines: Vec<Baseline>,
-    /// Iterations per fit (default: the recipe's, the paper's 1000).
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
-    pub iters: Option<u64>,
+    /// Iterations per fit (the paper: 1000).
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..))]
+    pub iters: u64,
     /// The recipe and the stop on convergence.
     #[command(flatten)]
     pub recipe: RecipeArgs,
@@ -54,7 +54,7 @@ impl NovelPointsArgs {
             sequence: self.sequence.load(1)?,
             variants: self.variant.clone(),
             baselines: self.baselines.clone(),
-            iterations: self.recipe.iterations(self.iters),
+            iterations: self.iters as usize,
             recipe: self.recipe.choice(),
             train_fraction: 0.25,
             samples: self.samples as usize,

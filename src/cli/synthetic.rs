@@ -26,10 +26,9 @@ pub struct SyntheticArgs {
     /// The regularisers' weights, fixed or searched.
     #[command(flatten)]
     pub weights: RegWeightArgs,
-    /// Iterations (passes over all 20 frames; default: the recipe's, 1000 for the paper's
-    /// budget).
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..), allow_negative_numbers = true)]
-    pub iters: Option<u64>,
+    /// Iterations (passes over all 20 frames); 1000 is the paper's budget.
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..), allow_negative_numbers = true)]
+    pub iters: u64,
     /// The recipe and the stop on convergence.
     #[command(flatten)]
     pub recipe: RecipeArgs,
@@ -63,7 +62,7 @@ impl SyntheticArgs {
             reg: self.reg,
             h_weight: fixed(self.weights.h_weight),
             e_weight: fixed(self.weights.e_weight),
-            iterations: self.recipe.iterations(self.iters),
+            iterations: self.iters as usize,
             recipe: self.recipe.choice(),
             hidden: self.hidden as usize,
             backend: self.common.backend,

@@ -127,6 +127,12 @@ pub struct Convergence {
     /// 0.01.
     #[serde(default = "Convergence::default_min_improvement")]
     pub min_improvement: f64,
+    /// Iterations of cool-down after the plateau: the learning rate falls linearly from its
+    /// value there towards 0, then the fit stops (`None`: as many as `patience`; 0: stop at
+    /// the plateau). Most of a fit's error goes during a decay, so stopping on a plateau
+    /// at a high rate would keep a rough field.
+    #[serde(default)]
+    pub cooldown: Option<usize>,
 }
 
 impl Convergence {
@@ -148,7 +154,27 @@ impl Convergence {
             validation_fraction: Self::default_fraction(),
             every: Self::default_every(),
             min_improvement: Self::default_min_improvement(),
+            cooldown: None,
         }
+    }
+
+    /// Sets the cool-down after the plateau.
+    pub fn with_cooldown(mut self, cooldown: Option<usize>) -> Self {
+        self.cooldown = cooldown;
+        self
+    }
+
+    /// The cool-down in iterations (`patience` unless set).
+    pub fn cooldown_iterations(&self) -> usize {
+        self.cooldown.unwrap_or(self.patience)
+    }
+
+    /// The iteration count at which the curve `epes` (as for [`Convergence::converged`])
+    /// first reached its plateau, if it has.
+    pub fn plateau(&self, epes: &[(usize, f64)]) -> Option<usize> {
+        (0..epes.len())
+            .find(|&i| self.converged(epes[..=i].iter().copied()))
+            .map(|i| epes[i].0)
     }
 
     /// Sets the held-back fraction.

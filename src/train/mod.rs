@@ -24,8 +24,7 @@ pub use config::{
 pub use hooks::Hooks;
 pub use objective::{Objective, TrajectoryObjective};
 pub use recipe::{
-    FAST_ITERATIONS, FAST_LR_FACTOR, FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, FAST_WARMUP,
-    Recipe, RecipeChoice,
+    FAST_LR_FACTOR, FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, FAST_WARMUP, Recipe, RecipeChoice,
 };
 pub use record::{Fitted, IterationRecord, Outcome, RngState, TrainerSnapshot, gaussian};
 pub use trainer::Trainer;

@@ -184,7 +184,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         let offset = self.history.last().map_or(0.0, |r| r.seconds);
         let (started, offset) = *self.clock.get_or_insert((Instant::now(), offset));
         let iteration = self.history.len();
-        let lr = self.schedule.learning_rate_at(iteration);
+        let lr = self.learning_rate_at(iteration);
         let mut order: Vec<usize> = (0..self.objective.frames()).collect();
         order.shuffle(&mut self.rng);
         self.objective.prepare_iteration(&order, &mut self.rng);
@@ -218,15 +218,37 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         Ok(self.history.last().expect("just pushed"))
     }
 
-    /// Whether the fit has converged by its [`Convergence`] (never without one).
+    /// The learning rate of iteration `e`: the schedule's, or during the cool-down after a
+    /// plateau ([`Convergence`]), a linear fall from the schedule's rate at the plateau.
+    fn learning_rate_at(&self, e: usize) -> f64 {
+        match (self.plateau(), &self.convergence) {
+            (Some(p), Some(c)) if e >= p => {
+                let cooldown = c.cooldown_iterations() as f64;
+                let fraction = 1.0 - (e - p + 1) as f64 / (cooldown + 1.0);
+                self.schedule.learning_rate_at(p) * fraction.max(0.0)
+            }
+            _ => self.schedule.learning_rate_at(e),
+        }
+    }
+
+    /// The iterations done when the validation EPE reached its plateau, if it has.
+    fn plateau(&self) -> Option<usize> {
+        let c = self.convergence.as_ref()?;
+        let curve: Vec<(usize, f64)> = self
+            .history
+            .iter()
+            .filter_map(|r| Some((r.iteration + 1, r.validation_epe?)))
+            .collect();
+        c.plateau(&curve)
+    }
+
+    /// Whether the fit has converged by its [`Convergence`]: its validation EPE reached a
+    /// plateau and the cool-down after it is done (never without one).
     pub fn converged(&self) -> bool {
-        self.convergence.as_ref().is_some_and(|c| {
-            c.converged(
-                self.history
-                    .iter()
-                    .filter_map(|r| Some((r.iteration + 1, r.validation_epe?))),
-            )
-        })
+        match (self.plateau(), &self.convergence) {
+            (Some(p), Some(c)) => self.history.len() >= p + c.cooldown_iterations(),
+            _ => false,
+        }
     }
 
     /// The field being fitted (parameters on the autodiff device).

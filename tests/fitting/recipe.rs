@@ -11,7 +11,7 @@ use doma::field::{DomaFieldConfig, Variant};
 use doma::run::RunSpec;
 use doma::siren::WithSirenShape;
 use doma::train::{
-    Convergence, Decay, FAST_ITERATIONS, FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, FitConfig,
+    Convergence, Decay, FAST_LR_FACTOR, FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, FitConfig,
     Recipe, RecipeChoice, ScheduleConfig, Trainer, WithSchedule,
 };
 
@@ -66,6 +66,19 @@ fn convergence_is_patience_iterations_without_a_one_percent_improvement() {
             .is_err()
     );
     assert!(Convergence::new(5).with_every(0).validate().is_err());
+    // The plateau is where the rule first held.
+    let curve = [
+        (10, 1.0),
+        (20, 0.5),
+        (30, 0.5),
+        (40, 0.5),
+        (50, 0.5),
+        (60, 0.2),
+    ];
+    assert_eq!(c.plateau(&curve), Some(50));
+    assert_eq!(c.plateau(&curve[..4]), None);
+    assert_eq!(c.cooldown_iterations(), 30);
+    assert_eq!(c.clone().with_cooldown(Some(0)).cooldown_iterations(), 0);
 }
 
 /// A small piece of the synthetic protocol: 96 training points, 5 frames.
@@ -86,14 +99,20 @@ fn a_fit_until_converged_stops_before_its_budget_with_the_validation_curve_flat(
     let device = Device::flex();
     let budget = 3000;
     let patience = 40;
-    let config = FitConfig::doma(DomaFieldConfig::new(Variant::Trans).with_hidden(32))
-        .with_iterations(budget)
-        .with_learning_rate(1e-3)
-        .with_until_converged(Some(Convergence::new(patience)));
-    let fitted = Trainer::from_config(&config, &train, &device)
-        .unwrap()
-        .run()
-        .unwrap();
+    let config = |c: Convergence| {
+        FitConfig::doma(DomaFieldConfig::new(Variant::Trans).with_hidden(32))
+            .with_iterations(budget)
+            .with_learning_rate(1e-3)
+            .with_until_converged(Some(c))
+    };
+    let run = |c: &FitConfig| {
+        Trainer::from_config(c, &train, &device)
+            .unwrap()
+            .run()
+            .unwrap()
+    };
+    // No cool-down: the fit stops at the plateau.
+    let fitted = run(&config(Convergence::new(patience).with_cooldown(Some(0))));
     let done = fitted.history.len();
     assert!(done < budget, "ran the whole budget of {budget}");
     assert_eq!(fitted.steps, done * train.frames());
@@ -116,18 +135,28 @@ fn a_fit_until_converged_stops_before_its_budget_with_the_validation_curve_flat(
     for (i, e) in tail {
         assert!(*e >= 0.99 * best_before, "{e} at {i} beat {best_before}");
     }
+    // With a cool-down of `patience` iterations (the default), the same fit goes on from
+    // the plateau with a learning rate falling linearly from the rate there, then stops.
+    let with_cooldown = config(Convergence::new(patience));
+    let cooled = run(&with_cooldown);
+    assert_eq!(cooled.history.len(), done + patience);
+    let at_plateau = with_cooldown.schedule.learning_rate_at(done);
+    for j in 0..patience {
+        let lr = cooled.history[done + j].learning_rate;
+        let want = at_plateau * (1.0 - (j + 1) as f64 / (patience + 1) as f64);
+        assert!(
+            (lr - want).abs() <= 1e-12 * at_plateau,
+            "{j}: {lr} against {want}"
+        );
+    }
+    assert_eq!(
+        fitted.history[done - 1].trajectory_loss.to_bits(),
+        cooled.history[done - 1].trajectory_loss.to_bits()
+    );
     // The same fit without the rule runs the whole budget of a short run.
-    let plain = Trainer::from_config(
-        &config
-            .clone()
-            .with_until_converged(None)
-            .with_iterations(20),
-        &train,
-        &device,
-    )
-    .unwrap()
-    .run()
-    .unwrap();
+    let plain = run(&config(Convergence::new(patience))
+        .with_until_converged(None)
+        .with_iterations(20));
     assert_eq!(plain.history.len(), 20);
     assert!(plain.history.iter().all(|r| r.validation_epe.is_none()));
 }
@@ -137,9 +166,13 @@ fn the_fast_recipe_sets_its_schedule_and_caps_the_capped_smoothness_sampling() {
     let paper =
         FitConfig::doma(DomaFieldConfig::new(Variant::Affinity)).with_smoothness_weight(0.1);
     let fast = Recipe::Fast.apply(paper.clone());
-    assert_eq!(fast.schedule.iterations, FAST_ITERATIONS);
+    // The budget is kept; the rate is scaled and decays on a cosine.
+    assert_eq!(fast.schedule.iterations, paper.schedule.iterations);
     assert_eq!(fast.schedule.decay, Some(Decay::Cosine));
-    assert!(fast.schedule.learning_rate > paper.schedule.learning_rate);
+    assert_eq!(
+        fast.schedule.learning_rate,
+        FAST_LR_FACTOR * paper.schedule.learning_rate
+    );
     assert_eq!(
         fast.smoothness_sampling.max_points,
         Some(FAST_SMOOTHNESS_POINTS)
@@ -179,7 +212,8 @@ fn a_run_spec_applies_the_recipe_after_the_variant_and_before_the_flags() {
     )
     .unwrap();
     let fit = spec.fit_config(|| Ok(10)).unwrap();
-    // The variant's sampling is the authors' 1024, which the recipe caps.
+    // The variant's sampling is the authors' 1024, which the recipe caps; --points-per-step
+    // and --iters win over the recipe.
     assert_eq!(
         fit.smoothness_sampling.max_points,
         Some(FAST_SMOOTHNESS_POINTS)
