@@ -40,7 +40,7 @@ impl Recipe {
     pub fn apply(self, mut config: FitConfig) -> FitConfig {
         if self == Recipe::Fast {
             let s = &mut config.schedule;
-            s.learning_rate *= FAST_LR_FACTOR;
+            s.learning_rate = decimal(s.learning_rate * FAST_LR_FACTOR);
             s.decay = Some(Decay::Cosine);
             s.warmup_iterations = Some(FAST_WARMUP);
             let m = &mut config.smoothness_sampling.max_points;
@@ -77,6 +77,14 @@ impl RecipeChoice {
         }
         config
     }
+}
+
+/// `x` rounded to 12 significant digits. `1.5 × 1e-4` is one ulp off the double nearest
+/// `1.5e-4`; written into `config.json` in full and read back by serde_json's parser, it
+/// would come back as that nearest double, and a resumed fit would not repeat its steps.
+/// A short decimal reads back exactly.
+fn decimal(x: f64) -> f64 {
+    format!("{x:.11e}").parse().unwrap_or(x)
 }
 
 crate::names::display_as_value_name!(Recipe);

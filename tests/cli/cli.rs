@@ -24,6 +24,11 @@ fn bad_flags_are_refused_with_a_message() {
         (vec!["synthetic", "--iters", "-3"], "--iters"),
         (vec!["synthetic", "--iters", "many"], "--iters"),
         (vec!["synthetic", "--motion", "wobble"], "wobble"),
+        (vec!["synthetic", "--recipe", "fastest"], "fastest"),
+        (
+            vec!["synthetic", "--until-converged", "0"],
+            "--until-converged",
+        ),
         (vec!["synthetic", "--variant", "bones"], "bones"),
         (vec!["synthetic", "--backend", "cuda"], "cuda"),
         (vec!["synthetic", "--h-weight", "-0.1"], "non-negative"),
@@ -731,4 +736,102 @@ fn tracker_flags_that_do_not_fit_the_data_are_refused_naming_the_file_or_flag() 
             "{args:?} left a run folder"
         );
     }
+}
+
+#[test]
+fn bench_time_to_accuracy_writes_the_curves_the_targets_and_the_plots() {
+    let dir = common::scratch("doma-tta");
+    let json = dir.join("tta.json");
+    let recipe = dir.join("short.json");
+    std::fs::write(
+        &recipe,
+        r#"{"schedule": {"iterations": 4, "decay": "cosine"}, "points_per_step": 64}"#,
+    )
+    .unwrap();
+    let (ok, stdout, stderr) = doma(&[
+        "bench",
+        "--time-to-accuracy",
+        "--motion",
+        "rotation",
+        "--recipe",
+        "paper",
+        "--paper-iters",
+        "3",
+        "--recipe-file",
+        recipe.to_str().unwrap(),
+        "--curve-points",
+        "3",
+        "--json",
+        json.to_str().unwrap(),
+        "--plot",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("to authors (10.52)"), "{stdout}");
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let curves = record["curves"].as_array().unwrap();
+    let names: Vec<&str> = curves
+        .iter()
+        .map(|c| c["contender"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["paper", "short"]);
+    let iterations = |c: &serde_json::Value| -> Vec<u64> {
+        c["points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["iteration"].as_u64().unwrap())
+            .collect()
+    };
+    assert_eq!(iterations(&curves[0]), [1, 2, 3]);
+    assert_eq!(iterations(&curves[1]), [1, 2, 3, 4]);
+    // The file's fields over the protocol's, and the curve's seconds only grow.
+    assert_eq!(curves[1]["config"]["schedule"]["iterations"], 4);
+    assert_eq!(curves[1]["config"]["points_per_step"], 64);
+    for c in curves {
+        let s: Vec<f64> = c["points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["seconds"].as_f64().unwrap())
+            .collect();
+        assert!(s.windows(2).all(|w| w[0] <= w[1]), "{s:?}");
+        assert!(c["eval_seconds"].as_f64().unwrap() > 0.0);
+    }
+    // The authors' EPE, the protocol's, each +10 %.
+    let targets: Vec<&str> = record["targets"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        targets,
+        [
+            "authors",
+            "authors +10 %",
+            "paper final",
+            "paper final +10 %"
+        ]
+    );
+    for ext in ["png", "svg"] {
+        assert!(
+            dir.join(format!("time_to_accuracy_rotation.{ext}"))
+                .is_file()
+        );
+    }
+    // A recipe file with a field no fit config has is refused, naming the file and field.
+    std::fs::write(&recipe, r#"{"schedule": {"iters": 4}}"#).unwrap();
+    let (ok, _, stderr) = doma(&[
+        "bench",
+        "--time-to-accuracy",
+        "--recipe-file",
+        recipe.to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("short.json") && stderr.contains("schedule.iters"),
+        "{stderr}"
+    );
 }
