@@ -444,15 +444,10 @@ impl FitConfig {
     /// layout) is refused, so that nothing in the file is silently ignored. Errors name the
     /// file and the field.
     pub fn load_partial(path: &Path) -> Result<Self> {
-        let text = crate::io::read_input_text(path, crate::io::InputKind::Config)?;
+        let mut fields = read_object(path)?;
         let malformed = |reason: String| DomaError::Malformed {
             path: path.to_path_buf(),
             reason,
-        };
-        let given: Value =
-            serde_json::from_str(&text).map_err(|e| malformed(format!("not JSON: {e}")))?;
-        let Value::Object(fields) = &given else {
-            return Err(malformed("a fit config is a JSON object".into()));
         };
         let model = match fields.get("model") {
             Some(m) => serde_json::from_value::<ModelConfig>(merge_model(m))
@@ -471,20 +466,8 @@ impl FitConfig {
             other => FitConfig::new(other.clone()),
         }
         .with_jacobian(JacobianKind::Analytic);
-        let mut merged = serde_json::to_value(&base)
-            .map_err(|e| malformed(format!("cannot serialise the defaults: {e}")))?;
-        let mut given = given;
-        if let Value::Object(g) = &mut given {
-            g.remove("model");
-        }
-        if let Some(field) = unknown_field(&given, &merged, "") {
-            return Err(malformed(format!("no fit config has the field `{field}`")));
-        }
-        merge(&mut merged, given);
-        let config: FitConfig =
-            serde_json::from_value(merged).map_err(|e| malformed(e.to_string()))?;
-        config.validate().map_err(|e| malformed(e.to_string()))?;
-        Ok(config)
+        fields.remove("model");
+        overlay(&base, Value::Object(fields), path)
     }
 }
 
@@ -493,27 +476,42 @@ impl FitConfig {
     /// (a recipe written as a file: `{"schedule": {"iterations": 200}}`). A field that no
     /// fit config has is refused; errors name the file and the field.
     pub fn overlaid(&self, path: &Path) -> Result<Self> {
-        let text = crate::io::read_input_text(path, crate::io::InputKind::Config)?;
-        let malformed = |reason: String| DomaError::Malformed {
-            path: path.to_path_buf(),
-            reason,
-        };
-        let given: Value =
-            serde_json::from_str(&text).map_err(|e| malformed(format!("not JSON: {e}")))?;
-        if !given.is_object() {
-            return Err(malformed("a fit config is a JSON object".into()));
-        }
-        let mut merged = serde_json::to_value(self)
-            .map_err(|e| malformed(format!("cannot serialise the config: {e}")))?;
-        if let Some(field) = unknown_field(&given, &merged, "") {
-            return Err(malformed(format!("no fit config has the field `{field}`")));
-        }
-        merge(&mut merged, given);
-        let config: FitConfig =
-            serde_json::from_value(merged).map_err(|e| malformed(e.to_string()))?;
-        config.validate().map_err(|e| malformed(e.to_string()))?;
-        Ok(config)
+        overlay(self, Value::Object(read_object(path)?), path)
     }
+}
+
+/// The JSON object in the config file `path`.
+fn read_object(path: &Path) -> Result<serde_json::Map<String, Value>> {
+    let text = crate::io::read_input_text(path, crate::io::InputKind::Config)?;
+    let given: Value = serde_json::from_str(&text).map_err(|e| DomaError::Malformed {
+        path: path.to_path_buf(),
+        reason: format!("not JSON: {e}"),
+    })?;
+    match given {
+        Value::Object(fields) => Ok(fields),
+        _ => Err(DomaError::Malformed {
+            path: path.to_path_buf(),
+            reason: "a fit config is a JSON object".into(),
+        }),
+    }
+}
+
+/// `base` with `given` (read from `path`) overlaid, refusing a field no fit config has, then
+/// checked.
+fn overlay(base: &FitConfig, given: Value, path: &Path) -> Result<FitConfig> {
+    let malformed = |reason: String| DomaError::Malformed {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let mut merged = serde_json::to_value(base)
+        .map_err(|e| malformed(format!("cannot serialise the config: {e}")))?;
+    if let Some(field) = unknown_field(&given, &merged, "") {
+        return Err(malformed(format!("no fit config has the field `{field}`")));
+    }
+    merge(&mut merged, given);
+    let config: FitConfig = serde_json::from_value(merged).map_err(|e| malformed(e.to_string()))?;
+    config.validate().map_err(|e| malformed(e.to_string()))?;
+    Ok(config)
 }
 
 /// The first field of `given` (as a dotted path below `at`) that `known`, a full config of
