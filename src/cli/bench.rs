@@ -244,7 +244,7 @@ fn time_to_accuracy(args: &BenchArgs) -> Result<()> {
             job.problems
                 .iter()
                 .find(|p| p.name == name)
-                .and_then(|p| authors(p))
+                .and_then(&authors)
         };
         for (name, figure) in tta::plots(&record, by_name) {
             let path = dir.join(name);

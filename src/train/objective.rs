@@ -558,7 +558,7 @@ fn held_back(data: &Trajectories, c: &Convergence, seed: u64) -> Result<(Vec<usi
     let (_, held) = crate::data::sequence::split_indices(
         eligible.len(),
         1.0 - c.validation_fraction,
-        seed ^ 0xC0_4E_26ED,
+        seed ^ 0xC04E_26ED,
     )
     .map_err(|_| {
         crate::DomaError::InvalidConfig(format!(

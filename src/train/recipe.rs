@@ -1,5 +1,5 @@
-//! Named recipes: the paper's protocol, and a shorter schedule that reaches the same error
-//! sooner (docs/speed.md, "Time to accuracy"). A recipe rewrites the fields of a
+//! Named recipes: the paper's protocol, and cheaper steps on a steeper schedule that reach
+//! its error sooner (docs/speed.md, "Time to accuracy"). A recipe rewrites the fields of a
 //! [`FitConfig`]; the result is saved in `config.json` like any other setting, so a run's
 //! folder says exactly what ran.
 

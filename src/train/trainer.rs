@@ -206,7 +206,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         });
         // The validation EPE is part of the fit's cost, so it runs inside its clock.
         if let Some(every) = self.convergence.as_ref().map(|c| c.every)
-            && (iteration + 1) % every == 0
+            && (iteration + 1).is_multiple_of(every)
         {
             let epe = self
                 .objective

@@ -186,7 +186,7 @@ fn the_fast_recipe_sets_its_schedule_and_caps_the_capped_smoothness_sampling() {
     // The paper's recipe changes nothing but the label.
     let same = Recipe::Paper.apply(paper.clone());
     assert_eq!(
-        serde_json::to_value(&same.clone().with_recipe(None)).unwrap(),
+        serde_json::to_value(same.clone().with_recipe(None)).unwrap(),
         serde_json::to_value(&paper).unwrap()
     );
     // The recipe's settings are in the config, and read back.
