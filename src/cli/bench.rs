@@ -139,11 +139,8 @@ impl TimeArgs {
     /// The contenders: `paper` first (the paper's protocol at --paper-iters), then the
     /// other named recipes, then the recipe files.
     pub fn contenders(&self) -> Result<Vec<Contender>> {
-        let (w_h, w_e) = match self.reg {
-            Regularizer::None => (0.0, 0.0),
-            Regularizer::H => (0.1, 0.0),
-            Regularizer::E => (0.0, 0.01),
-        };
+        // The weights of docs/results.md's "-H" and "-E" rows.
+        let (w_h, w_e) = self.reg.weights(0.1, 0.01);
         let paper = FitConfig::doma(DomaFieldConfig::new(self.variant))
             .with_iterations(self.paper_iters as usize)
             .with_smoothness_weight(w_h)

@@ -34,6 +34,15 @@ impl Regularizer {
             Regularizer::E => "-E",
         }
     }
+
+    /// The weights `(w_H, w_E)` of a fit with this regulariser, given each one's weight.
+    pub fn weights(self, h_weight: f64, e_weight: f64) -> (f64, f64) {
+        match self {
+            Regularizer::None => (0.0, 0.0),
+            Regularizer::H => (h_weight, 0.0),
+            Regularizer::E => (0.0, e_weight),
+        }
+    }
 }
 
 /// What to run.
@@ -97,11 +106,7 @@ impl SyntheticJob {
 
     /// The fit configuration of one run.
     pub fn fit_config(&self, variant: Variant) -> FitConfig {
-        let (w_h, w_e) = match self.reg {
-            Regularizer::None => (0.0, 0.0),
-            Regularizer::H => (self.h_weight, 0.0),
-            Regularizer::E => (0.0, self.e_weight),
-        };
+        let (w_h, w_e) = self.reg.weights(self.h_weight, self.e_weight);
         let base = FitConfig::doma(DomaFieldConfig::new(variant).with_hidden(self.hidden));
         self.recipe
             .apply(base)

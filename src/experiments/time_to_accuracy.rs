@@ -139,6 +139,19 @@ pub struct TimeRecord {
     pub targets: Vec<Target>,
 }
 
+impl TimeRecord {
+    /// The problems, in the order they were fitted.
+    pub fn problems(&self) -> Vec<&str> {
+        let mut problems: Vec<&str> = Vec::new();
+        for c in &self.curves {
+            if !problems.contains(&c.problem.as_str()) {
+                problems.push(&c.problem);
+            }
+        }
+        problems
+    }
+}
+
 /// The final EPE (× 10⁴) of the authors' code on the synthetic benchmark's points (seed
 /// 0), for the variants measured there (docs/results.md).
 pub fn authors_epe(variant: Variant, reg: Regularizer, motion: Motion) -> Option<f64> {
@@ -266,13 +279,7 @@ fn problem_targets(problem: &str, curves: &[Curve], authors: Option<f64>) -> Vec
 /// each target with every contender's time and speed-up over the reference.
 pub fn table(record: &TimeRecord) -> String {
     let mut out = String::new();
-    let mut problems: Vec<&str> = Vec::new();
-    for c in &record.curves {
-        if !problems.contains(&c.problem.as_str()) {
-            problems.push(&c.problem);
-        }
-    }
-    for p in problems {
+    for p in record.problems() {
         out += &format!("\n{p}\n");
         out += &format!(
             "  {:<16} {:>12} {:>10} {:>6}\n",
@@ -311,13 +318,8 @@ pub fn plots(
         [255, 127, 14],
         [23, 190, 207],
     ];
-    let mut problems: Vec<&str> = Vec::new();
-    for c in &record.curves {
-        if !problems.contains(&c.problem.as_str()) {
-            problems.push(&c.problem);
-        }
-    }
-    problems
+    record
+        .problems()
         .into_iter()
         .map(|p| {
             let curves: Vec<&Curve> = record.curves.iter().filter(|c| c.problem == p).collect();

@@ -169,14 +169,6 @@ impl Convergence {
         self.cooldown.unwrap_or(self.patience)
     }
 
-    /// The iteration count at which the curve `epes` (as for [`Convergence::converged`])
-    /// first reached its plateau, if it has.
-    pub fn plateau(&self, epes: &[(usize, f64)]) -> Option<usize> {
-        (0..epes.len())
-            .find(|&i| self.converged(epes[..=i].iter().copied()))
-            .map(|i| epes[i].0)
-    }
-
     /// Sets the held-back fraction.
     pub fn with_validation_fraction(mut self, fraction: f64) -> Self {
         self.validation_fraction = fraction;
@@ -217,15 +209,13 @@ impl Convergence {
         Ok(())
     }
 
-    /// Whether the fit whose validation EPEs so far are `epes` (iteration count after
-    /// which each was measured, EPE) has converged: its best EPE (each improvement at least
-    /// `min_improvement` below the previous best) is `patience` iterations or more behind
-    /// its latest.
-    pub fn converged(&self, epes: impl IntoIterator<Item = (usize, f64)>) -> bool {
+    /// The iteration count at which the validation curve `epes` (iteration count after
+    /// which each EPE was measured, EPE) first reached its plateau: its best EPE so far
+    /// (each improvement at least `min_improvement` below the previous best) `patience`
+    /// iterations or more behind the measurement. One pass over the curve.
+    pub fn plateau(&self, epes: impl IntoIterator<Item = (usize, f64)>) -> Option<usize> {
         let mut best: Option<(usize, f64)> = None;
-        let mut last = None;
         for (done, epe) in epes {
-            last = Some(done);
             let improved = match best {
                 None => epe.is_finite(),
                 Some((_, b)) => epe < b * (1.0 - self.min_improvement),
@@ -233,11 +223,18 @@ impl Convergence {
             if improved {
                 best = Some((done, epe));
             }
+            if let Some((at, _)) = best
+                && done - at >= self.patience
+            {
+                return Some(done);
+            }
         }
-        match (best, last) {
-            (Some((at, _)), Some(last)) => last - at >= self.patience,
-            _ => false,
-        }
+        None
+    }
+
+    /// Whether the curve `epes` has reached a plateau ([`Convergence::plateau`]).
+    pub fn converged(&self, epes: impl IntoIterator<Item = (usize, f64)>) -> bool {
+        self.plateau(epes).is_some()
     }
 }
 

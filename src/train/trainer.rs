@@ -233,13 +233,11 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
 
     /// The iterations done when the validation EPE reached its plateau, if it has.
     fn plateau(&self) -> Option<usize> {
-        let c = self.convergence.as_ref()?;
-        let curve: Vec<(usize, f64)> = self
-            .history
-            .iter()
-            .filter_map(|r| Some((r.iteration + 1, r.validation_epe?)))
-            .collect();
-        c.plateau(&curve)
+        self.convergence.as_ref()?.plateau(
+            self.history
+                .iter()
+                .filter_map(|r| Some((r.iteration + 1, r.validation_epe?))),
+        )
     }
 
     /// Whether the fit has converged by its [`Convergence`]: its validation EPE reached a

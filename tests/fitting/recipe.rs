@@ -75,8 +75,8 @@ fn convergence_is_patience_iterations_without_a_one_percent_improvement() {
         (50, 0.5),
         (60, 0.2),
     ];
-    assert_eq!(c.plateau(&curve), Some(50));
-    assert_eq!(c.plateau(&curve[..4]), None);
+    assert_eq!(c.plateau(curve), Some(50));
+    assert_eq!(c.plateau(curve[..4].iter().copied()), None);
     assert_eq!(c.cooldown_iterations(), 30);
     assert_eq!(c.clone().with_cooldown(Some(0)).cooldown_iterations(), 0);
 }
