@@ -23,7 +23,8 @@ pub struct NovelPointsArgs {
         default_value = "trans,se3,scaled-se3,affinity"
     )]
     pub variant: Vec<Variant>,
-    /// Baselines to run too (comma-separated): mlp, mlp-pe6, dct-nerf, bone-cloud.
+    /// Baselines to run too (comma-separated): mlp, mlp-pe6, dct-nerf, banmo,
+    /// bone-cloud.
     #[arg(long, value_enum, value_delimiter = ',')]
     pub baselines: Vec<Baseline>,
     /// Iterations per fit (the paper: 1000).

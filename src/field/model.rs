@@ -1,5 +1,6 @@
 //! Every model a fit can train, named by one config: the DOMA variants (Eq. 4, 10–12) and
-//! the baselines of Tab. 1 and Tab. 3 (DPF, MLP-ReLU, MLP-ReLU PE.6, DCT-NeRF, BoneCloud).
+//! the baselines of Tab. 1 and Tab. 3 (DPF, MLP-ReLU, MLP-ReLU PE.6, DCT-NeRF, BANMO,
+//! BoneCloud).
 //!
 //! [`ModelConfig`] is what a run's `config.json` stores under `model`, e.g.
 //! `{"doma": {"variant": "affinity", "shape": {…}}}` or `{"dpf": {"frames": 10, …}}`;
@@ -10,6 +11,7 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
+use super::baselines::banmo::{Banmo, BanmoConfig};
 use super::baselines::bone_cloud::{BoneCloud, BoneCloudConfig};
 use super::baselines::dct::{DctConfig, DctNerf};
 use super::baselines::mlp::{Mlp, MlpConfig};
@@ -54,6 +56,9 @@ pub enum ModelName {
     /// DCT-NeRF.
     #[serde(rename = "DCT-NeRF")]
     DctNerf,
+    /// BANMO.
+    #[serde(rename = "BANMO")]
+    Banmo,
     /// BoneCloud.
     #[serde(rename = "BoneCloud")]
     BoneCloud,
@@ -73,6 +78,7 @@ impl ModelName {
             ModelName::Mlp => "MLP-ReLU",
             ModelName::MlpPe6 => "MLP-ReLU PE.6",
             ModelName::DctNerf => "DCT-NeRF",
+            ModelName::Banmo => "BANMO",
             ModelName::BoneCloud => "BoneCloud",
         }
     }
@@ -107,6 +113,8 @@ pub enum ModelConfig {
     Mlp(MlpConfig),
     /// DCT-NeRF.
     DctNerf(DctConfig),
+    /// BANMO (Gaussian bones, neural skinning, pose codes).
+    Banmo(BanmoConfig),
     /// BoneCloud (linear blend skinning).
     BoneCloud(BoneCloudConfig),
 }
@@ -125,6 +133,7 @@ impl ModelConfig {
             ModelConfig::Mlp(c) if c.pe_octaves > 0 => ModelName::MlpPe6,
             ModelConfig::Mlp(_) => ModelName::Mlp,
             ModelConfig::DctNerf(_) => ModelName::DctNerf,
+            ModelConfig::Banmo(_) => ModelName::Banmo,
             ModelConfig::BoneCloud(_) => ModelName::BoneCloud,
         }
     }
@@ -151,12 +160,13 @@ impl ModelConfig {
         )))
     }
 
-    /// The frames a frame-indexed model (DPF, DCT-NeRF, BoneCloud) was built for; `None`
+    /// The frames a frame-indexed model (DPF, DCT-NeRF, BANMO, BoneCloud) was built for; `None`
     /// for the DOMA fields and the MLP, which take any time.
     pub fn frames(&self) -> Option<usize> {
         match self {
             ModelConfig::Dpf(c) => Some(c.frames),
             ModelConfig::DctNerf(c) => Some(c.frames),
+            ModelConfig::Banmo(c) => Some(c.frames),
             ModelConfig::BoneCloud(c) => Some(c.frames),
             ModelConfig::Doma(_) | ModelConfig::Mlp(_) => None,
         }
@@ -180,6 +190,7 @@ impl ModelConfig {
             ModelConfig::Dpf(c) => c.num_params(),
             ModelConfig::Mlp(c) => c.num_params(),
             ModelConfig::DctNerf(c) => c.num_params(),
+            ModelConfig::Banmo(c) => c.num_params(),
             ModelConfig::BoneCloud(c) => c.num_params(),
         }
     }
@@ -201,6 +212,17 @@ impl ModelConfig {
             }
             ModelConfig::DctNerf(c) if c.hidden == 0 || c.frames == 0 => {
                 return bad("DCT-NeRF needs a hidden width and frames".into());
+            }
+            ModelConfig::Banmo(c)
+                if c.bones == 0
+                    || c.frames == 0
+                    || c.code_size == 0
+                    || c.transform_layers == 0
+                    || c.skin_layers == 0
+                    || c.transform_width < 2
+                    || c.skin_width < 2 =>
+            {
+                return bad("BANMO needs bones, frames, a code, and layers at least 2 wide".into());
             }
             ModelConfig::BoneCloud(c) if c.bones == 0 || c.frames == 0 => {
                 return bad("BoneCloud needs bones and frames".into());
@@ -225,6 +247,7 @@ impl ModelConfig {
             ModelConfig::Dpf(c) => Model::Dpf(c.init(seed, device)),
             ModelConfig::Mlp(c) => Model::Mlp(c.init(seed, device)),
             ModelConfig::DctNerf(c) => Model::DctNerf(c.init(seed, device)),
+            ModelConfig::Banmo(c) => Model::Banmo(c.init(seed, device)),
             ModelConfig::BoneCloud(c) => Model::BoneCloud(c.init(canonical, seed, device)),
         }
     }
@@ -235,6 +258,9 @@ impl ModelConfig {
 pub const MAX_PARAMS: usize = 100_000_000;
 
 /// An initialised model of any [`ModelConfig`].
+// One model per fit, so the size of the largest variant (BANMO's two networks) costs
+// nothing worth a box.
+#[allow(clippy::large_enum_variant)]
 #[derive(Module, Debug)]
 pub enum Model {
     /// See [`ModelConfig::Doma`].
@@ -245,6 +271,8 @@ pub enum Model {
     Mlp(Mlp),
     /// See [`ModelConfig::DctNerf`].
     DctNerf(DctNerf),
+    /// See [`ModelConfig::Banmo`].
+    Banmo(Banmo),
     /// See [`ModelConfig::BoneCloud`].
     BoneCloud(BoneCloud),
 }
@@ -259,6 +287,7 @@ impl Model {
             Model::Dpf(m) => encode_stable(m.clone(), precision),
             Model::Mlp(m) => encode_stable(m.clone(), precision),
             Model::DctNerf(m) => encode_stable(m.clone(), precision),
+            Model::Banmo(m) => encode_stable(m.clone(), precision),
             Model::BoneCloud(m) => encode_stable(m.clone(), precision),
         }
     }
@@ -271,6 +300,7 @@ impl Model {
             Model::Dpf(m) => Model::Dpf(decode_checkpoint(m, bytes)?),
             Model::Mlp(m) => Model::Mlp(decode_checkpoint(m, bytes)?),
             Model::DctNerf(m) => Model::DctNerf(decode_checkpoint(m, bytes)?),
+            Model::Banmo(m) => Model::Banmo(decode_checkpoint(m, bytes)?),
             Model::BoneCloud(m) => Model::BoneCloud(decode_checkpoint(m, bytes)?),
         })
     }
@@ -282,6 +312,7 @@ impl Model {
             Model::Dpf(m) => m,
             Model::Mlp(m) => m,
             Model::DctNerf(m) => m,
+            Model::Banmo(m) => m,
             Model::BoneCloud(m) => m,
         }
     }

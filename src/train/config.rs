@@ -534,7 +534,9 @@ pub(crate) fn unknown_field(given: &Value, known: &Value, at: &str) -> Option<St
 /// A partial model config filled from its kind's defaults: `{"doma": {"variant": "trans"}}`
 /// gets the paper's SIREN shape, `{"dpf": {"frames": 10}}` the paper's DPF.
 fn merge_model(given: &Value) -> Value {
-    use crate::field::baselines::{bone_cloud::BoneCloudConfig, dct::DctConfig, mlp::MlpConfig};
+    use crate::field::baselines::{
+        banmo::BanmoConfig, bone_cloud::BoneCloudConfig, dct::DctConfig, mlp::MlpConfig,
+    };
     use crate::field::dpf::DpfConfig;
     let Some((kind, fields)) = given
         .as_object()
@@ -558,6 +560,7 @@ fn merge_model(given: &Value) -> Value {
         ("mlp", _) => Some(ModelConfig::Mlp(MlpConfig::new())),
         ("dpf", Some(t)) => Some(ModelConfig::Dpf(DpfConfig::new(t))),
         ("dct-nerf", Some(t)) => Some(ModelConfig::DctNerf(DctConfig::new(t))),
+        ("banmo", Some(t)) => Some(ModelConfig::Banmo(BanmoConfig::new(t))),
         ("bone-cloud", Some(t)) => Some(ModelConfig::BoneCloud(BoneCloudConfig::new(t))),
         _ => None,
     };

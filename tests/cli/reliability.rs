@@ -294,4 +294,43 @@ fn fit_runs_any_model_of_the_config_and_checks_its_frames() {
     assert!(out.contains("\"DPF\""), "{out}");
     let (code, _, err) = doma(&["eval", s(&run)]);
     assert_eq!(code, Some(0), "{err}");
+    // BANMO (at a test's size) through the same paths: fit, info, eval, warp, export.
+    std::fs::write(
+        &config,
+        r#"{"model": {"banmo": {"frames": 4, "code_size": 8, "transform_width": 16, "skin_width": 8}},
+            "schedule": {"iterations": 2, "learning_rate": 1e-3}, "jacobian": "autodiff"}"#,
+    )
+    .unwrap();
+    let run = dir.join("banmo");
+    let (code, _, err) = doma(&[
+        "fit",
+        FAERIE,
+        "--frames",
+        "112..116",
+        "--quiet",
+        "--out",
+        s(&run),
+        "--config",
+        s(&config),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    let (code, out, err) = doma(&["info", s(&run)]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(out.contains("\"BANMO\""), "{out}");
+    let (code, first, err) = doma(&["eval", s(&run)]);
+    assert_eq!(code, Some(0), "{err}");
+    // eval re-evaluates the model read back from model.bpk: the fit's own report.
+    let epe =
+        |text: &str| serde_json::from_str::<serde_json::Value>(text).unwrap()["epe_x1e4"].clone();
+    let report = std::fs::read_to_string(run.join("report.json")).unwrap();
+    assert!(epe(&first).is_number(), "{first}");
+    assert_eq!(epe(&first), epe(&report));
+    let obj = dir.join("banmo_obj");
+    let (code, _, err) = doma(&["warp", s(&run), "--out", s(&obj)]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(obj.join("frame_0003.obj").exists());
+    let glb = dir.join("banmo.glb");
+    let (code, _, err) = doma(&["export", s(&run), "--gltf", s(&glb)]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(std::fs::metadata(&glb).unwrap().len() > 0);
 }

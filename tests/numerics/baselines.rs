@@ -1,4 +1,4 @@
-//! The baselines (MLP-ReLU, PE.6, DCT-NeRF, BoneCloud): shapes, parameter counts, the
+//! The baselines (MLP-ReLU, PE.6, DCT-NeRF, BANMO, BoneCloud): shapes, parameter counts, the
 //! identity at their initial state, closed-form motions, and `L_H` in the common fit loop
 //! (the Jacobians against finite differences are in `baselines_f64.rs`).
 
@@ -9,6 +9,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use common::{backward_lock, rel_err, tensor2, to_vec};
 use doma::data::Trajectories;
 use doma::field::MotionField;
+use doma::field::baselines::banmo::{self, BanmoConfig, BoneTransforms};
 use doma::field::baselines::bone_cloud::BoneCloudConfig;
 use doma::field::baselines::dct::{DctConfig, dct_basis};
 use doma::field::baselines::mlp::MlpConfig;
@@ -188,6 +189,7 @@ fn the_analytic_jacobian_is_refused_for_models_without_siren_layers() {
         ModelConfig::Mlp(MlpConfig::new().with_hidden(8)),
         ModelConfig::DctNerf(DctConfig::new(3).with_hidden(8)),
         ModelConfig::BoneCloud(BoneCloudConfig::new(3).with_bones(4)),
+        ModelConfig::Banmo(small_banmo(3)),
     ] {
         let name = model.paper_name();
         let analytic = FitConfig::new(model.clone())
@@ -206,4 +208,200 @@ fn the_analytic_jacobian_is_refused_for_models_without_siren_layers() {
         let fitted = doma::train::fit(&FitConfig::new(model).with_iterations(1), &data, &device);
         assert!(fitted.is_ok(), "{name}: {fitted:?}");
     }
+}
+
+/// A BANMO of the authors' structure at a test's size.
+fn small_banmo(frames: usize) -> BanmoConfig {
+    BanmoConfig::new(frames)
+        .with_code_size(16)
+        .with_transform_width(32)
+        .with_skin_width(16)
+}
+
+/// Row-major 3×3 product and transpose, on the host.
+fn mat_mul(a: &[f64], b: &[f64]) -> [f64; 9] {
+    let mut m = [0.0; 9];
+    for i in 0..3 {
+        for j in 0..3 {
+            m[3 * i + j] = (0..3).map(|k| a[3 * i + k] * b[3 * k + j]).sum();
+        }
+    }
+    m
+}
+
+fn transpose(a: &[f64]) -> [f64; 9] {
+    let mut m = [0.0; 9];
+    for i in 0..3 {
+        for j in 0..3 {
+            m[3 * i + j] = a[3 * j + i];
+        }
+    }
+    m
+}
+
+#[test]
+fn banmo_has_the_authors_parameter_count() {
+    // The authors' module, built at their sizes: 696,111 registered parameters, of which
+    // 324 (a density layer 256 → 1 and 64 → 1, and two scalars) never reach the warp;
+    // 695,787 are trained: the transform network 644,374, the skinning MLP 48,217, the
+    // pose code's linear map 2,816, the rest code 128, the bones 250, skin_aux 2.
+    let config = BanmoConfig::new(20);
+    assert_eq!(config.num_params(), 695_787);
+    assert_eq!(
+        config.num_params() + config.unused_authors_params(),
+        696_111
+    );
+    assert_eq!(config.encoded_width(3), 63);
+    assert_eq!(config.encoded_width(1), 21);
+    let device = Device::flex();
+    assert_eq!(config.init(0, &device).param_count(), 695_787);
+    assert_eq!(ModelConfig::Banmo(config).num_params(), 695_787);
+}
+
+#[test]
+fn banmo_rotation_maps_match_closed_forms() {
+    let device = Device::flex();
+    // A quarter turn about z, as an axis-angle and as a quaternion (real part first, not
+    // normalised: the map normalises).
+    let quarter = [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+    let h = std::f64::consts::FRAC_PI_2;
+    let r = to_vec(banmo::so3_exp(tensor2(vec![0.0, 0.0, h], [1, 3], &device)));
+    let s2 = std::f64::consts::SQRT_2;
+    let q = to_vec(banmo::quaternion_matrix(tensor2(
+        vec![s2, 0.0, 0.0, s2],
+        [1, 4],
+        &device,
+    )));
+    for k in 0..9 {
+        assert!((r[k] - quarter[k]).abs() < 1e-6, "exp: {r:?}");
+        assert!((q[k] - quarter[k]).abs() < 1e-6, "quaternion: {q:?}");
+    }
+    // exp(0) is the identity exactly (the clamped angle multiplies a zero skew matrix).
+    let zero = to_vec(banmo::so3_exp(tensor2(vec![0.0; 3], [1, 3], &device)));
+    assert_eq!(zero, vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);
+    // A bone's motion relative to its rest pose composes back: rest ∘ Δ = pose.
+    let rots = |seed: u64| banmo::so3_exp(x(4, seed, &device));
+    let rest = BoneTransforms {
+        rotations: rots(1),
+        translations: x(4, 2, &device),
+    };
+    let pose = BoneTransforms {
+        rotations: rots(3),
+        translations: x(4, 4, &device),
+    };
+    let delta = pose.relative_to(&rest);
+    let (rr, rt) = (to_vec(rest.rotations), to_vec(rest.translations));
+    let (pr, pt) = (to_vec(pose.rotations), to_vec(pose.translations));
+    let (dr, dt) = (to_vec(delta.rotations), to_vec(delta.translations));
+    for b in 0..4 {
+        let m = |v: &[f64]| v[9 * b..9 * b + 9].to_vec();
+        let composed = mat_mul(&m(&rr), &m(&dr));
+        for k in 0..9 {
+            assert!((composed[k] - pr[9 * b + k]).abs() < 1e-5, "bone {b}");
+        }
+        for i in 0..3 {
+            let moved: f64 = (0..3).map(|j| rr[9 * b + 3 * i + j] * dt[3 * b + j]).sum();
+            assert!(
+                (moved + rt[3 * b + i] - pt[3 * b + i]).abs() < 1e-5,
+                "bone {b}"
+            );
+        }
+    }
+}
+
+#[test]
+fn banmo_with_an_identity_pose_reproduces_its_input() {
+    let device = Device::flex();
+    let p = x(30, 7, &device);
+    for bones in [1, 25] {
+        let mut m = small_banmo(5).with_bones(bones).init(3, &device);
+        // A zero output layer: every code gives every bone exp(0) = I and τ = 0, so each
+        // bone's motion relative to its rest pose is the identity, whatever the weights.
+        let out = &mut m.transform.output;
+        out.weight = out.weight.clone().map(|w| w.zeros_like());
+        out.bias = out.bias.take().map(|b| b.map(|b| b.zeros_like()));
+        for t in [-1.0, 0.0, 1.0] {
+            let y = m.warp(p.clone(), t);
+            assert!(
+                rel_err(&to_vec(y), &to_vec(p.clone())) < 1e-6,
+                "{bones} bones at t = {t}"
+            );
+        }
+    }
+}
+
+#[test]
+fn banmo_moves_every_point_rigidly_when_every_bone_moves_alike() {
+    let device = Device::flex();
+    let mut m = small_banmo(6).with_bones(8).init(5, &device);
+    // Give every bone the first bone's rows of the transform network's output layer, scaled
+    // up so that the motion is far from the identity: all bones then get the same rest
+    // transform and the same transform at every frame, so the blend is that one rigid map.
+    let out = &mut m.transform.output;
+    out.weight = out
+        .weight
+        .clone()
+        .map(|w| w.narrow(1, 0, 6).repeat_dim(1, 8).mul_scalar(40.0));
+    out.bias = out
+        .bias
+        .take()
+        .map(|b| b.map(|b| b.narrow(0, 0, 6).repeat_dim(0, 8)));
+    let n = 20;
+    let p = x(n, 8, &device);
+    let frame = 4;
+    let t = -1.0 + 2.0 * frame as f64 / 5.0;
+    let (rest, pose) = m.rest_and_pose(frame);
+    let delta = pose.relative_to(&rest);
+    let (r, tau) = (to_vec(delta.rotations), to_vec(delta.translations));
+    // A proper rotation, and not the identity.
+    let rtr = mat_mul(&transpose(&r[..9]), &r[..9]);
+    let eye = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    assert!(rel_err(&rtr, &eye) < 1e-5, "RᵀR = {rtr:?}");
+    let off: f64 = (0..9).map(|k| (r[k] - eye[k]).abs()).fold(0.0, f64::max);
+    assert!(off > 0.1, "the motion is near the identity: {r:?}");
+    // The skinning weights themselves are far from uniform.
+    let w = to_vec(
+        m.skinning_weights(doma::jacobian::Dual::constant(p.clone()), &rest)
+            .value,
+    );
+    let spread = w.iter().fold(0.0f64, |a, &v| a.max(v)) - w.iter().fold(1.0f64, |a, &v| a.min(v));
+    assert!(spread > 0.05, "weights spread {spread}");
+    let y = to_vec(m.warp(p.clone(), t));
+    let xs = to_vec(p);
+    for i in 0..n {
+        for a in 0..3 {
+            let want: f64 = (0..3).map(|b| r[3 * a + b] * xs[3 * i + b]).sum::<f64>() + tau[a];
+            assert!(
+                (y[3 * i + a] - want).abs() < 1e-4,
+                "point {i}: {} vs {want}",
+                y[3 * i + a]
+            );
+        }
+    }
+}
+
+#[test]
+fn banmo_skinning_weights_sum_to_one() {
+    let device = Device::flex();
+    let mut m = small_banmo(3).init(9, &device);
+    // Spread the bones (centres, orientations, precisions) so the Gaussian terms differ.
+    let noise = tensor2(
+        common::random_points(84, 11)[..250]
+            .iter()
+            .map(|v| 0.5 * v)
+            .collect(),
+        [25, 10],
+        &device,
+    );
+    m.bones = m.bones.clone().map(|b| b + noise);
+    let p = x(50, 10, &device);
+    let (rest, _) = m.rest_and_pose(1);
+    let w = m
+        .skinning_weights(doma::jacobian::Dual::constant(p), &rest)
+        .value;
+    assert_eq!(w.dims(), [50, 25]);
+    for s in to_vec(w.clone().sum_dim(1)) {
+        assert!((s - 1.0).abs() < 1e-5, "{s}");
+    }
+    assert!(to_vec(w).iter().all(|&v| (0.0..=1.0).contains(&v)));
 }

@@ -158,6 +158,7 @@ impl NovelPointsJob {
         };
         let lr = match &model {
             ModelConfig::BoneCloud(_) => Baseline::BoneCloud.learning_rate(),
+            ModelConfig::Banmo(_) => Baseline::Banmo.learning_rate(),
             _ => 1e-4,
         };
         let base = match &model {
