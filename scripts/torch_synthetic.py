@@ -26,12 +26,14 @@ held-out EPE after each of the first 50 steps and every --dump-every-th step aft
 Needs torch >= 2.0 and numpy, in a virtual environment outside the repository.
 """
 import argparse, json, math, sys, time
+from pathlib import Path
 
 import numpy as np
 import torch
-from torch import nn
 
-OMEGA = 30.0
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benches"))
+from torch_step import OMEGA, Siren as StepSiren  # noqa: E402
+
 FRAMES = 20
 
 
@@ -57,23 +59,9 @@ def sequence(motion):
     return np.stack(frames).astype(np.float32)  # [T, N, 3]
 
 
-class Siren(nn.Module):
-    def __init__(self, hidden=128, n_hidden=2, d_out=12):
-        super().__init__()
-        dims = [4] + [hidden] * (n_hidden + 1)
-        self.sine = nn.ModuleList(nn.Linear(a, b) for a, b in zip(dims[:-1], dims[1:]))
-        self.out = nn.Linear(hidden, d_out)
-        with torch.no_grad():
-            self.sine[0].weight.uniform_(-1 / 4, 1 / 4)
-            bound = math.sqrt(6 / hidden) / OMEGA
-            for layer in list(self.sine[1:]) + [self.out]:
-                layer.weight.uniform_(-bound, bound)
-
-    def forward(self, xt):
-        h = xt
-        for layer in self.sine:
-            h = torch.sin(OMEGA * layer(h))
-        return self.out(h)
+class Siren(StepSiren):
+    """The SIREN of benches/torch_step.py (the same layers, initialisation and draws), with
+    the Jacobian that L_H needs."""
 
     def jacobian(self, xt):
         """d raw / d x, [N, 12, 3], by forward mode (exact, differentiable)."""

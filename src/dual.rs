@@ -219,6 +219,17 @@ impl Dual {
         }
     }
 
+    /// The softmax over channels, `[N, C]` → `[N, C]`, rows summing to 1. The row maximum,
+    /// a constant, is subtracted first so that `exp` stays in range.
+    pub fn softmax(self) -> Self {
+        let c = self.channels();
+        let shift = Dual::constant(self.value.clone().max_dim(1).detach());
+        let ones = Tensor::<2>::ones([1, c], &self.value.device());
+        let e = (self - shift.linear(ones, None)).exp();
+        let inv = e.clone().sum_channels().recip();
+        e * inv
+    }
+
     /// The sum over channels, `[N, 1]`.
     pub fn sum_channels(self) -> Self {
         Dual {

@@ -276,19 +276,22 @@ fn fit_runs_any_model_of_the_config_and_checks_its_frames() {
         r#"{"model": {"dpf": {"frames": 4, "shape": {"hidden": 16}}}, "schedule": {"iterations": 2}}"#,
     )
     .unwrap();
+    let fit = |run: &Path| {
+        let (code, _, err) = doma(&[
+            "fit",
+            FAERIE,
+            "--frames",
+            "112..116",
+            "--quiet",
+            "--out",
+            s(run),
+            "--config",
+            s(&config),
+        ]);
+        assert_eq!(code, Some(0), "{err}");
+    };
     let run = dir.join("dpf");
-    let (code, _, err) = doma(&[
-        "fit",
-        FAERIE,
-        "--frames",
-        "112..116",
-        "--quiet",
-        "--out",
-        s(&run),
-        "--config",
-        s(&config),
-    ]);
-    assert_eq!(code, Some(0), "{err}");
+    fit(&run);
     let (code, out, err) = doma(&["info", s(&run)]);
     assert_eq!(code, Some(0), "{err}");
     assert!(out.contains("\"DPF\""), "{out}");
@@ -302,18 +305,7 @@ fn fit_runs_any_model_of_the_config_and_checks_its_frames() {
     )
     .unwrap();
     let run = dir.join("banmo");
-    let (code, _, err) = doma(&[
-        "fit",
-        FAERIE,
-        "--frames",
-        "112..116",
-        "--quiet",
-        "--out",
-        s(&run),
-        "--config",
-        s(&config),
-    ]);
-    assert_eq!(code, Some(0), "{err}");
+    fit(&run);
     let (code, out, err) = doma(&["info", s(&run)]);
     assert_eq!(code, Some(0), "{err}");
     assert!(out.contains("\"BANMO\""), "{out}");

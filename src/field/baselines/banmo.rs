@@ -496,13 +496,7 @@ impl Banmo {
             fourier_encode(x, self.frequencies),
             Some(&self.rest_code.val()),
         );
-        let logits = gauss + residual;
-        // A softmax; the row maximum (a constant) keeps exp in range.
-        let shift = Dual::constant(logits.value.clone().max_dim(1).detach());
-        let ones = Tensor::<2>::ones([1, b], &logits.value.device());
-        let e = (logits - shift.linear(ones, None)).exp();
-        let inv = e.clone().sum_channels().recip();
-        e.mul(inv)
+        (gauss + residual).softmax()
     }
 
     /// The raw outputs at frame `k`: the blended `A` (row-major) and `u`.

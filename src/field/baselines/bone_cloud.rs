@@ -102,13 +102,7 @@ impl BoneCloud {
         // [3, N, K] like the rest.
         let d2 = cross + x_sq.linear(ones, None) + Dual::constant(v_sq);
         let d = d2.clamp_min(1e-12).sqrt();
-        let logits = d.mul_scalar(-self.sigma);
-        // A softmax; the row maximum (a constant) keeps exp in range.
-        let shift = Dual::constant(logits.value.clone().max_dim(1).detach());
-        let ones_k = Tensor::<2>::ones([1, k], &logits.value.device());
-        let e = (logits - shift.linear(ones_k, None)).exp();
-        let inv = e.clone().sum_channels().recip();
-        e.mul(inv)
+        d.mul_scalar(-self.sigma).softmax()
     }
 
     /// The per-bone transforms of frame `k`: rotations row-major `[K, 9]` and
