@@ -493,7 +493,7 @@ fn the_supplement_experiments_refuse_bad_flags() {
         (vec!["image2d", "--resolution", "1"], "--resolution"),
         (vec!["image2d", "--widths", "0"], "--widths"),
         (vec!["image2d", "--motion", "twist"], "twist"),
-        (vec!["novel-points", "--baselines", "banmo"], "banmo"),
+        (vec!["novel-points", "--baselines", "banana"], "banana"),
         (vec!["novel-points", "--reg", "x"], "x"),
         (vec!["novel-points", "--h-weight", "-1"], "--h-weight"),
         (vec!["novel-points", "--h-weight", "lots"], "auto"),
