@@ -134,8 +134,9 @@ impl BanmoConfig {
     /// biases zeroed, and the skinning temperature `a = 0`.
     ///
     /// # Panics
-    /// If a size is 0, or a width is below 2 (programming errors; [`crate::field::model::
-    /// ModelConfig::validate`] refuses them first).
+    /// If a size is 0, or a width is below 2 (programming errors;
+    /// [`ModelConfig::validate`](crate::field::model::ModelConfig::validate) refuses them
+    /// first).
     pub fn init(&self, seed: u64, device: &Device) -> Banmo {
         assert!(self.frames > 0 && self.bones > 0 && self.code_size > 0);
         assert!(self.transform_width >= 2 && self.skin_width >= 2);
@@ -195,7 +196,7 @@ fn standard_normal(rng: &mut impl Rng) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
-/// A NeRF-style MLP: ReLU trunk layers (the [`SKIP`]th fed `[input, h]`), a linear feature
+/// A NeRF-style MLP: ReLU trunk layers (the 5th fed `[input, h]`), a linear feature
 /// layer, a ReLU layer of half the width and a linear output.
 #[derive(Module, Debug)]
 pub struct NerfMlp {
