@@ -13,11 +13,12 @@
 use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
-use doma::checkpoint::{Precision, save_json};
+use doma::checkpoint::Precision;
 use doma::data::mesh::as_points;
 use doma::data::normalized_time;
 use doma::export::{ExportOptions, export_gltf};
 use doma::field::{DomaFieldConfig, Variant};
+use doma::io::save_json;
 use doma::metrics::{EPE_SCALE, evaluate_epe};
 use doma::prelude::*;
 use doma::run::{RunConfig, RunDir};

@@ -46,7 +46,7 @@ impl BackendKind {
     }
 }
 
-crate::names::display_as_value_name!(BackendKind);
+crate::names::value_names!(BackendKind);
 
 /// Whether at least one wgpu adapter exists. Never panics: a missing Vulkan
 /// loader is reported as "no adapter".

@@ -134,19 +134,3 @@ pub fn load_checkpoint<M: Module>(module: M, path: &Path) -> Result<M> {
         },
     })
 }
-
-/// Writes `config` as pretty JSON to `path`, atomically.
-pub fn save_json<T: Serialize>(config: &T, path: &Path) -> Result<()> {
-    let text = serde_json::to_string_pretty(config)
-        .map_err(|e| DomaError::InvalidData(format!("cannot serialise {}: {e}", path.display())))?;
-    write_atomic(path, text.as_bytes())
-}
-
-/// Reads JSON from `path`; a parse error is [`DomaError::Malformed`] naming the file.
-pub fn load_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
-    let text = crate::io::read_input_text(path, crate::io::InputKind::Config)?;
-    serde_json::from_str(&text).map_err(|e| DomaError::Malformed {
-        path: path.to_path_buf(),
-        reason: e.to_string(),
-    })
-}

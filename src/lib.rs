@@ -32,15 +32,12 @@
 //! # Ok::<(), doma::DomaError>(())
 //! ```
 //!
-//! **Layers**, each importing only those before it:
-//! 1. the core: [`dual`] (forward-mode duals), [`siren`], [`jacobian`], [`field`] (the
-//!    variants and baselines), [`loss`], [`metrics`], [`data`] (trajectories, formats,
-//!    meshes, sequences), [`checkpoint`], [`train`] (the one fit loop) and [`register`]
-//!    (the Eq. 14 objective in that loop);
-//! 2. [`warp`] (meshes through fields, above `data` and `field`);
-//! 3. [`experiments`] (the paper's tables), [`run`] (run folders for users' data) and
-//!    [`plot`];
-//! 4. [`cli`], the command line that the `doma` binary parses.
+//! **Layers**: each module imports only those of the layers before it, from the leaves
+//! ([`dual`], [`io`], [`knn`], [`names`], …) through the network ([`siren`], [`jacobian`],
+//! [`field`]), data and losses ([`data`], [`loss`]), [`warp`] and [`metrics`], fitting
+//! ([`train`], [`register`]) and the jobs ([`run`], [`experiments`], [`export`],
+//! [`view`], [`batch`]) to the command line ([`cli`]). The list, with what each layer
+//! holds, is in docs/design.md §4.
 //!
 //! Equation numbers refer to the CVPR 2024 paper (main text): Eq. 1 SIREN, Eq. 2 DPF,
 //! Eq. 4 the affinity field, Eq. 6 the SIREN Jacobian, Eq. 10–12 the Trans, SE(3) and
@@ -60,6 +57,7 @@ pub mod export;
 pub mod field;
 pub mod io;
 pub mod jacobian;
+pub mod knn;
 pub mod loss;
 pub mod metrics;
 pub mod names;

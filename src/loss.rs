@@ -64,6 +64,47 @@ impl DataPenalty {
     }
 }
 
+/// `l1`, `huber[:DELTA]` or `charbonnier[:EPSILON]` (the scale in normalised units,
+/// default 0.01): the spelling of `doma fit --robust`, of a manifest's and a Python fit's
+/// `robust`.
+impl std::str::FromStr for DataPenalty {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (kind, scale) = match s.split_once(':') {
+            Some((k, v)) => (
+                k,
+                v.parse::<f64>()
+                    .map_err(|_| format!("`{v}` is not a number"))?,
+            ),
+            None => (s, 0.01),
+        };
+        let penalty = match kind {
+            "l1" if !s.contains(':') => DataPenalty::L1,
+            "huber" => DataPenalty::Huber { delta: scale },
+            "charbonnier" => DataPenalty::Charbonnier { epsilon: scale },
+            _ => {
+                return Err(format!(
+                    "`{s}` is not l1, huber[:DELTA] or charbonnier[:EPSILON]"
+                ));
+            }
+        };
+        penalty.validate()?;
+        Ok(penalty)
+    }
+}
+
+/// The spelling [`DataPenalty`]'s `FromStr` reads: `l1`, `huber:0.01`, `charbonnier:0.002`.
+impl std::fmt::Display for DataPenalty {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            DataPenalty::L1 => f.write_str("l1"),
+            DataPenalty::Huber { delta } => write!(f, "huber:{delta}"),
+            DataPenalty::Charbonnier { epsilon } => write!(f, "charbonnier:{epsilon}"),
+        }
+    }
+}
+
 /// The trajectory loss with a per-coordinate `penalty` and per-point `weights` (`[N, 1]`,
 /// non-negative, a tracker's confidence): `Σ_i w_i Σ_c ρ(ŷ_ic − y_ic) / (3 Σ_i w_i)`, the
 /// weighted mean. With [`DataPenalty::L1`] and no weights it is [`trajectory_l1`], computed
@@ -210,7 +251,7 @@ impl AiapNeighbourhoods {
                 canonical.len()
             )));
         }
-        let tree = crate::metrics::PointTree::new(canonical)?;
+        let tree = crate::knn::PointTree::new(canonical)?;
         let indices: Vec<usize> = canonical
             .iter()
             .flat_map(|q| tree.nearest_k(q, k))
@@ -319,4 +360,26 @@ pub fn chamfer(a: Tensor<2>, b: Tensor<2>) -> Tensor<1> {
         "chamfer: empty point cloud"
     );
     chamfer_one_way(a.clone(), b.clone()) + chamfer_one_way(b, a)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::DataPenalty;
+
+    #[test]
+    fn robust_penalties_parse_with_and_without_a_scale_and_print_as_they_parse() {
+        assert_eq!("l1".parse(), Ok(DataPenalty::L1));
+        assert_eq!("huber".parse(), Ok(DataPenalty::Huber { delta: 0.01 }));
+        assert_eq!(
+            "charbonnier:0.002".parse(),
+            Ok(DataPenalty::Charbonnier { epsilon: 0.002 })
+        );
+        for bad in ["huber:-1", "huber:x", "l2", "l1:3", "charbonnier:0"] {
+            assert!(bad.parse::<DataPenalty>().is_err(), "{bad}");
+        }
+        for text in ["l1", "huber:0.25", "charbonnier:0.002"] {
+            let p: DataPenalty = text.parse().unwrap();
+            assert_eq!(p.to_string(), text);
+        }
+    }
 }

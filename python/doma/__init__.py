@@ -32,19 +32,21 @@ import numpy as np
 from . import _native
 
 __version__: str = _native.__version__
-__all__ = ["Field", "Tracks", "fit", "load", "read_tracks", "resume"]
+__all__ = ["BACKENDS", "Field", "JACOBIANS", "RECIPES", "Tracks", "VARIANTS", "fit", "load", "read_tracks", "resume"]
 
 PathLike = Union[str, "os.PathLike[str]"]
 Frames = Union[float, Sequence[float], np.ndarray]
 
+#: The choices of ``fit``'s and ``load``'s string arguments, from the library itself.
+_CHOICES: dict[str, tuple[str, ...]] = {k: tuple(v) for k, v in _native.CHOICES.items()}
 #: The models ``fit`` accepts: the DOMA variants (Eq. 4, 10–12) and the DPF baseline.
-VARIANTS = ("trans", "se3", "scaled-se3", "affinity", "dpf")
+VARIANTS = _CHOICES["variant"]
 #: The compute backends.
-BACKENDS = ("flex", "ndarray", "wgpu")
+BACKENDS = _CHOICES["backend"]
 #: How the spatial Jacobian inside L_H is computed.
-JACOBIANS = ("analytic", "autodiff")
+JACOBIANS = _CHOICES["jacobian"]
 #: The named recipes of ``fit(recipe=...)``.
-RECIPES = ("paper", "fast")
+RECIPES = _CHOICES["recipe"]
 
 
 def _float_array(value: Any, name: str, shape: Sequence[Optional[int]]) -> np.ndarray:
@@ -162,47 +164,40 @@ def fit(
     tracks: Any,
     observed: Any = None,
     *,
-    variant: str = "affinity",
     reg: Optional[str] = None,
-    h_weight: Union[float, str, None] = None,
-    iters: int = 1000,
-    recipe: Optional[str] = None,
-    until_converged: Optional[int] = None,
-    backend: str = "flex",
-    jacobian: str = "analytic",
-    seed: int = 0,
-    test_fraction: float = 0.75,
-    points_per_step: Optional[int] = None,
-    frames_per_step: Optional[int] = None,
-    reference_frame: Optional[int] = None,
-    drop_unobserved: bool = False,
-    holdout_observations: Optional[float] = None,
-    robust: Optional[str] = None,
-    checkpoint_every: int = 50,
     progress: bool = True,
     out: Optional[PathLike] = None,
+    **options: Any,
 ) -> Field:
     """Fits a motion field to ``tracks``, as ``doma fit`` does.
+
+    The options are ``doma fit``'s flags by the same names (``--iters`` is ``iters``,
+    ``--test-fraction`` is ``test_fraction``), read by the library into the one options
+    type that the command line and batch manifests use; None leaves the library's default.
 
     Args:
         tracks: [T, N, 3] positions (any float dtype). Entries that ``observed`` marks
             False are never read (NaN is fine there).
         observed: optional [T, N] bool mask of the entries a tracker saw.
-        variant: ``trans``, ``se3``, ``scaled-se3``, ``affinity`` (the DOMA variants) or ``dpf``.
-        reg: None, or ``"h"`` for the smoothness loss L_H (Eq. 13).
-        h_weight: L_H's weight with ``reg="h"`` (default 0.1), or ``"auto"`` to choose it by
-            validation on held-out training points.
-        iters: iterations (passes over all frames; the paper: 1000).
+        variant: one of ``VARIANTS``: ``trans``, ``se3``, ``scaled-se3``, ``affinity`` (the
+            DOMA variants; default) or ``dpf``.
+        reg: None, or ``"h"`` for the smoothness loss L_H (Eq. 13) with ``h_weight``
+            (default 0.1).
+        **options: the fit's options, below.
+        h_weight: L_H's weight (0: off), or ``"auto"`` to choose it by validation on
+            held-out training points; a weight alone turns L_H on.
+        iters: iterations (passes over all frames; default 1000, the paper's).
         recipe: ``"paper"`` (the paper's protocol, the default) or ``"fast"`` (1.5 times
             the learning rate with a warm-up and a cosine decay, 256 training points and 64
             L_H samples per step); the other options override it.
         until_converged: stop once the EPE on a held-back tenth of the training tracks has
             not improved for this many iterations, after as many iterations of a learning
             rate falling to 0 (those tracks are then not fitted).
-        backend: ``flex``, ``ndarray`` or ``wgpu``.
-        jacobian: ``analytic`` (fused, hand-derived) or ``autodiff``.
-        seed: seed of the weights, the split and the frame order.
-        test_fraction: the fraction of tracks held out for the report (the paper: 0.75).
+        backend: one of ``BACKENDS`` (default ``flex``).
+        jacobian: ``analytic`` (fused, hand-derived; default) or ``autodiff``.
+        seed: seed of the weights, the split and the frame order (default 0).
+        test_fraction: the fraction of tracks held out for the report (default 0.75, the
+            paper's).
         points_per_step, frames_per_step: a random subset of K training points per step;
             B frames per Adam step (defaults: all points, one frame: the paper's protocol).
         reference_frame: the frame whose positions are the input ``x`` (default: the most
@@ -211,14 +206,15 @@ def fit(
         holdout_observations: hide this fraction of the observations, in spans, and
             report the EPE on them (``report["held_out_observations"]``).
         robust: ``"huber[:delta]"`` or ``"charbonnier[:eps]"``, a robust trajectory loss.
-        checkpoint_every: iterations between checkpoints.
+        checkpoint_every: iterations between checkpoints (default 50).
         progress: show a progress bar on stderr.
         out: the run folder to write (it must not hold a run); default a temporary one,
             removed with the field (:meth:`Field.save` keeps it).
 
     Raises:
-        ValueError: bad shapes, dtypes, values or options. FileExistsError: ``out`` holds
-        a run. KeyboardInterrupt: Ctrl-C; the checkpoint is saved (see :func:`resume`).
+        ValueError: bad shapes, dtypes, values or options. TypeError: an option of the
+        wrong type. FileExistsError: ``out`` holds a run. KeyboardInterrupt: Ctrl-C; the
+        checkpoint is saved (see :func:`resume`).
     """
     positions = _float_array(tracks, "tracks", (None, None, 3))
     mask = None
@@ -232,60 +228,14 @@ def fit(
                 f"{list(positions.shape)} need {list(positions.shape[:2])}"
             )
         mask = np.ascontiguousarray(mask_array).view(np.uint8)
-    model = variant.replace("_", "-").lower()
-    if model not in VARIANTS:
-        raise ValueError(f"variant {variant!r} is not one of {', '.join(VARIANTS)}")
-    for name, value, choices in (("backend", backend, BACKENDS), ("jacobian", jacobian, JACOBIANS)):
-        if value not in choices:
-            raise ValueError(f"{name} {value!r} is not one of {', '.join(choices)}")
     if reg not in (None, "h"):
         raise ValueError(f"reg {reg!r} is not None or 'h' (the smoothness loss L_H)")
-    if reg is None and h_weight is not None:
-        raise ValueError("h_weight applies with reg='h'")
-    if recipe is not None and recipe not in RECIPES:
-        raise ValueError(f"recipe {recipe!r} is not one of {', '.join(RECIPES)}")
-    spec: dict[str, Any] = {
-        "model": model,
-        "backend": backend,
-        "jacobian": jacobian,
-        "iterations": _count(iters, "iters"),
-        "seed": _count(seed, "seed", minimum=0),
-        "test_fraction": float(test_fraction),
-        "checkpoint_every": _count(checkpoint_every, "checkpoint_every"),
-    }
-    if reg == "h":
-        spec["h_weight"] = 0.1 if h_weight is None else h_weight
-    if recipe is not None:
-        spec["recipe"] = recipe
-    for key, value in (
-        ("points_per_step", points_per_step),
-        ("frames_per_step", frames_per_step),
-        ("until_converged", until_converged),
-    ):
-        if value is not None:
-            spec[key] = _count(value, key)
-    if reference_frame is not None:
-        spec["reference_frame"] = _count(reference_frame, "reference_frame", minimum=0)
-    if drop_unobserved:
-        spec["drop_unobserved"] = True
-    if holdout_observations is not None:
-        spec["holdout_observations"] = float(holdout_observations)
+    if reg == "h" and options.get("h_weight") is None:
+        options["h_weight"] = 0.1
     native = _native.fit(
-        positions,
-        mask,
-        json.dumps(spec),
-        robust,
-        None if out is None else os.fspath(out),
-        bool(progress),
+        positions, mask, out=None if out is None else os.fspath(out), progress=bool(progress), **options
     )
     return Field(native)
-
-
-def _count(value: Any, name: str, minimum: int = 1) -> int:
-    """``value`` as an integer of at least ``minimum``."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise ValueError(f"{name} must be an integer of at least {minimum}, not {value!r}")
-    return int(value)
 
 
 def resume(run_dir: PathLike, *, progress: bool = True) -> Field:

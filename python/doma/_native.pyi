@@ -1,4 +1,6 @@
-"""Types of the compiled extension; the API with its docs is doma/__init__.py."""
+"""Types of the compiled extension; the API with its docs is doma/__init__.py.
+
+python/tests/test_native_stub.py checks every name and parameter here against the module."""
 
 from typing import Optional, Sequence
 
@@ -29,13 +31,15 @@ class Field:
     @property
     def model(self) -> str: ...
 
+CHOICES: dict[str, list[str]]
+
 def fit(
     tracks: NDArray[np.float32],
-    observed: Optional[NDArray[np.uint8]],
-    spec: str,
-    robust: Optional[str],
-    out: Optional[str],
-    progress: bool,
+    observed: Optional[NDArray[np.uint8]] = None,
+    *,
+    out: Optional[str] = None,
+    progress: bool = True,
+    **options: object,
 ) -> Field: ...
 def resume(run_dir: str, progress: bool) -> Field: ...
 def load(run_dir: str, backend: Optional[str] = None) -> Field: ...
@@ -46,3 +50,4 @@ def read_tracks(
     count_hidden: bool = False,
     confidence: Optional[str] = None,
 ) -> tuple[bytearray, tuple[int, int], bytearray, Optional[bytearray], Optional[bytearray]]: ...
+def sequence_reads() -> int: ...

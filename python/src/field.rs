@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 use burn::tensor::{Device, Tensor, TensorData};
+use doma::data::sequence::Sequence;
 use doma::field::MotionField;
 use doma::field::model::Model;
 use doma::jacobian::{Analytic, Autodiff, JacobianMethod};
@@ -46,19 +47,60 @@ impl Drop for Field {
     }
 }
 
+/// What a [`Field`] keeps of its run's data: the clip's shape and the normalisation.
+#[derive(Clone, Copy, Debug)]
+pub struct DataShape {
+    frames: usize,
+    points: usize,
+    center: [f32; 3],
+    scale: f32,
+}
+
+impl DataShape {
+    /// The shape and normalisation of `data`.
+    pub fn of(data: &Sequence) -> Self {
+        DataShape {
+            frames: data.trajectories.frames(),
+            points: data.trajectories.points(),
+            center: data.center,
+            scale: data.scale,
+        }
+    }
+}
+
 impl Field {
-    /// Opens the fitted run in `dir` on `device`.
+    /// Opens the fitted run in `dir` on `device` (its data read once, for its shape).
     pub fn open(dir: &Path, temporary: bool, device: Device) -> Result<Self> {
         let run = RunDir::new(dir);
-        let opened = run.open(None, &device)?;
+        let config = run.load_config()?;
+        let shape = DataShape::of(&config.load()?);
+        Self::assemble(run, config, temporary, device, shape)
+    }
+
+    /// Opens the run in `dir` that was just fitted to data of `shape`, without reading the
+    /// data again.
+    pub fn fitted(dir: &Path, temporary: bool, device: Device, shape: DataShape) -> Result<Self> {
+        let run = RunDir::new(dir);
+        let config = run.load_config()?;
+        Self::assemble(run, config, temporary, device, shape)
+    }
+
+    fn assemble(
+        run: RunDir,
+        config: RunConfig,
+        temporary: bool,
+        device: Device,
+        shape: DataShape,
+    ) -> Result<Self> {
+        let model = run.load_field(&config, &device)?;
         Ok(Field {
             temporary,
-            frames: opened.data.trajectories.frames(),
-            points: opened.data.trajectories.points(),
-            center: opened.data.center,
-            scale: opened.data.scale,
-            config: opened.config,
-            model: Mutex::new(opened.field),
+            frames: shape.frames,
+            points: shape.points,
+            center: shape.center,
+            scale: shape.scale,
+            config,
+            model: Mutex::new(model),
             device,
             run,
         })
@@ -321,5 +363,5 @@ pub fn save_run(from: &RunDir, config: &RunConfig, dir: &Path) -> Result<()> {
             copy(name.as_ref())?;
         }
     }
-    doma::checkpoint::save_json(&config, &to.config())
+    doma::io::save_json(&config, &to.config())
 }

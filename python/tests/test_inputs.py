@@ -54,17 +54,23 @@ def test_read_tracks_reads_every_shipped_format(tmp_path):
         (lambda c: doma.fit(c, np.ones((20, 366), np.uint8)), ValueError, "bool array"),
         (lambda c: doma.fit(c, np.ones((20, 365), bool)), ValueError, r"observed has shape \[20, 365\]"),
         (lambda c: doma.fit(np.where(np.arange(366)[:, None] == 9, np.nan, c)), ValueError, r"tracks\[0, 9, 0\] is NaN"),
-        (lambda c: doma.fit(c, variant="affine"), ValueError, "variant 'affine'"),
-        (lambda c: doma.fit(c, backend="cuda"), ValueError, "backend 'cuda' is not one of flex"),
-        (lambda c: doma.fit(c, iters=0), ValueError, "iters must be an integer"),
-        (lambda c: doma.fit(c, h_weight=0.1), ValueError, "reg='h'"),
-        (lambda c: doma.fit(c, recipe="fastest"), ValueError, "recipe 'fastest' is not one of paper, fast"),
-        (lambda c: doma.fit(c, until_converged=0), ValueError, "until_converged must be an integer"),
-        (lambda c: doma.fit(c, robust="l2"), ValueError, "l2"),
-        (lambda c: doma.fit(c, test_fraction=1.0), ValueError, "test fraction"),
+        (lambda c: doma.fit(c, variant="affine"), ValueError, "variant: unknown variant `affine`, expected one of"),
+        (lambda c: doma.fit(c, backend="cuda"), ValueError, "backend: unknown variant `cuda`, expected one of `flex`"),
+        (lambda c: doma.fit(c, iters=0), ValueError, "iterations: 0 is not at least 1"),
+        (lambda c: doma.fit(c, iters=10**30), ValueError, "iters: 1000000000000000000000000000000 is out of range"),
+        (lambda c: doma.fit(c, iters="5"), TypeError, "iters: invalid type: string"),
+        (lambda c: doma.fit(c, iter=5), TypeError, "unexpected keyword argument 'iter'"),
+        (lambda c: doma.fit(c, layout="masked"), TypeError, "does not take 'layout'"),
+        (lambda c: doma.fit(c, reg="e"), ValueError, "reg 'e'"),
+        (lambda c: doma.fit(c, recipe="fastest"), ValueError, "recipe: unknown variant `fastest`, expected `paper` or `fast`"),
+        (lambda c: doma.fit(c, until_converged=0), ValueError, "until_converged: 0 is not at least 1"),
+        (lambda c: doma.fit(c, robust="l2"), ValueError, "robust: `l2` is not l1"),
+        (lambda c: doma.fit(c, test_fraction=1.0), ValueError, "test_fraction: `1` must be strictly between 0 and 1"),
+        (lambda c: doma.fit(c, test_fraction=float("nan")), ValueError, "test_fraction: nan is not a finite number"),
         (lambda c: doma.fit(c[:, :1]), ValueError, "does not split 1 points"),
         (lambda c: doma.read_tracks("/nonexistent/x.traj"), FileNotFoundError, "/nonexistent/x.traj"),
-        (lambda c: doma.read_tracks("x.npz", layout="po"), ValueError, 'layout "po" is not one of'),
+        (lambda c: doma.read_tracks("x.npz", layout="po"), ValueError, "layout `po` is not one of plain, pointodyssey"),
+        (lambda c: doma.load("/nonexistent/run", backend="cuda"), ValueError, "backend `cuda` is not one of flex, ndarray, wgpu"),
         (lambda c: doma.load("/nonexistent/run"), ValueError, "not a doma run folder"),
     ],
 )
@@ -96,3 +102,21 @@ def test_a_file_that_is_not_a_sequence_names_itself(tmp_path):
 def test_a_fit_into_a_run_folder_is_refused(fitted, clip):
     with pytest.raises(FileExistsError, match="already holds a run"):
         doma.fit(clip, iters=1, progress=False, out=fitted.run_dir)
+
+
+def test_an_option_reaches_the_run_config_as_the_cli_writes_it(clip, tmp_path):
+    field = doma.fit(
+        clip, iters=3, variant="se3", reg="h", robust="huber:0.02", seed=4, progress=False, out=tmp_path / "r"
+    )
+    fit = field.config["fit"]
+    assert fit["schedule"]["iterations"] == 3 and fit["seed"] == 4
+    assert fit["model"]["doma"]["variant"] == "se3"
+    assert fit["loss"]["smoothness_weight"] == 0.1
+    assert fit["loss"]["data_penalty"] == {"huber": {"delta": 0.02}}
+    assert doma.VARIANTS == ("trans", "se3", "scaled-se3", "affinity", "dpf")
+
+
+def test_a_fit_reads_its_data_once(clip, tmp_path):
+    before = doma._native.sequence_reads()
+    doma.fit(clip, iters=1, progress=False, out=tmp_path / "r")
+    assert doma._native.sequence_reads() - before == 1

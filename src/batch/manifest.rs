@@ -14,12 +14,13 @@
 //! ```
 //!
 //! Every field of an entry, and of `defaults`, is a [`RunSpec`] field: `data`, `config`,
-//! `model` (`trans`, `se3`, `scaled-se3`, `affinity`, `dpf`), `backend`, `jacobian`,
-//! `iterations`, `h_weight` (a number or `"auto"`), `seed`, `mesh`, `frames` (`[start,
+//! `model` (or `variant`, as the flag: `trans`, `se3`, `scaled-se3`, `affinity`, `dpf`),
+//! `backend`, `jacobian`, `iterations` (or `iters`), `h_weight` (a number or `"auto"`), `seed`, `mesh`, `frames` (`[start,
 //! end)`), `stride`, `test_fraction`, `checkpoint_every`, `points_per_step`,
 //! `frames_per_step`, and for tracker output `layout`, `frame`, `count_hidden`,
 //! `reference_frame`, `drop_unobserved`, `holdout_observations`, `confidence`,
-//! `data_penalty`, and `recipe` (`paper`, `fast`) and `until_converged` (a patience in
+//! `robust` (`"huber:0.01"`, as `--robust` spells it; the older `data_penalty` object
+//! still reads), and `recipe` (`paper`, `fast`) and `until_converged` (a patience in
 //! iterations); an entry also
 //! has a `name`, its run folder's name (default: the data file's stem). Relative paths are
 //! relative to the manifest's folder. Unknown fields are refused.
@@ -117,7 +118,10 @@ impl Manifest {
             frames_as_pair(&mut fields).map_err(at)?;
             let spec: RunSpec =
                 serde_json::from_value(Value::Object(fields)).map_err(|e| at(e.to_string()))?;
-            let spec = spec.or(&defaults).relative_to(base);
+            let spec = spec
+                .or(&defaults)
+                .map_err(|e| at(e.to_string()))?
+                .relative_to(base);
             let data = spec.data.as_deref().ok_or_else(|| at("no `data`".into()))?;
             let name = match name {
                 Some(n) => n,
@@ -211,8 +215,8 @@ mod tests {
             (r#"{"sequences": []}"#, "no sequence"),
             (r#"{"sequences": [{"name": "a"}]}"#, "sequence 0: no `data`"),
             (
-                r#"{"sequences": [{"data": "a.traj", "iters": 3}]}"#,
-                "iters",
+                r#"{"sequences": [{"data": "a.traj", "iteratons": 3}]}"#,
+                "iteratons",
             ),
             (
                 r#"{"sequences": [{"data": "x/a.traj"}, {"data": "y/a.traj"}]}"#,

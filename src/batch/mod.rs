@@ -25,7 +25,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use serde::{Deserialize, Serialize};
 
-use crate::checkpoint::{load_json, save_json};
+use crate::io::{load_json, save_json};
 use crate::run::{FitOutcome, Report, RunDir, RunSpec, fit_run};
 use crate::train::IterationRecord;
 use crate::train::select::WeightSearch;
@@ -211,9 +211,9 @@ fn fit_new(
     interrupt: &AtomicBool,
     progress: bool,
 ) -> Result<FitOutcome> {
-    let config = spec.run_config(search, |_| {})?;
-    let device = config.backend.device()?;
-    match fit_run(run, Some(config), &device, interrupt, None, progress) {
+    let new = spec.prepare(search, |_| {})?;
+    let device = new.config.backend.device()?;
+    match fit_run(run, Some(new), &device, interrupt, None, progress) {
         // Another shard started it between our look and our lock: continue it.
         Err(DomaError::RunExists(_)) => resume(run, interrupt, progress),
         other => other,

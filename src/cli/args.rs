@@ -6,6 +6,8 @@ use std::path::{Path, PathBuf};
 
 use clap::ValueEnum;
 
+pub use crate::run::fraction;
+
 use crate::backend::BackendKind;
 use crate::{DomaError, Result};
 
@@ -46,7 +48,7 @@ impl ExperimentArgs {
     /// Writes `records` to the JSON file, if one was asked for, and says so.
     pub fn write_json<T: serde::Serialize>(&self, records: &T) -> Result<()> {
         if let Some(path) = &self.json {
-            crate::checkpoint::save_json(records, path)?;
+            crate::io::save_json(records, path)?;
             eprintln!("wrote {}", path.display());
         }
         Ok(())
@@ -98,26 +100,15 @@ pub fn non_negative(s: &str) -> std::result::Result<f64, String> {
     }
 }
 
-/// A regulariser weight: a finite non-negative number, or `auto` (chosen by validation).
-pub fn weight(s: &str) -> std::result::Result<crate::train::select::Weight, String> {
-    use crate::train::select::Weight;
-    if s.trim() == "auto" {
-        return Ok(Weight::Auto);
-    }
-    non_negative(s)
-        .map(Weight::Fixed)
-        .map_err(|e| format!("{e}, or `auto`"))
-}
-
 /// The weights of the smoothness ("-H") and elasticity ("-E") regularisers: a number, or
 /// `auto` (chosen by validation on held-out training points).
 #[derive(clap::Args, Debug, Clone)]
 pub struct RegWeightArgs {
     /// The weight of the smoothness loss `L_H` (Eq. 13) with --reg h, or `auto`.
-    #[arg(long, default_value = "0.1", value_parser = weight, allow_negative_numbers = true)]
+    #[arg(long, default_value = "0.1", allow_negative_numbers = true)]
     pub h_weight: crate::train::select::Weight,
     /// The weight of the elasticity loss with --reg e, or `auto`.
-    #[arg(long, default_value = "0.01", value_parser = weight, allow_negative_numbers = true)]
+    #[arg(long, default_value = "0.01", allow_negative_numbers = true)]
     pub e_weight: crate::train::select::Weight,
     /// How an `auto` weight is searched.
     #[command(flatten)]
@@ -155,16 +146,6 @@ impl WeightSearchArgs {
         };
         search.validate()?;
         Ok(search)
-    }
-}
-
-/// A fraction strictly between 0 and 1.
-pub fn fraction(s: &str) -> std::result::Result<f64, String> {
-    let v: f64 = s.parse().map_err(|_| format!("`{s}` is not a number"))?;
-    if v > 0.0 && v < 1.0 {
-        Ok(v)
-    } else {
-        Err(format!("`{s}` must be strictly between 0 and 1"))
     }
 }
 

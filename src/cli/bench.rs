@@ -233,7 +233,7 @@ fn time_to_accuracy(args: &BenchArgs) -> Result<()> {
     );
     print!("{}", tta::table(&record));
     if let Some(path) = &args.json {
-        crate::checkpoint::save_json(&record, path)?;
+        crate::io::save_json(&record, path)?;
         eprintln!("wrote {}", path.display());
     }
     if let Some(dir) = &args.plot {
@@ -282,7 +282,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         println!();
         print!("{}", speed::comparison_table(&rows));
         if let Some(path) = &args.json {
-            crate::checkpoint::save_json(&rows, path)?;
+            crate::io::save_json(&rows, path)?;
             eprintln!("wrote {}", path.display());
         }
         return Ok(());
@@ -297,7 +297,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     println!();
     print!("{}", speed::table(&rows));
     if let Some(path) = &args.json {
-        crate::checkpoint::save_json(&rows, path)?;
+        crate::io::save_json(&rows, path)?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())
@@ -339,7 +339,7 @@ fn scaling(args: &BenchArgs) -> Result<()> {
     print!("{}", scaling::scaling_table(&cells, &sizes));
     if let Some(path) = &args.json {
         let record = serde_json::json!({ "cells": cells, "checkpoints": sizes });
-        crate::checkpoint::save_json(&record, path)?;
+        crate::io::save_json(&record, path)?;
         eprintln!("wrote {}", path.display());
     }
     if let Some(dir) = &args.plot {

@@ -121,7 +121,7 @@ pub fn run(args: &FluidArgs) -> Result<()> {
     } else {
         let mut records = Vec::new();
         for path in &args.records {
-            records.extend(crate::checkpoint::load_json::<Vec<FluidRecord>>(path)?);
+            records.extend(crate::io::load_json::<Vec<FluidRecord>>(path)?);
         }
         records
     };

@@ -39,16 +39,7 @@ pub enum Layout {
     Masked,
 }
 
-impl std::fmt::Display for Layout {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Layout::Plain => "plain",
-            Layout::PointOdyssey => "pointodyssey",
-            Layout::TapVid3d => "tapvid3d",
-            Layout::Masked => "masked",
-        })
-    }
-}
+crate::names::value_names!(Layout, CoordFrame);
 
 impl Layout {
     /// The layout that `keys` (an archive's member names) show: PointOdyssey's

@@ -215,11 +215,21 @@ fn extension(data: &Path) -> String {
         .unwrap_or_default()
 }
 
+/// Sequence files parsed by [`read_tracks`] in this process.
+static READS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// How many sequence files this process has parsed (every load of a fit's data goes
+/// through [`read_tracks`]): a fit reads its data once, and tests count it.
+pub fn sequence_reads() -> usize {
+    READS.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 /// Reads any supported sequence file (or OBJ folder) by its extension as tracks (a
 /// tracker's `.npz` with its mask, [`layout`]; every other file complete), and the faces
 /// where the format has them. A `file` other than the default applies to `.npz` alone.
 pub fn read_tracks(data: &Path, file: &TrackFile) -> Result<(Tracks, Option<Vec<[u32; 3]>>)> {
     check_readable(data)?;
+    READS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     if extension(data) == "npz" && !data.is_dir() {
         return Ok((layout::read_npz_tracks(data, file)?, None));
     }

@@ -167,4 +167,4 @@ pub fn benchmark_sequence(motion: Motion, seed: u32) -> Result<SyntheticSequence
     })
 }
 
-crate::names::display_as_value_name!(Motion);
+crate::names::value_names!(Motion);

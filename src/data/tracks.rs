@@ -18,7 +18,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::Trajectories;
-use crate::metrics::PointTree;
+use crate::knn::PointTree;
 use crate::{DomaError, Result};
 
 /// The neighbours whose motion places an unseen track's canonical position, and predicts

@@ -256,4 +256,4 @@ pub fn table(records: &[Image2dRecord]) -> String {
     out
 }
 
-crate::names::display_as_value_name!(Motion2d);
+crate::names::value_names!(Motion2d);

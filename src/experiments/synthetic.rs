@@ -213,4 +213,4 @@ pub fn table(runs: &[SyntheticRun]) -> String {
     out
 }
 
-crate::names::display_as_value_name!(Regularizer);
+crate::names::value_names!(Regularizer);

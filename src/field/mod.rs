@@ -79,7 +79,7 @@ impl Variant {
     }
 }
 
-crate::names::display_as_value_name!(Variant);
+crate::names::value_names!(Variant);
 
 /// A per-point affine map `y = A x + u`, with `A` given by its columns (`None` = `I`).
 #[derive(Clone, Debug)]

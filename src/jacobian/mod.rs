@@ -80,4 +80,4 @@ impl JacobianKind {
     }
 }
 
-crate::names::display_as_value_name!(JacobianKind);
+crate::names::value_names!(JacobianKind);

@@ -5,12 +5,12 @@ use std::path::Path;
 use burn::tensor::Device;
 
 use super::{GapReport, Report, RunConfig, RunDir};
-use crate::checkpoint::load_json;
 use crate::data::Trajectories;
 use crate::data::mesh::as_points;
 use crate::data::sequence::{LoadOptions, Sequence, load_sequence_with};
 use crate::data::tracks::neighbour_motion;
 use crate::field::MotionField;
+use crate::io::load_json;
 use crate::metrics::{EPE_SCALE, field_epe_per_frame, mean_over_frames};
 use crate::train::IterationRecord;
 use crate::{DomaError, Result};

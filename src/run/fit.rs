@@ -4,10 +4,11 @@ use std::sync::atomic::AtomicBool;
 
 use burn::tensor::Device;
 
-use super::{Report, RunConfig, RunDir, RunLock, evaluate, gap_report};
-use crate::checkpoint::{Precision, save_json};
+use super::{NewFit, Report, RunConfig, RunDir, RunLock, evaluate, gap_report};
+use crate::checkpoint::Precision;
 use crate::data::sequence::Sequence;
 use crate::field::model::Model;
+use crate::io::save_json;
 use crate::io::write_atomic;
 use crate::train::{Fitted, Hooks, Outcome, Trainer};
 use crate::{DomaError, Result};
@@ -24,27 +25,28 @@ pub enum FitOutcome {
     },
 }
 
-/// Fits `config` into `run` (a new or empty folder), or resumes the fit saved there when
-/// `config` is `None`. `interrupt` is polled after every iteration: when set, the fit saves
+/// Fits `new` into `run` (a new or empty folder), or resumes the fit saved there when
+/// `new` is `None`. A new fit's data is the sequence it carries (read once, by
+/// [`NewFit::load`] or [`super::RunSpec::prepare`]); a resumed fit reads its data once. `interrupt` is polled after every iteration: when set, the fit saves
 /// a checkpoint and returns [`FitOutcome::Interrupted`]. `stop_after` (for tests)
 /// interrupts after that many iterations. `progress` shows a progress bar.
 pub fn fit_run(
     run: &RunDir,
-    config: Option<RunConfig>,
+    new: Option<NewFit>,
     device: &Device,
     interrupt: &AtomicBool,
     stop_after: Option<usize>,
     progress: bool,
 ) -> Result<FitOutcome> {
-    let resume = config.is_none();
-    let (config, _lock) = match config {
-        Some(c) => start(run, c)?,
+    let resume = new.is_none();
+    let (NewFit { config, sequence }, _lock) = match new {
+        Some(n) => start(run, n)?,
         None => {
             let config = run.load_config()?;
-            (config, RunLock::acquire(&run.dir)?)
+            let lock = RunLock::acquire(&run.dir)?;
+            (NewFit::load(config)?, lock)
         }
     };
-    let sequence = config.load()?;
     let (train, _) = config.split(&sequence.trajectories)?;
     let ad = device.clone().autodiff();
     let fit = &config.fit;
@@ -76,25 +78,21 @@ pub fn fit_run(
     }
 }
 
-/// Makes the run folder of a new fit, locks it and writes its config. The data is checked
-/// before the folder is made, so that bad data leaves nothing behind.
-fn start(run: &RunDir, config: RunConfig) -> Result<(RunConfig, RunLock)> {
-    config.validate()?;
+/// Makes the run folder of a new fit, locks it and writes its config. The data was read
+/// and checked before ([`NewFit`]), so that bad data leaves nothing behind.
+fn start(run: &RunDir, new: NewFit) -> Result<(NewFit, RunLock)> {
     let taken = || DomaError::RunExists(run.dir.clone());
     if run.config().exists() {
         return Err(taken());
     }
-    let data = config.load()?.trajectories;
-    config.split(&data)?;
-    config.fit.model.check_frames(data.frames())?;
     std::fs::create_dir_all(&run.dir).map_err(|e| DomaError::io(&run.dir, e))?;
     let lock = RunLock::acquire(&run.dir)?;
     // Checked again under the lock: another fit may have started here meanwhile.
     if run.config().exists() {
         return Err(taken());
     }
-    save_json(&config, &run.config())?;
-    Ok((config, lock))
+    save_json(&new.config, &run.config())?;
+    Ok((new, lock))
 }
 
 /// Writes `model.bpk`, `canonical.npy` when the fit learned canonical positions, and

@@ -6,8 +6,8 @@ use serde::{Deserialize, Serialize};
 
 use super::RunDir;
 use crate::Result;
-use crate::checkpoint::load_json;
 use crate::field::model::{ModelConfig, ModelName};
+use crate::io::load_json;
 use crate::train::IterationRecord;
 
 /// What `doma info` prints.

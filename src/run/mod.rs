@@ -33,7 +33,7 @@ pub use fit::{FitOutcome, fit_run};
 pub use info::{RunInfo, info};
 pub use lock::RunLock;
 pub use plot::plot_run;
-pub use spec::{ModelChoice, RunSpec};
+pub use spec::{ModelChoice, NewFit, RunSpec, fraction};
 pub use warp::warp_run;
 
 use std::path::PathBuf;
@@ -310,7 +310,7 @@ impl RunDir {
                 reason: "not a doma run folder (no config.json)".into(),
             });
         }
-        let given: serde_json::Value = crate::checkpoint::load_json(&path)?;
+        let given: serde_json::Value = crate::io::load_json(&path)?;
         let malformed = |e: serde_json::Error| DomaError::Malformed {
             path: path.clone(),
             reason: e.to_string(),
@@ -319,7 +319,7 @@ impl RunDir {
         // A field that no run config has (an edit with a typo, another layout) is refused
         // rather than ignored.
         let known = serde_json::to_value(&config).map_err(malformed)?;
-        if let Some(field) = crate::train::unknown_field(&given, &known, "") {
+        if let Some(field) = crate::io::unknown_field(&given, &known, "") {
             return Err(DomaError::Malformed {
                 path,
                 reason: format!("no run config has the field `{field}`"),

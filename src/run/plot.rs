@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use burn::tensor::Device;
 
 use super::RunDir;
-use crate::checkpoint::load_json;
 use crate::data::mesh::as_points;
+use crate::io::load_json;
 use crate::metrics::{EPE_SCALE, epe_per_frame, predict};
 use crate::plot::{Series, line_plot, three_views};
 use crate::train::IterationRecord;

@@ -10,13 +10,14 @@ use serde::{Deserialize, Serialize};
 use super::RunConfig;
 use crate::backend::BackendKind;
 use crate::data::layout::{CoordFrame, Layout, TrackFile};
+use crate::data::sequence::Sequence;
 use crate::field::dpf::DpfConfig;
 use crate::field::model::ModelConfig;
 use crate::field::{DomaFieldConfig, Variant};
 use crate::jacobian::JacobianKind;
 use crate::loss::DataPenalty;
 use crate::train::select::Weight;
-use crate::train::select::{Penalty, WeightChoice, WeightSearch, choose_weight};
+use crate::train::select::{Penalty, WeightSearch, choose_weight};
 use crate::train::{FitConfig, Recipe, RecipeChoice, SmoothnessSampling};
 use crate::{DomaError, Result};
 
@@ -61,124 +62,241 @@ impl From<Variant> for ModelChoice {
     }
 }
 
+crate::names::value_names!(ModelChoice);
+
 /// A new fit: the data and what differs from the default recipe (DOMA-Affinity, the
-/// analytic Jacobian, 1000 iterations, no `L_H`, the paper's 25 % / 75 % split). Every
-/// field is optional but `data`; unknown fields are refused, so a misspelt override is an
-/// error and not a silent default.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+/// analytic Jacobian, 1000 iterations, no `L_H`, the paper's 25 % / 75 % split).
+///
+/// This one type is the fit's options everywhere: `doma fit`'s flags (clap, the doc line of
+/// each field is its `--help`), a batch manifest's entry (serde, the same names with `_`)
+/// and the keywords of the Python `doma.fit` (turned into this type by serde). Every field
+/// is optional; unknown fields are refused, so a misspelt override is an error and not a
+/// silent default. Enums read and print one spelling ([`crate::names`]).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, clap::Args)]
 #[serde(deny_unknown_fields)]
 pub struct RunSpec {
-    /// The data: .traj, .anime, .npy, .npz, or a folder of OBJ frames.
+    /// The data: .traj, .anime, .npy, .npz, or a folder of OBJ frames with equal vertex counts.
+    #[arg(value_name = "DATA", required_unless_present = "resume")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub data: Option<PathBuf>,
     /// A fit config (JSON, the `fit` part of a run's config.json; missing fields take
-    /// their defaults), under the other overrides.
+    /// their defaults); the other options override it.
+    #[arg(long)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub config: Option<PathBuf>,
-    /// The model (a DOMA variant also sets the authors' `L_H` sampling for it).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// The model: a DOMA variant (which also sets the authors' `L_H` sampling for it) or
+    /// the frame-wise `dpf` baseline.
+    #[arg(long = "variant", value_name = "MODEL")]
+    #[serde(default, alias = "variant", skip_serializing_if = "Option::is_none")]
     pub model: Option<ModelChoice>,
     /// The compute backend (default flex).
+    #[arg(skip)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub backend: Option<BackendKind>,
     /// How the spatial Jacobian is computed.
+    #[arg(long)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub jacobian: Option<JacobianKind>,
     /// Iterations (passes over all frames).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[arg(long = "iters", value_name = "N", value_parser = at_least_one)]
+    #[serde(default, alias = "iters", skip_serializing_if = "Option::is_none")]
     pub iterations: Option<usize>,
-    /// The weight of `L_H` (Eq. 13), or `auto`: chosen by validation before the fit.
+    /// The weight of the smoothness loss L_H (Eq. 13; 0 = off), or `auto`: chosen by
+    /// validation on held-out training points before the fit (the grid goes into
+    /// config.json and the plots).
+    #[arg(long, value_name = "W", allow_negative_numbers = true)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub h_weight: Option<Weight>,
     /// Seed of the weights, the split and the frame order.
+    #[arg(long)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
-    /// An OBJ for the faces.
+    /// An OBJ whose vertices are the points in order, for the faces (default: NAME.obj next
+    /// to a .traj, or the .anime's own faces).
+    #[arg(long)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mesh: Option<PathBuf>,
-    /// The clip `[start, end)` of the frames.
+    /// A clip of the frames, `A..B` (B excluded) or `A..=B`; in JSON `[A, B]`.
+    #[arg(long, value_name = "A..B", value_parser = clip)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frames: Option<[usize; 2]>,
-    /// Every `stride`-th frame of the clip.
+    /// Keep every N-th frame of the clip.
+    #[arg(long, value_name = "N", value_parser = at_least_one)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stride: Option<usize>,
     /// The fraction of points held out for the report.
+    #[arg(long, value_name = "F", value_parser = fraction)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub test_fraction: Option<f64>,
     /// Iterations between checkpoints.
+    #[arg(long, value_name = "N", value_parser = at_least_one)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub checkpoint_every: Option<usize>,
-    /// Training points per step (`FitConfig::points_per_step`).
+    /// Training points per step: a fresh random subset of K each step (default: all of
+    /// them, the paper's protocol), so that a step's memory does not grow with the tracks.
+    #[arg(long, value_name = "K", value_parser = at_least_one)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub points_per_step: Option<usize>,
-    /// Frames per Adam step (`FitConfig::frames_per_step`).
+    /// Frames per Adam step: each step minimises the sum of B frames' losses (default 1,
+    /// the paper's protocol).
+    #[arg(long, value_name = "B", value_parser = at_least_one)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frames_per_step: Option<usize>,
-    /// The layout of a tracker's `.npz` (default: detected from its keys).
+    /// The layout of a tracker's .npz (default: detected from its keys).
+    #[arg(long)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub layout: Option<Layout>,
-    /// The coordinate frame of a tracker's tracks (default: the layout's own).
+    /// The coordinate frame of a tracker's tracks: PointOdyssey's are in the world frame
+    /// unless `camera` (its extrinsics applied); TAPVid-3D's are in the camera frame.
+    #[arg(long)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frame: Option<CoordFrame>,
-    /// Count PointOdyssey's valid but hidden entries as observed.
+    /// Count PointOdyssey's valid but hidden entries (its ground truth) as observed.
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub count_hidden: Option<bool>,
-    /// The reference frame of the canonical positions (default: the most observed).
+    /// The frame whose positions are the field's input x (default: the frame with the most
+    /// observed points), counted within the clip.
+    #[arg(long, value_name = "K")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reference_frame: Option<usize>,
-    /// Go on without the tracks never observed.
+    /// Go on without the tracks that are never observed (`complete` records the kept
+    /// indices) rather than refuse them.
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub drop_unobserved: Option<bool>,
-    /// Hide this fraction of the observations from the fit, in spans, to measure gap
-    /// filling.
+    /// Hide this fraction of the observations from the fit, in spans of 2–10 frames, and
+    /// report the EPE on them beside linear interpolation and k-NN.
+    #[arg(long, value_name = "F", value_parser = fraction)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout_observations: Option<f64>,
-    /// The key of a tracker file's per-observation confidence weights.
+    /// The key of a `[T, N]` array of per-observation confidence weights in a tracker's
+    /// .npz: each observation's share of the trajectory loss.
+    #[arg(long, value_name = "KEY")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub confidence: Option<String>,
-    /// The trajectory loss's per-coordinate penalty.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub data_penalty: Option<DataPenalty>,
-    /// A named recipe, applied over the config before the other fields.
+    /// A robust trajectory loss for tracks with outliers: `huber[:DELTA]` or
+    /// `charbonnier[:EPSILON]` (normalised units, default 0.01), or `l1` (the paper's).
+    #[arg(long, value_name = "PENALTY")]
+    #[serde(
+        default,
+        alias = "data_penalty",
+        with = "penalty_text",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub robust: Option<DataPenalty>,
+    /// A named recipe: `paper` (the paper's protocol, the default) or `fast` (1.5 times the
+    /// learning rate, warm-up and cosine decay, 256 training points and 64 `L_H` samples
+    /// per step; docs/speed.md). The other options override its settings.
+    #[arg(long)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub recipe: Option<Recipe>,
-    /// Stop once the EPE on held-back training tracks has not improved for this many
-    /// iterations.
+    /// Stop once the EPE on a held-back tenth of the training tracks (checked every 10
+    /// iterations) has not improved by 1 % for PATIENCE iterations, after a cool-down of
+    /// PATIENCE more iterations whose learning rate falls linearly to 0; the held-back
+    /// tracks are not fitted.
+    #[arg(long, value_name = "PATIENCE", value_parser = at_least_one)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub until_converged: Option<usize>,
 }
 
+/// A count of at least one.
+fn at_least_one(s: &str) -> std::result::Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(format!("`{s}` is not a whole number of at least 1")),
+    }
+}
+
+/// A fraction strictly between 0 and 1.
+pub fn fraction(s: &str) -> std::result::Result<f64, String> {
+    let v: f64 = s.parse().map_err(|_| format!("`{s}` is not a number"))?;
+    if v > 0.0 && v < 1.0 {
+        Ok(v)
+    } else {
+        Err(format!("`{s}` must be strictly between 0 and 1"))
+    }
+}
+
+/// A clip `A..B` or `A..=B` as `[A, B)`.
+fn clip(s: &str) -> std::result::Result<[usize; 2], String> {
+    crate::data::parse_frame_range(s).map(|r| [r.start, r.end])
+}
+
+/// A [`DataPenalty`] in its one spelling (`huber:0.01`); a manifest written before that
+/// spelling (`{"huber": {"delta": 0.01}}`) still reads.
+mod penalty_text {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    use crate::loss::DataPenalty;
+
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Given {
+        Text(String),
+        Tagged(DataPenalty),
+    }
+
+    pub fn serialize<S: Serializer>(p: &Option<DataPenalty>, s: S) -> Result<S::Ok, S::Error> {
+        match p {
+            Some(p) => s.collect_str(p),
+            None => s.serialize_none(),
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<DataPenalty>, D::Error> {
+        match Option::<Given>::deserialize(d)? {
+            None => Ok(None),
+            Some(Given::Text(t)) => t.parse().map(Some).map_err(serde::de::Error::custom),
+            Some(Given::Tagged(p)) => {
+                p.validate().map_err(serde::de::Error::custom)?;
+                Ok(Some(p))
+            }
+        }
+    }
+}
+
 impl RunSpec {
     /// `self` with every field it leaves unset taken from `defaults`.
-    pub fn or(self, defaults: &RunSpec) -> RunSpec {
-        let d = defaults.clone();
-        RunSpec {
-            data: self.data.or(d.data),
-            config: self.config.or(d.config),
-            model: self.model.or(d.model),
-            backend: self.backend.or(d.backend),
-            jacobian: self.jacobian.or(d.jacobian),
-            iterations: self.iterations.or(d.iterations),
-            h_weight: self.h_weight.or(d.h_weight),
-            seed: self.seed.or(d.seed),
-            mesh: self.mesh.or(d.mesh),
-            frames: self.frames.or(d.frames),
-            stride: self.stride.or(d.stride),
-            test_fraction: self.test_fraction.or(d.test_fraction),
-            checkpoint_every: self.checkpoint_every.or(d.checkpoint_every),
-            points_per_step: self.points_per_step.or(d.points_per_step),
-            frames_per_step: self.frames_per_step.or(d.frames_per_step),
-            layout: self.layout.or(d.layout),
-            frame: self.frame.or(d.frame),
-            count_hidden: self.count_hidden.or(d.count_hidden),
-            reference_frame: self.reference_frame.or(d.reference_frame),
-            drop_unobserved: self.drop_unobserved.or(d.drop_unobserved),
-            holdout_observations: self.holdout_observations.or(d.holdout_observations),
-            confidence: self.confidence.or(d.confidence),
-            data_penalty: self.data_penalty.or(d.data_penalty),
-            recipe: self.recipe.or(d.recipe),
-            until_converged: self.until_converged.or(d.until_converged),
+    pub fn or(self, defaults: &RunSpec) -> Result<RunSpec> {
+        let fields = |spec: &RunSpec| match serde_json::to_value(spec) {
+            Ok(serde_json::Value::Object(m)) => Ok(m),
+            other => Err(DomaError::InvalidData(format!(
+                "fit options do not serialise to an object: {other:?}"
+            ))),
+        };
+        let mut merged = fields(defaults)?;
+        merged.extend(fields(&self)?);
+        serde_json::from_value(serde_json::Value::Object(merged))
+            .map_err(|e| DomaError::InvalidConfig(format!("fit options: {e}")))
+    }
+
+    /// Refuses values no fit can take, naming the field: a count of 0, a fraction outside
+    /// `(0, 1)`. The command line's parsers refuse them before; JSON and Python reach here.
+    pub fn validate(&self) -> Result<()> {
+        let counts = [
+            ("iterations", self.iterations),
+            ("stride", self.stride),
+            ("checkpoint_every", self.checkpoint_every),
+            ("points_per_step", self.points_per_step),
+            ("frames_per_step", self.frames_per_step),
+            ("until_converged", self.until_converged),
+        ];
+        if let Some((name, Some(n))) = counts.iter().find(|(_, n)| *n == Some(0)) {
+            return Err(DomaError::InvalidConfig(format!(
+                "{name}: {n} is not at least 1"
+            )));
         }
+        for (name, f) in [
+            ("test_fraction", self.test_fraction),
+            ("holdout_observations", self.holdout_observations),
+        ] {
+            if let Some(f) = f {
+                fraction(&f.to_string())
+                    .map_err(|e| DomaError::InvalidConfig(format!("{name}: {e}")))?;
+            }
+        }
+        Ok(())
     }
 
     /// `self` with its relative paths (data, config, mesh) taken relative to `base`.
@@ -242,20 +360,16 @@ impl RunSpec {
         if self.frames_per_step.is_some() {
             fit.frames_per_step = self.frames_per_step;
         }
-        if let Some(p) = self.data_penalty {
+        if let Some(p) = self.robust {
             fit.loss.data_penalty = (p != DataPenalty::L1).then_some(p);
         }
         Ok(fit)
     }
 
-    /// The run config of this fit, checked; with `h_weight = auto`, after the weight
-    /// search (`search`; `on_weight` hears each weight's validation EPE). The data must
-    /// exist and load.
-    pub fn run_config(
-        &self,
-        search: &WeightSearch,
-        on_weight: impl FnMut(&crate::train::select::GridPoint),
-    ) -> Result<RunConfig> {
+    /// The run config of this fit without its data read: what the options say, checked
+    /// where the data is not needed. A DPF model's frame count is set by
+    /// [`RunSpec::prepare`], from the data.
+    fn run_config(&self) -> Result<RunConfig> {
         let data = self
             .data
             .as_deref()
@@ -291,33 +405,77 @@ impl RunSpec {
                 "the clip {a}..{b} holds no frame"
             )));
         }
-        config.fit = self.fit_config(|| Ok(config.load()?.trajectories.frames()))?;
-        config.validate()?;
-        if self.h_weight == Some(Weight::Auto) {
-            config.weight_search = Some(self.choose_h_weight(&config, search, on_weight)?);
-            config.fit.loss.smoothness_weight =
-                config.weight_search.as_ref().map_or(0.0, |c| c.weight);
-        }
+        // The frame count of a DPF model is the data's; 1 stands in until it is read.
+        config.fit = self.fit_config(|| Ok(1))?;
         Ok(config)
     }
 
-    fn choose_h_weight(
+    /// The new fit these options ask for, with its data read once: the run config,
+    /// checked, and the sequence that [`super::fit_run`] fits. With `h_weight = auto`, the
+    /// weight search runs here, on the same sequence (`search`; `on_weight` hears each
+    /// weight's validation EPE).
+    pub fn prepare(
         &self,
-        config: &RunConfig,
         search: &WeightSearch,
         on_weight: impl FnMut(&crate::train::select::GridPoint),
-    ) -> Result<WeightChoice> {
-        search.validate()?;
-        let (train, _) = config.split(&config.load()?.trajectories)?;
-        let device = config.backend.device()?;
-        choose_weight(
-            &config.fit,
-            Penalty::Smoothness,
-            &train,
-            search,
-            &device,
-            on_weight,
-        )
+    ) -> Result<NewFit> {
+        self.validate()?;
+        let mut config = self.run_config()?;
+        config.validate()?;
+        let sequence = config.load()?;
+        if self.model == Some(ModelChoice::Dpf) {
+            config.fit = self.fit_config(|| Ok(sequence.trajectories.frames()))?;
+            config.validate()?;
+        }
+        let mut fit = NewFit { config, sequence };
+        fit.check()?;
+        if self.h_weight == Some(Weight::Auto) {
+            search.validate()?;
+            let (train, _) = fit.config.split(&fit.sequence.trajectories)?;
+            let device = fit.config.backend.device()?;
+            let choice = choose_weight(
+                &fit.config.fit,
+                Penalty::Smoothness,
+                &train,
+                search,
+                &device,
+                on_weight,
+            )?;
+            fit.config.fit.loss.smoothness_weight = choice.weight;
+            fit.config.weight_search = Some(choice);
+        }
+        Ok(fit)
+    }
+}
+
+/// A new fit, ready to start: its run config and its data, read once
+/// ([`RunConfig::load`]: clipped, normalised, held-out observations hidden). Made by
+/// [`RunSpec::prepare`] from options, or by [`NewFit::load`] from a run config.
+pub struct NewFit {
+    /// What is fitted and how; `config.json` of the run.
+    pub config: RunConfig,
+    /// The data, as `config` reads it.
+    pub sequence: Sequence,
+}
+
+impl NewFit {
+    /// `config`'s fit, with its data read and checked against it.
+    pub fn load(config: RunConfig) -> Result<NewFit> {
+        config.validate()?;
+        let sequence = config.load()?;
+        let fit = NewFit { config, sequence };
+        fit.check()?;
+        Ok(fit)
+    }
+
+    /// Refuses a split or a model that the data cannot take.
+    fn check(&self) -> Result<()> {
+        self.config
+            .split_indices(self.sequence.trajectories.points())?;
+        self.config
+            .fit
+            .model
+            .check_frames(self.sequence.trajectories.frames())
     }
 }
 
@@ -366,6 +524,7 @@ mod tests {
             ..RunSpec::default()
         }
         .or(&defaults)
+        .unwrap()
         .relative_to(Path::new("/data"));
         assert_eq!(item.iterations, Some(50));
         assert_eq!(item.seed, Some(7));

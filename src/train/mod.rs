@@ -10,24 +10,27 @@
 
 mod config;
 mod hooks;
+mod learned;
 mod objective;
 mod recipe;
 mod record;
+mod rows;
+mod samples;
+mod schedule;
 pub mod select;
 mod trainer;
+mod trajectory;
 
-pub(crate) use config::unknown_field;
-pub use config::{
-    Convergence, Decay, FitConfig, LossConfig, ScheduleConfig, SmoothnessSampling, WithSchedule,
-    check_weights, default_adam,
-};
+pub use config::{FitConfig, LossConfig, SmoothnessSampling, WithSchedule, check_weights};
 pub use hooks::Hooks;
-pub use objective::{Objective, TrajectoryObjective};
+pub use objective::Objective;
 pub use recipe::{
     FAST_LR_FACTOR, FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, FAST_WARMUP, Recipe, RecipeChoice,
 };
 pub use record::{Fitted, IterationRecord, Outcome, RngState, TrainerSnapshot, gaussian};
+pub use schedule::{Convergence, Decay, ScheduleConfig, default_adam};
 pub use trainer::Trainer;
+pub use trajectory::TrajectoryObjective;
 
 use burn::module::Module;
 use burn::tensor::Device;

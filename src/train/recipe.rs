@@ -5,7 +5,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::config::{Convergence, Decay, FitConfig};
+use super::config::FitConfig;
+use super::schedule::{Convergence, Decay};
 
 /// A named set of fit settings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -87,4 +88,4 @@ fn decimal(x: f64) -> f64 {
     format!("{x:.11e}").parse().unwrap_or(x)
 }
 
-crate::names::display_as_value_name!(Recipe);
+crate::names::value_names!(Recipe);

@@ -1,9 +1,12 @@
 //! What a fit leaves: the per-iteration records, the fitted field, and the resumable
 //! state of the loop (its random stream included).
 
+use burn::tensor::Tensor;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
+
+use crate::{DomaError, Result};
 
 /// The record of one iteration.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -115,4 +118,27 @@ impl<M> Outcome<M> {
             Outcome::Interrupted { .. } => unreachable!("a run without hooks is not interrupted"),
         }
     }
+}
+
+/// Reads an iteration's step losses back (one device sync), each a `[2]` tensor
+/// (primary loss, total) in the order `order` of frames; stops with
+/// [`DomaError::NonFiniteLoss`] naming the iteration and frame if any is not finite, else
+/// returns the two means.
+pub(super) fn read_step_losses(
+    step_losses: Vec<Tensor<1>>,
+    first_frames: &[usize],
+    frames: usize,
+    iteration: usize,
+) -> Result<(f64, f64)> {
+    let losses = crate::readback::to_vec::<f64, 2, _>(Tensor::stack::<2>(step_losses, 0))?;
+    if let Some(i) = losses.iter().position(|v| !v.is_finite()) {
+        return Err(DomaError::NonFiniteLoss {
+            iteration,
+            frame: first_frames[i / 2],
+            value: losses[i],
+        });
+    }
+    // Per frame: a step's losses are the sums over its frames.
+    let mean = |c: usize| losses.iter().skip(c).step_by(2).sum::<f64>() / frames as f64;
+    Ok((mean(0), mean(1)))
 }

@@ -57,6 +57,30 @@ impl From<Weight> for WeightRepr {
     }
 }
 
+/// A finite non-negative number, or `auto`: the spelling of `--h-weight` and `--e-weight`.
+impl std::str::FromStr for Weight {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        if s.trim() == "auto" {
+            return Ok(Weight::Auto);
+        }
+        match s.parse::<f64>() {
+            Ok(w) if w.is_finite() && w >= 0.0 => Ok(Weight::Fixed(w)),
+            _ => Err(format!("`{s}` must be finite and non-negative, or `auto`")),
+        }
+    }
+}
+
+impl std::fmt::Display for Weight {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Weight::Fixed(w) => write!(f, "{w}"),
+            Weight::Auto => f.write_str("auto"),
+        }
+    }
+}
+
 /// Which loss weight is searched.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]

@@ -13,14 +13,18 @@ use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
-use super::config::{Convergence, FitConfig, ScheduleConfig};
+use super::config::FitConfig;
 use super::hooks::Hooks;
-use super::objective::{Objective, TrajectoryObjective};
-use super::record::{Fitted, IterationRecord, Outcome, RngState, TrainerSnapshot};
+use super::objective::Objective;
+use super::record::{Fitted, IterationRecord, Outcome, read_step_losses};
+use super::schedule::{Convergence, ScheduleConfig};
+use super::trajectory::TrajectoryObjective;
 use crate::data::Trajectories;
 use crate::field::MotionField;
 use crate::field::model::Model;
 use crate::{DomaError, Result};
+
+mod snapshot;
 
 /// The state of a fit in progress: the field on the autodiff device, its objective,
 /// Adam's state, the schedule and the random stream. [`Trainer::step`] is one optimiser
@@ -259,61 +263,6 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         &self.history
     }
 
-    /// Everything a resumed fit needs besides the config and the data: the field's
-    /// parameters, Adam's state, the random stream's position and the history.
-    pub fn snapshot(&self) -> Result<TrainerSnapshot> {
-        let optimizer = self
-            .optim
-            .into_bytes()
-            .map_err(|e| DomaError::Device(format!("cannot serialise Adam's state: {e}")))?
-            .to_vec();
-        Ok(TrainerSnapshot {
-            model: crate::checkpoint::encode_checkpoint(
-                self.field().clone(),
-                crate::checkpoint::Precision::F32,
-            )?,
-            optimizer,
-            rng: RngState::of(&self.rng),
-            iterations_done: self.history.len(),
-            history: self.history.clone(),
-            objective: self.objective.state()?,
-        })
-    }
-
-    /// Puts a [`Trainer::snapshot`] back: the field's parameters (with their ids, which
-    /// key Adam's state), Adam's state, the random stream and the history.
-    pub fn restore(&mut self, snapshot: &TrainerSnapshot) -> Result<()> {
-        if snapshot.history.len() != snapshot.iterations_done {
-            return Err(DomaError::InvalidData(format!(
-                "the checkpoint says {} iterations but holds {} records",
-                snapshot.iterations_done,
-                snapshot.history.len()
-            )));
-        }
-        let field = self.field.take().expect("the field is always put back");
-        let loaded = crate::checkpoint::decode_checkpoint(field.clone(), &snapshot.model);
-        self.field = Some(match loaded {
-            Ok(f) => f,
-            Err(e) => {
-                self.field = Some(field);
-                return Err(e);
-            }
-        });
-        let optim = std::mem::replace(&mut self.optim, AdamConfig::new().init());
-        self.optim = optim
-            .from_bytes(burn::tensor::Bytes::from_bytes_vec(
-                snapshot.optimizer.clone(),
-            ))
-            .map_err(|e| {
-                DomaError::InvalidData(format!("the saved Adam state is unreadable: {e}"))
-            })?;
-        self.objective.restore_state(&snapshot.objective)?;
-        self.rng = snapshot.rng.restore();
-        self.history = snapshot.history.clone();
-        self.clock = None;
-        Ok(())
-    }
-
     /// The whole fit: every remaining iteration of the schedule.
     pub fn run(self) -> Result<Fitted<M>> {
         self.run_with(Hooks::new()).map(Outcome::expect_finished)
@@ -392,27 +341,4 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
             )
             .with_position(self.history.len() as u64)
     }
-}
-
-/// Reads an iteration's step losses back (one device sync), each a `[2]` tensor
-/// (primary loss, total) in the order `order` of frames; stops with
-/// [`DomaError::NonFiniteLoss`] naming the iteration and frame if any is not finite, else
-/// returns the two means.
-fn read_step_losses(
-    step_losses: Vec<Tensor<1>>,
-    first_frames: &[usize],
-    frames: usize,
-    iteration: usize,
-) -> Result<(f64, f64)> {
-    let losses = crate::readback::to_vec::<f64, 2, _>(Tensor::stack::<2>(step_losses, 0))?;
-    if let Some(i) = losses.iter().position(|v| !v.is_finite()) {
-        return Err(DomaError::NonFiniteLoss {
-            iteration,
-            frame: first_frames[i / 2],
-            value: losses[i],
-        });
-    }
-    // Per frame: a step's losses are the sums over its frames.
-    let mean = |c: usize| losses.iter().skip(c).step_by(2).sum::<f64>() / frames as f64;
-    Ok((mean(0), mean(1)))
 }

@@ -164,3 +164,8 @@ pub fn faerie_tracker_view(
     .unwrap();
     (view, obj)
 }
+
+/// A new fit of `config` for [`doma::run::fit_run`], its data read.
+pub fn new_fit(config: doma::run::RunConfig) -> Option<doma::run::NewFit> {
+    Some(doma::run::NewFit::load(config).unwrap())
+}

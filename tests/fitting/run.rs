@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 use burn::tensor::Device;
-use common::backward_lock;
+use common::{backward_lock, new_fit};
 use doma::DomaError;
 use doma::checkpoint::Precision;
 use doma::field::model::Model;
@@ -58,12 +58,12 @@ fn a_resumed_fit_equals_an_uninterrupted_one_bit_exactly() {
     let device = Device::flex();
     let never = AtomicBool::new(false);
     let (_whole_dir, whole) = run_dir("whole");
-    let outcome = fit_run(&whole, Some(config()), &device, &never, None, false).unwrap();
+    let outcome = fit_run(&whole, new_fit(config()), &device, &never, None, false).unwrap();
     assert!(matches!(outcome, FitOutcome::Finished(_)));
 
     // Interrupted after 3 iterations (between two checkpoints), then resumed twice over.
     let (_parts_dir, parts) = run_dir("parts");
-    let outcome = fit_run(&parts, Some(config()), &device, &never, Some(3), false).unwrap();
+    let outcome = fit_run(&parts, new_fit(config()), &device, &never, Some(3), false).unwrap();
     assert_eq!(outcome, FitOutcome::Interrupted { iterations_done: 3 });
     assert!(
         !parts.model().exists(),
@@ -100,7 +100,7 @@ fn a_resumed_fit_equals_an_uninterrupted_one_bit_exactly() {
     assert_eq!(history(&whole), history(&parts));
     // A finished run cannot be started again in the same folder.
     assert!(matches!(
-        fit_run(&whole, Some(config()), &device, &never, None, false),
+        fit_run(&whole, new_fit(config()), &device, &never, None, false),
         Err(DomaError::RunExists(_))
     ));
 }
@@ -111,7 +111,7 @@ fn a_non_finite_loss_keeps_the_last_good_checkpoint() {
     let device = Device::flex();
     let never = AtomicBool::new(false);
     let (_run_dir, run) = run_dir("nan");
-    fit_run(&run, Some(config()), &device, &never, Some(2), false).unwrap();
+    fit_run(&run, new_fit(config()), &device, &never, Some(2), false).unwrap();
     let good = std::fs::read(run.resume()).unwrap();
     // Make the continuation diverge: an absurd learning rate overflows the outputs.
     let mut c: serde_json::Value =
@@ -143,7 +143,7 @@ fn eval_warp_and_info_read_a_finished_run() {
         .with_jacobian(JacobianKind::Analytic)
         .with_seed(3);
     let FitOutcome::Finished(report) =
-        fit_run(&run, Some(c), &device, &never, None, false).unwrap()
+        fit_run(&run, new_fit(c), &device, &never, None, false).unwrap()
     else {
         panic!()
     };
@@ -244,7 +244,7 @@ fn an_unfinished_run_is_read_in_memory_without_writing_into_its_folder() {
     let device = Device::flex();
     let never = AtomicBool::new(false);
     let (_run_dir, run) = run_dir("unfinished");
-    fit_run(&run, Some(config()), &device, &never, Some(2), false).unwrap();
+    fit_run(&run, new_fit(config()), &device, &never, Some(2), false).unwrap();
     let listing = |dir: &std::path::Path| -> Vec<String> {
         let mut names: Vec<String> = std::fs::read_dir(dir)
             .unwrap()
@@ -290,7 +290,7 @@ fn nan_weights_are_blamed_on_model_bpk_not_on_the_data() {
     let (_run_dir, run) = run_dir("poison");
     let mut c = config();
     c.fit = c.fit.with_iterations(1);
-    fit_run(&run, Some(c.clone()), &device, &never, None, false).unwrap();
+    fit_run(&run, new_fit(c.clone()), &device, &never, None, false).unwrap();
     let poisoned = run.load_field(&c, &device).unwrap().map(&mut Poison);
     std::fs::write(run.model(), poisoned.encode(Precision::F32).unwrap()).unwrap();
     match eval_run(&run, None, &device) {
@@ -324,7 +324,7 @@ fn an_edited_config_json_is_refused_naming_the_field_or_both_files() {
     c.fit = FitConfig::doma(DomaFieldConfig::new(Variant::Trans).with_hidden(16))
         .with_iterations(2)
         .with_jacobian(JacobianKind::Analytic);
-    fit_run(&run, Some(c), &device, &never, None, false).unwrap();
+    fit_run(&run, new_fit(c), &device, &never, None, false).unwrap();
     let original = std::fs::read_to_string(run.config()).unwrap();
     let mut value: serde_json::Value = serde_json::from_str(&original).unwrap();
     // A field that no run config has: refused, not ignored.

@@ -2,7 +2,7 @@
 //! observations are reported beside the two baselines, and `complete` writes every track
 //! at every frame in the input's order, with the input's observations untouched.
 
-use crate::common;
+use crate::common::{self, new_fit};
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -35,7 +35,7 @@ fn fit(data: &Path, run: &RunDir, edit: impl FnOnce(&mut RunConfig)) -> Report {
     edit(&mut c);
     let never = AtomicBool::new(false);
     let _g = common::backward_lock();
-    match fit_run(run, Some(c), &Device::flex(), &never, None, false).unwrap() {
+    match fit_run(run, new_fit(c), &Device::flex(), &never, None, false).unwrap() {
         FitOutcome::Finished(report) => report,
         other => panic!("{other:?}"),
     }
@@ -220,13 +220,13 @@ fn learned_canonical_positions_resume_bit_for_bit_and_are_used_by_eval() {
     let device = Device::flex();
     let _g = common::backward_lock();
     let whole = RunDir::new(dir.join("whole"));
-    let report = match fit_run(&whole, Some(config()), &device, &never, None, false).unwrap() {
+    let report = match fit_run(&whole, new_fit(config()), &device, &never, None, false).unwrap() {
         FitOutcome::Finished(r) => r,
         other => panic!("{other:?}"),
     };
     let parts = RunDir::new(dir.join("parts"));
     assert!(matches!(
-        fit_run(&parts, Some(config()), &device, &never, Some(2), false).unwrap(),
+        fit_run(&parts, new_fit(config()), &device, &never, Some(2), false).unwrap(),
         FitOutcome::Interrupted { iterations_done: 2 }
     ));
     let resumed = match fit_run(&parts, None, &device, &never, None, false).unwrap() {

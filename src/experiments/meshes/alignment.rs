@@ -200,4 +200,4 @@ pub fn mesh_alignment(
     Ok(records)
 }
 
-crate::names::display_as_value_name!(AlignModel, AlignReg);
+crate::names::value_names!(AlignModel, AlignReg);

@@ -6,6 +6,10 @@
 //! against the naming file's folder and refused unless, symbolic links resolved, it lies
 //! inside the folder the user pointed at.
 
+mod json;
+
+pub use json::{load_json, merge, read_object, save_json, unknown_field};
+
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 

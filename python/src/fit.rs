@@ -1,0 +1,247 @@
+//! `doma._native.fit`, `resume` and `load`: fits from NumPy into run folders, and run
+//! folders opened as [`Field`]s.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use doma::DomaError;
+use doma::Result;
+use doma::backend::BackendKind;
+use doma::data::layout::Layout;
+use doma::run::{FitOutcome, NewFit, RunDir, fit_run};
+use doma::train::select::WeightSearch;
+use doma_formats::npy::NpyValues;
+use pyo3::buffer::PyBuffer;
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::arrays::contiguous;
+use crate::convert::{Wrap, run_spec};
+use crate::errors::{self, IntoPy};
+use crate::field::{DataShape, Field};
+use crate::interrupt;
+
+/// The data file of a fit from NumPy, inside its run folder.
+const DATA_FILE: &str = "tracks.npz";
+
+/// The options that read a data file, which a fit of arrays has no use for.
+const FILE_OPTIONS: [&str; 5] = ["data", "layout", "frame", "count_hidden", "confidence"];
+
+/// Fits a field to `tracks` ([T, N, 3] float32) with the mask `observed` ([T, N] uint8,
+/// `None`: every entry observed) into the run folder `out` (a new temporary folder when
+/// `None`, removed with the field), as `doma fit` would with the same options: `options`
+/// are [`doma::run::RunSpec`]'s fields by name (`variant`, `iters`, `h_weight`, …).
+#[pyfunction]
+#[pyo3(signature = (tracks, observed=None, *, out=None, progress=true, **options))]
+pub fn fit(
+    py: Python<'_>,
+    tracks: PyBuffer<f32>,
+    observed: Option<PyBuffer<u8>>,
+    out: Option<PathBuf>,
+    progress: bool,
+    options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<Field> {
+    if let Some(given) = options {
+        for key in FILE_OPTIONS {
+            if given.contains(key)? {
+                return Err(PyTypeError::new_err(format!(
+                    "fit() does not take '{key}': the tracks are the arrays given (read a \
+                     file with doma.read_tracks)"
+                )));
+            }
+        }
+    }
+    let mut spec = run_spec(options)?;
+    let (dims, positions) = contiguous(&tracks, "tracks", &[None, None, Some(3)], false)?;
+    let (t, n) = (dims[0], dims[1]);
+    // SAFETY: the caller holds both buffers for this call.
+    let positions = unsafe { positions.slice() };
+    let mask = match &observed {
+        Some(o) => {
+            let (_, mask) = contiguous(o, "observed", &[Some(t), Some(n)], false)?;
+            // SAFETY: as above.
+            Some(
+                unsafe { mask.slice() }
+                    .iter()
+                    .map(|&b| b != 0)
+                    .collect::<Vec<bool>>(),
+            )
+        }
+        None => None,
+    };
+    check_tracks(t, n, positions, mask.as_deref())?;
+    let (dir, temporary) = match out {
+        Some(dir) => (dir, false),
+        None => (temporary_dir().py()?, true),
+    };
+    let run = RunDir::new(&dir);
+    if run.config().exists() {
+        return Err(errors::to_py(DomaError::RunExists(dir)));
+    }
+    let made = !dir.exists();
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| DomaError::io(&dir, e))
+        .py()?;
+    let data = dir.join(DATA_FILE);
+    // Nothing of a fit that does not start is left behind: the data file, and the folder
+    // when this call made it.
+    let clean_up = || {
+        if !run.config().exists() {
+            let _ = std::fs::remove_file(&data);
+            if made {
+                let _ = std::fs::remove_dir(&dir);
+            }
+        }
+    };
+    // The data file is written once and read once, by `prepare`; the fit runs on what it
+    // read.
+    let prepared = (|| -> Result<NewFit> {
+        let (s3, s2) = ([t, n, 3], [t, n]);
+        let mut members = vec![("tracks", &s3[..], NpyValues::F32(positions))];
+        if let Some(mask) = &mask {
+            members.push(("observed", &s2[..], NpyValues::Bool(mask)));
+        }
+        doma::io::write_atomic(&data, &doma_formats::npz::encode_npz_values(&members))?;
+        spec.data = Some(data.clone());
+        spec.layout = Some(if mask.is_some() {
+            Layout::Masked
+        } else {
+            Layout::Plain
+        });
+        spec.prepare(&WeightSearch::default(), |p| {
+            if progress {
+                eprintln!(
+                    "weight {:e}: validation EPE {:.2}e-4",
+                    p.weight, p.validation_epe_x1e4
+                );
+            }
+        })
+    })();
+    let new = match prepared {
+        Ok(new) => new,
+        Err(e) => {
+            clean_up();
+            return Err(errors::to_py(e));
+        }
+    };
+    let shape = DataShape::of(&new.sequence);
+    let result = run_fit(py, &run, Some(new), progress);
+    if result.is_err() {
+        clean_up();
+        if temporary {
+            let _ = std::fs::remove_dir_all(&dir);
+        }
+    }
+    let device = result?;
+    Field::fitted(&dir, temporary, device, shape).py()
+}
+
+/// Refuses tracks that no fit can read, naming the entry: an observed coordinate that is
+/// not finite, or no observation at all.
+fn check_tracks(t: usize, n: usize, positions: &[f32], mask: Option<&[bool]>) -> PyResult<()> {
+    if t == 0 || n == 0 {
+        return Err(PyValueError::new_err(format!(
+            "tracks of {t} frames and {n} points: nothing to fit"
+        )));
+    }
+    let seen = |e: usize| mask.is_none_or(|m| m[e]);
+    if let Some(c) = (0..positions.len()).find(|&c| seen(c / 3) && !positions[c].is_finite()) {
+        let (e, axis) = (c / 3, c % 3);
+        return Err(PyValueError::new_err(format!(
+            "tracks[{}, {}, {axis}] is {}, and observed{}",
+            e / n,
+            e % n,
+            positions[c],
+            if mask.is_some() {
+                ""
+            } else {
+                " (give `observed` to mark the entries a tracker did not see)"
+            }
+        )));
+    }
+    Ok(())
+}
+
+/// Fits (a `new` fit, or the run's own to resume when `None`) on the worker thread of
+/// [`interrupt::run_interruptible`]; returns the device on success. Ctrl-C raises
+/// `KeyboardInterrupt` after the checkpoint is saved and the lock released.
+fn run_fit(
+    py: Python<'_>,
+    run: &RunDir,
+    new: Option<NewFit>,
+    progress: bool,
+) -> PyResult<burn::tensor::Device> {
+    let backend = match &new {
+        Some(n) => n.config.backend,
+        None => run.load_config().py()?.backend,
+    };
+    let device = backend.device().py()?;
+    let (outcome, raised) =
+        interrupt::run_interruptible(py, |flag| fit_run(run, new, &device, flag, None, progress));
+    match (outcome.py()?, raised) {
+        (FitOutcome::Finished(_), None) => Ok(device),
+        (FitOutcome::Interrupted { iterations_done }, raised) => {
+            let error = raised.unwrap_or_else(|| {
+                pyo3::exceptions::PyKeyboardInterrupt::new_err("the fit was interrupted")
+            });
+            let note = format!(
+                "doma: the fit stopped after {iterations_done} iterations; its checkpoint is \
+                 in {} (doma.resume, or `doma fit --resume`, continues it)",
+                run.dir.display()
+            );
+            let _ = error.value(py).call_method1("add_note", (note,));
+            Err(error)
+        }
+        // The signal came as the last iteration ended: the fit is whole, and the
+        // interrupt is still the caller's.
+        (FitOutcome::Finished(_), Some(raised)) => Err(raised),
+    }
+}
+
+/// A new empty folder under the system's temporary folder.
+fn temporary_dir() -> Result<PathBuf> {
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    let base = std::env::temp_dir();
+    loop {
+        let name = format!(
+            "doma-fit-{}-{}",
+            std::process::id(),
+            NEXT.fetch_add(1, Ordering::Relaxed)
+        );
+        let dir = base.join(name);
+        match std::fs::create_dir(&dir) {
+            Ok(()) => return Ok(dir),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(DomaError::io(&base, e)),
+        }
+    }
+}
+
+/// Continues the interrupted fit in `run_dir` from its checkpoint, on the backend it was
+/// started on.
+#[pyfunction]
+#[pyo3(signature = (run_dir, progress))]
+pub fn resume(py: Python<'_>, run_dir: PathBuf, progress: bool) -> PyResult<Field> {
+    let run = RunDir::new(&run_dir);
+    let device = run_fit(py, &run, None, progress)?;
+    Field::open(&run_dir, false, device).py()
+}
+
+/// Opens the fitted run in `run_dir` (written by `doma fit` or by `doma.fit(out=...)`), on
+/// its own backend or `backend`.
+#[pyfunction]
+#[pyo3(signature = (run_dir, backend=None))]
+pub fn load(
+    py: Python<'_>,
+    run_dir: PathBuf,
+    backend: Option<Wrap<BackendKind>>,
+) -> PyResult<Field> {
+    let run = RunDir::new(&run_dir);
+    let kind = match backend {
+        Some(Wrap(kind)) => kind,
+        None => run.load_config().py()?.backend,
+    };
+    let device = kind.device().py()?;
+    py.detach(|| Field::open(&run_dir, false, device)).py()
+}

@@ -1,0 +1,67 @@
+//! A fit's checkpoint: what a resumed fit needs besides the config and the data.
+
+use burn::module::Module;
+use burn::optim::AdamConfig;
+
+use super::Trainer;
+use crate::field::MotionField;
+use crate::train::objective::Objective;
+use crate::train::record::{RngState, TrainerSnapshot};
+use crate::{DomaError, Result};
+
+impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
+    /// Everything a resumed fit needs besides the config and the data: the field's
+    /// parameters, Adam's state, the random stream's position and the history.
+    pub fn snapshot(&self) -> Result<TrainerSnapshot> {
+        let optimizer = self
+            .optim
+            .into_bytes()
+            .map_err(|e| DomaError::Device(format!("cannot serialise Adam's state: {e}")))?
+            .to_vec();
+        Ok(TrainerSnapshot {
+            model: crate::checkpoint::encode_checkpoint(
+                self.field().clone(),
+                crate::checkpoint::Precision::F32,
+            )?,
+            optimizer,
+            rng: RngState::of(&self.rng),
+            iterations_done: self.history.len(),
+            history: self.history.clone(),
+            objective: self.objective.state()?,
+        })
+    }
+
+    /// Puts a [`Trainer::snapshot`] back: the field's parameters (with their ids, which
+    /// key Adam's state), Adam's state, the random stream and the history.
+    pub fn restore(&mut self, snapshot: &TrainerSnapshot) -> Result<()> {
+        if snapshot.history.len() != snapshot.iterations_done {
+            return Err(DomaError::InvalidData(format!(
+                "the checkpoint says {} iterations but holds {} records",
+                snapshot.iterations_done,
+                snapshot.history.len()
+            )));
+        }
+        let field = self.field.take().expect("the field is always put back");
+        let loaded = crate::checkpoint::decode_checkpoint(field.clone(), &snapshot.model);
+        self.field = Some(match loaded {
+            Ok(f) => f,
+            Err(e) => {
+                self.field = Some(field);
+                return Err(e);
+            }
+        });
+        let optim = std::mem::replace(&mut self.optim, AdamConfig::new().init());
+        self.optim = optim
+            .from_bytes(burn::tensor::Bytes::from_bytes_vec(
+                snapshot.optimizer.clone(),
+            ))
+            .map_err(|e| {
+                DomaError::InvalidData(format!("the saved Adam state is unreadable: {e}"))
+            })?;
+        self.objective.restore_state(&snapshot.objective)?;
+        self.rng = snapshot.rng.restore();
+        self.history = snapshot.history.clone();
+        self.clock = None;
+        Ok(())
+    }
+}
