@@ -187,6 +187,8 @@ def fit(
         h_weight: L_H's weight (0: off), or ``"auto"`` to choose it by validation on
             held-out training points; a weight alone turns L_H on.
         iters: iterations (passes over all frames; default 1000, the paper's).
+        learning_rate: Adam's base learning rate (default 1e-4, the authors'; it wins over
+            a recipe's).
         recipe: ``"paper"`` (the paper's protocol, the default) or ``"fast"`` (1.5 times
             the learning rate with a warm-up and a cosine decay, 256 training points and 64
             L_H samples per step); the other options override it.

@@ -106,10 +106,19 @@ def test_a_fit_into_a_run_folder_is_refused(fitted, clip):
 
 def test_an_option_reaches_the_run_config_as_the_cli_writes_it(clip, tmp_path):
     field = doma.fit(
-        clip, iters=3, variant="se3", reg="h", robust="huber:0.02", seed=4, progress=False, out=tmp_path / "r"
+        clip,
+        iters=3,
+        variant="se3",
+        reg="h",
+        robust="huber:0.02",
+        seed=4,
+        learning_rate=3e-4,
+        progress=False,
+        out=tmp_path / "r",
     )
     fit = field.config["fit"]
     assert fit["schedule"]["iterations"] == 3 and fit["seed"] == 4
+    assert fit["schedule"]["learning_rate"] == 3e-4
     assert fit["model"]["doma"]["variant"] == "se3"
     assert fit["loss"]["smoothness_weight"] == 0.1
     assert fit["loss"]["data_penalty"] == {"huber": {"delta": 0.02}}

@@ -121,37 +121,23 @@ mod tests {
     /// spec that the JSON deserialises to.
     #[test]
     fn flags_and_json_are_one_options_type() {
-        let flags = parse(&[
-            "a.traj",
-            "--out",
-            "r",
-            "--variant",
-            "scaled-se3",
-            "--iters",
-            "20",
-            "--h-weight",
-            "auto",
-            "--frames",
-            "3..=9",
-            "--robust",
-            "huber:0.02",
-            "--count-hidden",
-            "--test-fraction",
-            "0.5",
-            "--recipe",
-            "fast",
-        ])
-        .unwrap();
+        let flags = "a.traj --out r --variant scaled-se3 --iters 20 --h-weight auto \
+                     --frames 3..=9 --robust huber:0.02 --count-hidden --test-fraction 0.5 \
+                     --recipe fast --learning-rate 3e-4";
+        let flags = parse(&flags.split_whitespace().collect::<Vec<_>>()).unwrap();
         let json: RunSpec = serde_json::from_str(
             r#"{"data": "a.traj", "model": "scaled-se3", "iterations": 20, "h_weight": "auto",
                 "frames": [3, 10], "robust": "huber:0.02", "count_hidden": true,
-                "test_fraction": 0.5, "recipe": "fast"}"#,
+                "test_fraction": 0.5, "recipe": "fast", "learning_rate": 3e-4}"#,
         )
         .unwrap();
         assert_eq!(flags.spec(), json);
         assert_eq!(json.model, Some(ModelChoice::ScaledSe3));
         assert_eq!(json.h_weight, Some(Weight::Auto));
         assert_eq!(json.robust, Some(DataPenalty::Huber { delta: 0.02 }));
+        // A given learning rate wins over the recipe's.
+        let fit = json.fit_config(|| Ok(1)).unwrap();
+        assert_eq!(fit.schedule.learning_rate, 3e-4);
         // Written back, the spec reads the same.
         let text = serde_json::to_string(&json).unwrap();
         assert!(text.contains(r#""robust":"huber:0.02""#), "{text}");

@@ -101,6 +101,11 @@ pub struct RunSpec {
     #[arg(long = "iters", value_name = "N", value_parser = at_least_one)]
     #[serde(default, alias = "iters", skip_serializing_if = "Option::is_none")]
     pub iterations: Option<usize>,
+    /// Adam's base learning rate (default 1e-4, the authors'; `--recipe fast` scales it
+    /// by 1.5, and this value wins over the recipe's).
+    #[arg(long, value_name = "LR", value_parser = positive)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub learning_rate: Option<f64>,
     /// The weight of the smoothness loss L_H (Eq. 13; 0 = off), or `auto`: chosen by
     /// validation on held-out training points before the fit (the grid goes into
     /// config.json and the plots).
@@ -205,6 +210,14 @@ fn at_least_one(s: &str) -> std::result::Result<usize, String> {
     match s.parse::<usize>() {
         Ok(n) if n >= 1 => Ok(n),
         _ => Err(format!("`{s}` is not a whole number of at least 1")),
+    }
+}
+
+/// A finite number above 0.
+fn positive(s: &str) -> std::result::Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("`{s}` is not a finite number above 0")),
     }
 }
 
@@ -347,6 +360,9 @@ impl RunSpec {
         }
         if let Some(i) = self.iterations {
             fit.schedule.iterations = i;
+        }
+        if let Some(lr) = self.learning_rate {
+            fit.schedule.learning_rate = lr;
         }
         if let Some(Weight::Fixed(w)) = self.h_weight {
             fit.loss.smoothness_weight = w;
