@@ -222,10 +222,12 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
             let e = loss::elasticity(tangent).mul_scalar(w_e);
             total = total.map(|d| d + e);
         }
-        // A frame with no observed training point and no regulariser contributes nothing.
+        // A frame with no observed training point and no regulariser adds nothing: a zero
+        // that is a tracked leaf, so that the step's backward pass runs and moves no
+        // parameter (Adam skips a parameter without a gradient).
         let zero = || Tensor::<1>::zeros([1], &self.ad);
         let data = fitted.map_or_else(zero, |(term, _)| term);
-        Ok((data, total.unwrap_or_else(zero)))
+        Ok((data, total.unwrap_or_else(|| zero().require_grad())))
     }
 
     /// Draws every step's rows and `L_H` samples now, in step order (each step's rows, then

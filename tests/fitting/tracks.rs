@@ -67,6 +67,42 @@ fn complete_tracks_in_a_tracker_layout_fit_bit_for_bit_as_complete_trajectories(
     assert_eq!(a.epe_per_frame_x1e4, b.epe_per_frame_x1e4);
 }
 
+/// Real recordings have frames where no marker is seen (a subject who walks out of the
+/// capture volume): such frames add nothing to the fit, which neither panics nor moves on
+/// them, with or without `L_H`, with every point or a subset per step.
+#[test]
+fn frames_where_nothing_is_observed_add_nothing_and_never_panic() {
+    let v = view();
+    let dir = common::scratch("doma-emptyframes");
+    let npz = dir.join("clip.npz");
+    let (t, n) = (v.truth.frames(), v.truth.points());
+    let mut observed = v.observed();
+    for k in [2, 3, t - 1] {
+        observed[k * n..(k + 1) * n].fill(false);
+    }
+    std::fs::write(
+        &npz,
+        encode_npz_values(&[
+            ("tracks", &[t, n, 3], NpyValues::F32(v.truth.positions())),
+            ("observed", &[t, n], NpyValues::Bool(&observed)),
+        ]),
+    )
+    .unwrap();
+    for (i, (w_h, subset)) in [(0.0, None), (0.0, Some(16)), (0.1, None)]
+        .into_iter()
+        .enumerate()
+    {
+        let report = fit(&npz, &RunDir::new(dir.join(format!("r{i}"))), |c| {
+            c.fit.loss.smoothness_weight = w_h;
+            c.fit.points_per_step = subset;
+            c.drop_unobserved = true;
+        });
+        assert!(report.epe_x1e4.is_finite(), "{w_h} {subset:?}: {report:?}");
+        // Nothing observed there: nothing to measure.
+        assert!(report.epe_per_frame_x1e4[2].is_nan(), "{report:?}");
+    }
+}
+
 #[test]
 fn held_out_observations_are_reported_beside_both_baselines_and_eval_repeats_them() {
     let v = view();
