@@ -15,12 +15,19 @@ import doma
 CLIP = "doma.read_tracks({data!r}).tracks[112:132]"
 
 
+def _default_sigint() -> None:
+    """SIGINT back to its default in the child: a test run launched in the background of a
+    shell inherits SIGINT ignored, and Python then installs no Ctrl-C handler."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def python(code: str, *args: str) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, "-c", textwrap.dedent(code), *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=_default_sigint,
     )
 
 
