@@ -224,10 +224,15 @@ fn positive(s: &str) -> std::result::Result<f64, String> {
 /// A fraction strictly between 0 and 1.
 pub fn fraction(s: &str) -> std::result::Result<f64, String> {
     let v: f64 = s.parse().map_err(|_| format!("`{s}` is not a number"))?;
+    check_fraction(v)
+}
+
+/// `v` when it lies strictly between 0 and 1.
+fn check_fraction(v: f64) -> std::result::Result<f64, String> {
     if v > 0.0 && v < 1.0 {
         Ok(v)
     } else {
-        Err(format!("`{s}` must be strictly between 0 and 1"))
+        Err(format!("`{v}` must be strictly between 0 and 1"))
     }
 }
 
@@ -305,8 +310,7 @@ impl RunSpec {
             ("holdout_observations", self.holdout_observations),
         ] {
             if let Some(f) = f {
-                fraction(&f.to_string())
-                    .map_err(|e| DomaError::InvalidConfig(format!("{name}: {e}")))?;
+                check_fraction(f).map_err(|e| DomaError::InvalidConfig(format!("{name}: {e}")))?;
             }
         }
         Ok(())
@@ -439,8 +443,11 @@ impl RunSpec {
         let mut config = self.run_config()?;
         config.validate()?;
         let sequence = config.load()?;
-        if self.model == Some(ModelChoice::Dpf) {
-            config.fit = self.fit_config(|| Ok(sequence.trajectories.frames()))?;
+        if let ModelConfig::Dpf(dpf) = &mut config.fit.model
+            && self.model == Some(ModelChoice::Dpf)
+        {
+            dpf.frames = sequence.trajectories.frames();
+            // Its size is known now.
             config.validate()?;
         }
         let mut fit = NewFit { config, sequence };

@@ -7,7 +7,7 @@
 
 use std::borrow::Cow;
 
-use burn::tensor::{Device, Gradients, Tensor};
+use burn::tensor::{Device, Gradients, Tensor, TensorData};
 use rand_chacha::ChaCha8Rng;
 
 use super::config::{FitConfig, LossConfig};
@@ -98,10 +98,7 @@ impl<'a> TrajectoryObjective<'a> {
             (0..data.frames())
                 .map(|k| {
                     let w = data.weights_in_frame(k).expect("weights in every frame");
-                    Tensor::<2>::from_data(
-                        burn::tensor::TensorData::new(w.to_vec(), [w.len(), 1]),
-                        &ad,
-                    )
+                    Tensor::<2>::from_data(TensorData::new(w.to_vec(), [w.len(), 1]), &ad)
                 })
                 .collect()
         });
