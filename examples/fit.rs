@@ -40,10 +40,12 @@ fn main() -> anyhow::Result<()> {
     // canonical frame, 25 % of the vertices train and 75 % are held out.
     let data = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data/md2_faerie.traj"));
     let mut run = RunConfig::new(data, fit);
+    run.test_fraction = 0.75;
     run.frames = Some([112, 132]);
     run.validate()?;
     let sequence = run.load()?;
     let (train, test) = run.split(&sequence.trajectories)?;
+    let test = test.expect("a test fraction of 0.75 holds tracks out");
     println!(
         "{}: {} frames, {} training and {} held-out points",
         sequence.name,

@@ -91,7 +91,11 @@ fn main() -> anyhow::Result<()> {
                 ..TrackFile::default()
             },
             drop_unobserved: true,
-            hold_out: Some((0.2, 0)),
+            hold_out: Some(doma::data::sequence::HoldOut {
+                fraction: 0.2,
+                spans: doma::data::tracks::DEFAULT_SPANS,
+                seed: 0,
+            }),
             ..LoadOptions::default()
         };
         let seq = load_sequence_with(&path, &options)?;

@@ -55,6 +55,7 @@ pub mod error;
 pub mod experiments;
 pub mod export;
 pub mod field;
+pub mod gaps;
 pub mod io;
 pub mod jacobian;
 pub mod knn;

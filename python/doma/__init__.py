@@ -198,8 +198,8 @@ def fit(
         backend: one of ``BACKENDS`` (default ``flex``).
         jacobian: ``analytic`` (fused, hand-derived; default) or ``autodiff``.
         seed: seed of the weights, the split and the frame order (default 0).
-        test_fraction: the fraction of tracks held out for the report (default 0.75, the
-            paper's).
+        test_fraction: the fraction of tracks held out of the fit for the report
+            (default 0: every track is fitted; the paper's Tab. 1 holds out 0.75).
         points_per_step, frames_per_step: a random subset of K training points per step;
             B frames per Adam step (defaults: all points, one frame: the paper's protocol).
         reference_frame: the frame whose positions are the input ``x`` (default: the most

@@ -45,6 +45,17 @@ pub struct HeldOut {
     pub truth: Vec<[f32; 3]>,
 }
 
+/// Observations hidden from a fit to measure gap filling ([`hold_out_spans`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct HoldOut {
+    /// The fraction of the observed entries hidden.
+    pub fraction: f64,
+    /// The span lengths, in frames (of the clip, after the stride).
+    pub spans: std::ops::RangeInclusive<usize>,
+    /// The seed of the draw.
+    pub seed: u64,
+}
+
 /// How a sequence is loaded: beside the file, everything that decides which entries a fit
 /// sees and where its canonical positions are.
 #[derive(Clone, Debug, Default)]
@@ -63,7 +74,7 @@ pub struct LoadOptions {
     pub drop_unobserved: bool,
     /// Hide this fraction of the observations, in spans, with this seed
     /// ([`hold_out_spans`]).
-    pub hold_out: Option<(f64, u64)>,
+    pub hold_out: Option<HoldOut>,
 }
 
 /// Loads `data` (`.traj`, `.anime`, `.npy`, `.npz`, or a folder of OBJ frames with equal
@@ -157,9 +168,9 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
         });
         kept = Some(keep);
     }
-    let held_out = match options.hold_out {
-        Some((fraction, seed)) => {
-            let entries = hold_out_spans(&tracks, fraction, seed)
+    let held_out = match &options.hold_out {
+        Some(h) => {
+            let entries = hold_out_spans(&tracks, h.fraction, h.spans.clone(), h.seed)
                 .map_err(|e| malformed(format!("--holdout-observations: {e}")))?;
             let n = tracks.points();
             let truth = entries

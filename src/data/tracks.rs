@@ -12,7 +12,7 @@
 //!   [`NEIGHBOURS`] nearest tracks seen in both.
 //!
 //! The unobserved entries then store the track's linear interpolation ([`interpolate`]),
-//! which is also the first gap-filling baseline; [`neighbour_motion`] is the second.
+//! which is also the first gap-filling baseline ([`crate::gaps::baselines`] has the others).
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -21,8 +21,7 @@ use super::Trajectories;
 use crate::knn::PointTree;
 use crate::{DomaError, Result};
 
-/// The neighbours whose motion places an unseen track's canonical position, and predicts
-/// a hidden entry in the k-NN baseline.
+/// The neighbours whose motion places an unseen track's canonical position.
 pub const NEIGHBOURS: usize = 8;
 
 /// Positions with an observed mask; unobserved entries are never read.
@@ -370,67 +369,20 @@ fn canonical_positions(
     Ok(canonical)
 }
 
-/// The k-NN gap-filling baseline: entry `(k, j)` predicted as `x_j` moved by the mean
-/// motion `x_i → y_i(k)` of the [`NEIGHBOURS`] tracks nearest to `x_j` in the canonical
-/// positions among those observed in frame `k` (track `j` itself excluded). An entry of a
-/// frame where no other track is observed stays at `x_j`.
-pub fn neighbour_motion(data: &Trajectories, entries: &[(usize, usize)]) -> Result<Vec<[f32; 3]>> {
-    let n = data.points();
-    let canonical = data.canonical();
-    let x = |i: usize| [canonical[3 * i], canonical[3 * i + 1], canonical[3 * i + 2]];
-    let mut out = vec![[0f32; 3]; entries.len()];
-    let mut order: Vec<usize> = (0..entries.len()).collect();
-    order.sort_by_key(|&e| entries[e].0);
-    let mut start = 0;
-    while start < order.len() {
-        let k = entries[order[start]].0;
-        let end = start + order[start..].partition_point(|&e| entries[e].0 == k);
-        let seen: Vec<usize> = (0..n).filter(|&i| data.is_observed(k, i)).collect();
-        let frame = data.frame(k);
-        let tree = if seen.is_empty() {
-            None
-        } else {
-            let cloud: Vec<[f32; 3]> = seen.iter().map(|&i| x(i)).collect();
-            Some(PointTree::new(&cloud)?)
-        };
-        for &e in &order[start..end] {
-            let j = entries[e].1;
-            let xj = x(j);
-            let mut y = xj;
-            if let Some(tree) = &tree {
-                let near: Vec<usize> = tree
-                    .nearest_k(&xj, (NEIGHBOURS + 1).min(seen.len()))
-                    .into_iter()
-                    .map(|m| seen[m])
-                    .filter(|&i| i != j)
-                    .take(NEIGHBOURS)
-                    .collect();
-                if !near.is_empty() {
-                    for c in 0..3 {
-                        let motion: f64 = near
-                            .iter()
-                            .map(|&i| (frame[3 * i + c] - canonical[3 * i + c]) as f64)
-                            .sum::<f64>()
-                            / near.len() as f64;
-                        y[c] = (xj[c] as f64 + motion) as f32;
-                    }
-                }
-            }
-            out[e] = y;
-        }
-        start = end;
-    }
-    Ok(out)
-}
+/// The span lengths of [`hold_out_spans`] unless asked otherwise: 2 to 10 frames.
+pub const DEFAULT_SPANS: std::ops::RangeInclusive<usize> = 2..=10;
 
 /// A seeded choice of about `fraction` of the observed entries of `tracks` to hide, in
-/// spans of 2 to 10 consecutive frames of one track (as a tracker loses a point for a
-/// while), leaving every track at least one observation. Returns the entries
-/// `(frame, point)`, sorted. Refuses a fraction outside `(0, 1)` or one that cannot be
-/// reached.
+/// spans of `spans` consecutive frames of one track (as a marker or a tracked point is lost
+/// for a while). Every span lies inside its track's observations: the track keeps an
+/// observation before it and one after, so that every hidden entry is a gap to fill, not an
+/// extrapolation past the ends. Returns the entries `(frame, point)`, sorted. Refuses a
+/// fraction outside `(0, 1)`, an empty or zero-length span range, and a fraction that cannot
+/// be reached.
 pub fn hold_out_spans(
     tracks: &Tracks,
     fraction: f64,
+    spans: std::ops::RangeInclusive<usize>,
     seed: u64,
 ) -> std::result::Result<Vec<(usize, usize)>, String> {
     if !(fraction > 0.0 && fraction < 1.0) {
@@ -438,36 +390,44 @@ pub fn hold_out_spans(
             "a held-out fraction of {fraction} is not strictly between 0 and 1"
         ));
     }
+    let (shortest, longest) = (*spans.start(), *spans.end());
+    if shortest == 0 || shortest > longest {
+        return Err(format!(
+            "spans of {shortest} to {longest} frames: the lengths must be at least 1 and in order"
+        ));
+    }
     let (t, n) = (tracks.frames, tracks.points);
     let target = (fraction * tracks.observed_count() as f64).round() as usize;
     let mut observed = tracks.observed.clone();
-    let mut left: Vec<usize> = (0..n)
-        .map(|i| (0..t).filter(|&k| observed[k * n + i]).count())
-        .collect();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut hidden = Vec::with_capacity(target);
-    let longest = t.clamp(1, 10);
     let mut tries = 0usize;
+    let cannot = |hid: usize| {
+        format!(
+            "cannot hide {fraction} of the {} observations in spans of {shortest} to {longest} \
+             frames inside the tracks' observations (hid {hid} of {target})",
+            tracks.observed_count()
+        )
+    };
     while hidden.len() < target {
         tries += 1;
-        if tries > 100 * (target + n) {
-            return Err(format!(
-                "cannot hide {fraction} of the {} observations in spans while every track \
-                 keeps one (hid {})",
-                tracks.observed_count(),
-                hidden.len()
-            ));
+        if tries > 100 * (target + n) || t < shortest + 2 || n == 0 {
+            return Err(cannot(hidden.len()));
         }
         let i = rng.random_range(0..n);
-        let len = rng.random_range(longest.min(2)..=longest);
-        let start = rng.random_range(0..=t - len);
+        // A frame before and one after the span.
+        let len = rng.random_range(shortest..=longest.min(t - 2));
+        let start = rng.random_range(1..=t - 1 - len);
+        let seen = |k: usize| observed[k * n + i];
+        if !(0..start).any(seen) || !(start + len..t).any(seen) {
+            continue;
+        }
         for k in start..start + len {
-            if hidden.len() == target || left[i] <= 1 {
+            if hidden.len() == target {
                 break;
             }
             if observed[k * n + i] {
                 observed[k * n + i] = false;
-                left[i] -= 1;
                 hidden.push((k, i));
             }
         }
@@ -553,25 +513,11 @@ mod tests {
     }
 
     #[test]
-    fn the_neighbour_baseline_moves_a_point_with_its_neighbours() {
-        // Rigid translation: every neighbour's motion is the point's own.
-        let positions = linear(3, 12);
-        let mut observed = vec![true; 36];
-        observed[2 * 12 + 5] = false;
-        let data = Tracks::new(3, 12, positions.clone(), observed)
-            .unwrap()
-            .into_trajectories(Some(0))
-            .unwrap();
-        let y = neighbour_motion(&data, &[(2, 5)]).unwrap();
-        assert_eq!(y[0], [52.0, 4.0, 0.0]);
-    }
-
-    #[test]
     fn held_out_spans_are_seeded_leave_every_track_seen_and_reach_the_fraction() {
         let tracks = Tracks::new(20, 30, linear(20, 30), vec![true; 600]).unwrap();
-        let a = hold_out_spans(&tracks, 0.25, 7).unwrap();
-        assert_eq!(a, hold_out_spans(&tracks, 0.25, 7).unwrap());
-        assert_ne!(a, hold_out_spans(&tracks, 0.25, 8).unwrap());
+        let a = hold_out_spans(&tracks, 0.25, DEFAULT_SPANS, 7).unwrap();
+        assert_eq!(a, hold_out_spans(&tracks, 0.25, DEFAULT_SPANS, 7).unwrap());
+        assert_ne!(a, hold_out_spans(&tracks, 0.25, DEFAULT_SPANS, 8).unwrap());
         assert_eq!(a.len(), 150);
         let mut hidden = tracks.clone();
         hidden.hide(&a);
@@ -583,6 +529,22 @@ mod tests {
             .filter(|&&(k, i)| set.contains(&(k + 1, i)) || (k > 0 && set.contains(&(k - 1, i))))
             .count();
         assert!(runs as f64 > 0.9 * a.len() as f64, "{runs} of {}", a.len());
-        assert!(hold_out_spans(&tracks, 1.0, 0).is_err());
+        // Inside the observations: every track keeps its first and last frame.
+        assert!(a.iter().all(|&(k, _)| k > 0 && k < 19));
+        assert!(hold_out_spans(&tracks, 1.0, DEFAULT_SPANS, 0).is_err());
+        assert!(hold_out_spans(&tracks, 0.2, 0..=3, 0).is_err());
+        // Long spans: runs of at least 6 frames, where the track had them.
+        let long = hold_out_spans(&tracks, 0.2, 6..=12, 3).unwrap();
+        let set: std::collections::BTreeSet<_> = long.iter().copied().collect();
+        let starts: Vec<_> = long
+            .iter()
+            .filter(|&&(k, i)| !set.contains(&(k.wrapping_sub(1), i)))
+            .collect();
+        assert!(
+            starts.len() * 6 <= long.len() + 6,
+            "{} spans for {} entries",
+            starts.len(),
+            long.len()
+        );
     }
 }

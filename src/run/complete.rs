@@ -5,10 +5,10 @@ use std::path::Path;
 use burn::tensor::Device;
 use doma_formats::npy::NpyValues;
 
-use super::RunDir;
+use super::{RunDir, field_everywhere};
 use crate::data::layout::Layout;
-use crate::data::mesh::as_points;
 use crate::data::sequence::read_tracks;
+use crate::gaps::carry_residuals;
 use crate::io::write_atomic;
 use crate::{DomaError, Result};
 
@@ -27,8 +27,9 @@ pub struct Completion {
 
 /// Writes every track of the run in `run` at every frame of its clip into the `.npz`
 /// `out`, in the input's frame, units and track order: an observed entry as the input
-/// holds it, every other one warped by the fitted field from the track's canonical
-/// position. The keys are `tracks` (`f32 [T, N, 3]`) and `observed` (`bool [T, N]`, the
+/// holds it, every other one filled by the fitted field from the track's canonical
+/// position plus the track's own residual carried across the gap
+/// ([`crate::gaps::carry_residuals`]), so that a fill meets the observations around it. The keys are `tracks` (`f32 [T, N, 3]`) and `observed` (`bool [T, N]`, the
 /// input's mask), plus `kept` (`i64 [N]`, the input's index of each track) when the fit
 /// dropped tracks that were never observed. `layout` writes the keys of a tracker's
 /// layout instead: PointOdyssey's `trajs_3d` (as `f32`), `visibs` (the mask) and `valids`
@@ -71,21 +72,29 @@ pub fn complete_run(
         });
     }
     let (t, n) = (data.frames(), data.points());
-    let mut tracks = input.positions().to_vec();
     let seen = input.observed();
-    let canonical = as_points(data.canonical());
+    // In the fit's normalised coordinates, where the field predicts.
     let (c, s) = (sequence.center, sequence.scale);
-    crate::warp::warp_frames(&field, &canonical, 0..t, t, device, |k, y| {
-        for (i, p) in y.iter().enumerate() {
-            if !seen[k * n + i] {
-                let e = 3 * (k * n + i);
-                for d in 0..3 {
-                    tracks[e + d] = p[d] * s + c[d];
-                }
-            }
-        }
-        Ok(())
-    })?;
+    let normalised: Vec<f32> = input
+        .positions()
+        .iter()
+        .enumerate()
+        .map(|(e, &v)| (v - c[e % 3]) / s)
+        .collect();
+    let predicted = field_everywhere(&field, data, device)?;
+    let filled = carry_residuals(t, n, &normalised, seen, &predicted);
+    // Observed entries exactly as the input holds them; filled ones back in its units.
+    let tracks: Vec<f32> = input
+        .positions()
+        .iter()
+        .zip(&filled)
+        .enumerate()
+        .map(
+            |(e, (&v, &f))| {
+                if seen[e / 3] { v } else { f * s + c[e % 3] }
+            },
+        )
+        .collect();
     let observed = seen.to_vec();
     let kept: Option<Vec<i64>> = sequence
         .kept

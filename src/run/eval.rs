@@ -4,12 +4,13 @@ use std::path::Path;
 
 use burn::tensor::Device;
 
-use super::{GapReport, Report, RunConfig, RunDir};
+use super::{GapErrors, GapReport, Report, RunConfig, RunDir};
 use crate::data::Trajectories;
 use crate::data::mesh::as_points;
 use crate::data::sequence::{LoadOptions, Sequence, load_sequence_with};
-use crate::data::tracks::neighbour_motion;
 use crate::field::MotionField;
+use crate::gaps::baselines::Marked;
+use crate::gaps::carry_residuals;
 use crate::io::load_json;
 use crate::metrics::{EPE_SCALE, field_epe_per_frame, mean_over_frames};
 use crate::train::IterationRecord;
@@ -41,10 +42,10 @@ pub fn evaluate(
 }
 
 /// The gap-filling report of `field` fitted under `config`: on the held-out observations
-/// of the training tracks, the field's EPE beside linear interpolation's and the k-NN
-/// baseline's ([`GapReport`]); `None` when nothing was held out. `placed` is the run's data
-/// as loaded (the baselines use its canonical positions, nothing the fit learned), `data`
-/// the same with the canonical positions the fit learned ([`RunDir::load_data`]).
+/// of the fitted tracks, doma's fill and the field's beside the baselines ([`GapReport`]);
+/// `None` when nothing was held out. `placed` is the run's data as loaded (the baselines use
+/// its observations, nothing the fit learned), `data` the same with the canonical positions
+/// the fit learned ([`RunDir::load_data`]).
 pub fn gap_report(
     field: &dyn MotionField,
     config: &RunConfig,
@@ -57,12 +58,12 @@ pub fn gap_report(
     };
     let (train_idx, _) = config.split_indices(data.trajectories.points())?;
     let train = data.trajectories.select_points(&train_idx)?;
-    let baseline = placed.trajectories.select_points(&train_idx)?;
+    let given = placed.trajectories.select_points(&train_idx)?;
     let mut row = vec![usize::MAX; data.trajectories.points()];
     for (r, &i) in train_idx.iter().enumerate() {
         row[i] = r;
     }
-    // The entries of training tracks, as (frame, training row), with their truth.
+    // The entries of fitted tracks, as (frame, fitted row), with their truth.
     let (entries, truth): (Vec<(usize, usize)>, Vec<[f32; 3]>) = held
         .entries
         .iter()
@@ -73,39 +74,90 @@ pub fn gap_report(
     if entries.is_empty() {
         return Ok(None);
     }
-    let l1 = |a: &[f32; 3], b: &[f32; 3]| (0..3).map(|c| (a[c] - b[c]).abs() as f64).sum::<f64>();
-    let mean = |pred: &[[f32; 3]]| {
-        EPE_SCALE * pred.iter().zip(&truth).map(|(a, b)| l1(a, b)).sum::<f64>()
-            / entries.len() as f64
+    let (t, n) = (given.frames(), given.points());
+    let all_seen = vec![true; t * n];
+    let observed = given.observed().unwrap_or(&all_seen);
+    let marked = Marked::new(t, n, given.positions(), observed);
+    let predicted = field_everywhere(field, &train, device)?;
+    let at = |filled: &[f32]| -> Vec<[f32; 3]> {
+        entries
+            .iter()
+            .map(|&(k, r)| {
+                let e = 3 * (k * n + r);
+                [filled[e], filled[e + 1], filled[e + 2]]
+            })
+            .collect()
     };
-    let linear: Vec<[f32; 3]> = entries
-        .iter()
-        .map(|&(k, r)| {
-            let p = &baseline.frame(k)[3 * r..3 * r + 3];
-            [p[0], p[1], p[2]]
-        })
-        .collect();
-    let neighbours = neighbour_motion(&baseline, &entries)?;
-    // The field's prediction, frame by frame over the frames that have entries.
-    let canonical = as_points(train.canonical());
-    let mut predicted = vec![[0f32; 3]; entries.len()];
-    let mut start = 0;
-    while start < entries.len() {
-        let k = entries[start].0;
-        let end = start + entries[start..].partition_point(|e| e.0 == k);
-        let x: Vec<[f32; 3]> = entries[start..end].iter().map(|e| canonical[e.1]).collect();
-        crate::warp::warp_frames(field, &x, k..k + 1, train.frames(), device, |_, y| {
-            predicted[start..end].copy_from_slice(&y);
-            Ok(())
-        })?;
-        start = end;
-    }
+    let doma = at(&carry_residuals(
+        t,
+        n,
+        given.positions(),
+        observed,
+        &predicted,
+    ));
+    let methods = [
+        doma,
+        at(&predicted),
+        at(&marked.linear()),
+        at(&marked.spline()),
+        marked.neighbours(&entries),
+        at(&marked.low_rank()),
+    ];
+    let errors = |metric: &dyn Fn(&[f32; 3], &[f32; 3]) -> f64| {
+        let e: Vec<f64> = methods
+            .iter()
+            .map(|pred| {
+                pred.iter()
+                    .zip(&truth)
+                    .map(|(a, b)| metric(a, b))
+                    .sum::<f64>()
+                    / entries.len() as f64
+            })
+            .collect();
+        GapErrors {
+            doma: e[0],
+            field: e[1],
+            linear: e[2],
+            spline: e[3],
+            neighbours: e[4],
+            low_rank: e[5],
+        }
+    };
+    let l1 = |a: &[f32; 3], b: &[f32; 3]| {
+        EPE_SCALE * (0..3).map(|c| (a[c] - b[c]).abs() as f64).sum::<f64>()
+    };
+    let scale = data.scale as f64;
+    let euclid = |a: &[f32; 3], b: &[f32; 3]| {
+        scale
+            * (0..3)
+                .map(|c| ((a[c] - b[c]) as f64).powi(2))
+                .sum::<f64>()
+                .sqrt()
+    };
     Ok(Some(GapReport {
         entries: entries.len(),
-        epe_x1e4: mean(&predicted),
-        linear_x1e4: mean(&linear),
-        neighbours_x1e4: mean(&neighbours),
+        epe_x1e4: errors(&l1),
+        distance: errors(&euclid),
     }))
+}
+
+/// The field's prediction `[T, N, 3]` of every track of `data` (from its canonical
+/// position) at every frame.
+pub fn field_everywhere(
+    field: &dyn MotionField,
+    data: &Trajectories,
+    device: &Device,
+) -> Result<Vec<f32>> {
+    let (t, n) = (data.frames(), data.points());
+    let canonical = as_points(data.canonical());
+    let mut predicted = vec![0f32; 3 * t * n];
+    crate::warp::warp_frames(field, &canonical, 0..t, t, device, |k, y| {
+        for (i, p) in y.iter().enumerate() {
+            predicted[3 * (k * n + i)..3 * (k * n + i) + 3].copy_from_slice(p);
+        }
+        Ok(())
+    })?;
+    Ok(predicted)
 }
 
 /// The metrics of the run in `run`: on its own held-out points, or on every point of
@@ -115,10 +167,10 @@ pub fn eval_run(run: &RunDir, data: Option<&Path>, device: &Device) -> Result<Re
     let field = run.load_field(&config, device)?;
     let own = run.load_data(&config)?;
     let (truth, what) = match data {
-        None => (
-            config.split(&own.trajectories)?.1,
-            "the held-out points of the fitted data".to_string(),
-        ),
+        None => {
+            let (truth, what) = config.measured(&own.trajectories)?;
+            (truth, what.to_string())
+        }
         Some(path) => {
             // Read as the run read its own data (a tracker's layout and frame for a
             // tracker's .npz, dropped tracks).

@@ -14,6 +14,8 @@ use crate::train::{Fitted, Hooks, Outcome, Trainer};
 use crate::{DomaError, Result};
 
 /// How a fit ended.
+// Returned once per fit: boxing the report would cost every caller a deref for nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug, PartialEq)]
 pub enum FitOutcome {
     /// All iterations ran; `model.bpk` and `report.json` are written.
@@ -128,15 +130,14 @@ fn finish(
         }
         None => sequence,
     };
-    let test = &config.split(&sequence.trajectories)?.1;
+    let (test, what) = config.measured(&sequence.trajectories)?;
     write_atomic(&run.model(), &encoded)?;
-    let what = "the held-out points of the fitted data";
     let report = Report {
         checkpoint_bytes: encoded.len() as u64,
         iterations: fitted.history.len(),
         seconds: fitted.seconds,
         held_out_observations: gap_report(&fitted.field, config, placed, sequence, device)?,
-        ..evaluate(&fitted.field, test, what, device)?
+        ..evaluate(&fitted.field, &test, what, device)?
     };
     save_json(&report, &run.report())?;
     Ok(report)

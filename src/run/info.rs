@@ -45,6 +45,17 @@ pub struct RunInfo {
     /// See `reference_frame`.
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub tracks_unseen_in_reference: Option<usize>,
+    /// The tracks the field was fitted to (of `points`); the others are held out for the
+    /// report (`test_fraction`).
+    #[serde(default)]
+    pub fitted_tracks: usize,
+    /// The test fraction of the split.
+    #[serde(default)]
+    pub test_fraction: f64,
+    /// For tracks with gaps: the frames where no fitted track is observed (they add
+    /// nothing to the fit; the field there follows from the frames around them).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub frames_without_observations: Option<usize>,
 }
 
 /// Describes the run in `run`.
@@ -60,6 +71,10 @@ pub fn info(run: &RunDir) -> Result<RunInfo> {
     let masked = data.observed().is_some();
     let unseen = (0..data.points())
         .filter(|&i| !data.is_observed(data.reference(), i))
+        .count();
+    let (fitted, _) = config.split_indices(data.points())?;
+    let empty_frames = (0..data.frames())
+        .filter(|&k| !fitted.iter().any(|&i| data.is_observed(k, i)))
         .count();
     let model = &config.fit.model;
     let shape = match model {
@@ -81,5 +96,8 @@ pub fn info(run: &RunDir) -> Result<RunInfo> {
         observed_entries: masked.then(|| data.observed_count()),
         reference_frame: masked.then(|| data.reference()),
         tracks_unseen_in_reference: masked.then_some(unseen),
+        fitted_tracks: fitted.len(),
+        test_fraction: config.test_fraction,
+        frames_without_observations: masked.then_some(empty_frames),
     })
 }

@@ -28,7 +28,7 @@ mod spec;
 mod warp;
 
 pub use complete::{Completion, complete_run};
-pub use eval::{eval_run, evaluate, gap_report};
+pub use eval::{eval_run, evaluate, field_everywhere, gap_report};
 pub use fit::{FitOutcome, fit_run};
 pub use info::{RunInfo, info};
 pub use lock::RunLock;
@@ -44,7 +44,8 @@ use serde::{Deserialize, Serialize};
 use crate::checkpoint::decode_checkpoint;
 use crate::data::Trajectories;
 use crate::data::layout::TrackFile;
-use crate::data::sequence::{LoadOptions, Sequence, load_sequence_with, split_indices};
+use crate::data::sequence::{HoldOut, LoadOptions, Sequence, load_sequence_with, split_indices};
+use crate::data::tracks::DEFAULT_SPANS;
 use crate::field::model::{Model, ModelConfig};
 use crate::train::FitConfig;
 use crate::{DomaError, Result};
@@ -60,7 +61,8 @@ pub struct RunConfig {
     pub frames: Option<[usize; 2]>,
     /// Every `stride`-th frame of the clip.
     pub stride: usize,
-    /// The fraction of points held out for the report (the paper: 0.75).
+    /// The fraction of tracks held out of the fit for the report (0: every track is
+    /// fitted; the paper's Tab. 1: 0.75).
     pub test_fraction: f64,
     /// Iterations between checkpoints.
     pub checkpoint_every: usize,
@@ -87,6 +89,10 @@ pub struct RunConfig {
     /// measure gap filling (seeded by the fit's seed).
     #[serde(default)]
     pub holdout_observations: Option<f64>,
+    /// The shortest and longest span of the held-out observations, in frames (default
+    /// 2 and 10).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout_span: Option<[usize; 2]>,
 }
 
 fn default_backend() -> crate::backend::BackendKind {
@@ -94,15 +100,15 @@ fn default_backend() -> crate::backend::BackendKind {
 }
 
 impl RunConfig {
-    /// A run of `data` with the given fit, the paper's 25 % / 75 % split and a checkpoint
-    /// every 50 iterations.
+    /// A run of `data` with the given fit, every track fitted (no track held out) and a
+    /// checkpoint every 50 iterations.
     pub fn new(data: PathBuf, fit: FitConfig) -> Self {
         RunConfig {
             data,
             mesh: None,
             frames: None,
             stride: 1,
-            test_fraction: 0.75,
+            test_fraction: 0.0,
             checkpoint_every: 50,
             backend: default_backend(),
             fit,
@@ -111,15 +117,16 @@ impl RunConfig {
             reference_frame: None,
             drop_unobserved: false,
             holdout_observations: None,
+            holdout_span: None,
         }
     }
 
     /// Refuses values that cannot run.
     pub fn validate(&self) -> Result<()> {
         self.fit.validate()?;
-        if !(self.test_fraction > 0.0 && self.test_fraction < 1.0) {
+        if !(0.0..1.0).contains(&self.test_fraction) {
             return Err(DomaError::InvalidConfig(format!(
-                "the test fraction {} must be strictly between 0 and 1",
+                "the test fraction {} must be at least 0 and below 1",
                 self.test_fraction
             )));
         }
@@ -143,13 +150,21 @@ impl RunConfig {
                 file: self.tracks.clone(),
                 reference: self.reference_frame,
                 drop_unobserved: self.drop_unobserved,
-                hold_out: self.holdout_observations.map(|f| (f, self.fit.seed)),
+                hold_out: self.holdout_observations.map(|fraction| HoldOut {
+                    fraction,
+                    spans: self.holdout_span.map_or(DEFAULT_SPANS, |[a, b]| a..=b),
+                    seed: self.fit.seed,
+                }),
             },
         )
     }
 
-    /// The indices of the training and held-out points of `n` (a seeded split).
+    /// The indices of the training and held-out points of `n` (a seeded split; every
+    /// point trains at a test fraction of 0).
     pub fn split_indices(&self, n: usize) -> Result<(Vec<usize>, Vec<usize>)> {
+        if self.test_fraction == 0.0 {
+            return Ok(((0..n).collect(), Vec::new()));
+        }
         split_indices(n, 1.0 - self.test_fraction, self.fit.seed).map_err(|e| {
             DomaError::Malformed {
                 path: self.data.clone(),
@@ -158,10 +173,29 @@ impl RunConfig {
         })
     }
 
-    /// The training and held-out points of `data` (a seeded split).
-    pub fn split(&self, data: &Trajectories) -> Result<(Trajectories, Trajectories)> {
+    /// The training and held-out points of `data` (a seeded split; no held-out points
+    /// at a test fraction of 0).
+    pub fn split(&self, data: &Trajectories) -> Result<(Trajectories, Option<Trajectories>)> {
         let (train, test) = self.split_indices(data.points())?;
-        Ok((data.select_points(&train)?, data.select_points(&test)?))
+        if test.is_empty() {
+            return Ok((data.clone(), None));
+        }
+        Ok((
+            data.select_points(&train)?,
+            Some(data.select_points(&test)?),
+        ))
+    }
+
+    /// What a report measures: the held-out tracks, or with none held out the fitted
+    /// tracks at their observed entries (a training error, named as such).
+    pub fn measured(&self, data: &Trajectories) -> Result<(Trajectories, &'static str)> {
+        Ok(match self.split(data)? {
+            (_, Some(test)) => (test, "the held-out points of the fitted data"),
+            (train, None) => (
+                train,
+                "the fitted tracks' own observations (no track held out: a training error)",
+            ),
+        })
     }
 }
 
@@ -193,21 +227,47 @@ pub struct Report {
     pub held_out_observations: Option<GapReport>,
 }
 
-/// The EPE × 10⁴ (the L1 distance, summed over x, y, z, averaged over the entries) on the
-/// observations of the training tracks that the fit did not see, by the fitted field and
-/// by two baselines on the same entries from the same observations: each track's linear
-/// interpolation ([`crate::data::tracks::interpolate`]) and its nearest neighbours' motion
-/// ([`crate::data::tracks::neighbour_motion`]).
+/// Gap filling (`--holdout-observations`): on the observations of the fitted tracks that
+/// the fit did not see, the error of doma's fill ([`crate::gaps::carry_residuals`]: the
+/// field plus each track's residual carried across the gap), of the field alone, and of the
+/// baselines ([`crate::gaps::baselines::Marked`]) on the same entries from the same
+/// observations.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct GapReport {
-    /// The hidden observations of the training tracks.
+    /// The hidden observations of the fitted tracks.
     pub entries: usize,
-    /// The fitted field's EPE × 10⁴.
-    pub epe_x1e4: f64,
-    /// Linear interpolation's EPE × 10⁴.
-    pub linear_x1e4: f64,
-    /// The k-NN baseline's EPE × 10⁴.
-    pub neighbours_x1e4: f64,
+    /// The EPE × 10⁴ (the L1 distance summed over x, y, z, averaged over the entries, in
+    /// the normalised coordinates of the fit).
+    pub epe_x1e4: GapErrors,
+    /// The mean Euclidean distance to the truth, in the data's own units (mm for a C3D
+    /// file's markers read in mm, metres for a `.npz` in metres).
+    pub distance: GapErrors,
+}
+
+/// One error per gap filler, on the same entries.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct GapErrors {
+    /// doma's fill: the field plus the carried residual (what `doma complete` writes).
+    pub doma: f64,
+    /// The fitted field alone, from each track's canonical position.
+    pub field: f64,
+    /// Each track's linear interpolation.
+    pub linear: f64,
+    /// Each track's natural cubic spline.
+    pub spline: f64,
+    /// The neighbours' motion.
+    pub neighbours: f64,
+    /// The low-rank (PCA) reconstruction.
+    pub low_rank: f64,
+}
+
+impl GapErrors {
+    /// The lowest error among the baselines (linear, spline, neighbours, low rank).
+    pub fn best_baseline(&self) -> f64 {
+        [self.linear, self.spline, self.neighbours, self.low_rank]
+            .into_iter()
+            .fold(f64::INFINITY, f64::min)
+    }
 }
 
 /// A per-frame list with NaN (a frame with nothing to measure) written as JSON's `null`.

@@ -40,6 +40,7 @@ fn config() -> RunConfig {
         .with_jacobian(JacobianKind::Analytic)
         .with_seed(3);
     let mut c = RunConfig::new(faerie(), fit);
+    c.test_fraction = 0.75;
     c.frames = Some([112, 118]);
     c.checkpoint_every = 2;
     c
@@ -306,7 +307,8 @@ fn nan_weights_are_blamed_on_model_bpk_not_on_the_data() {
 fn a_sequence_too_small_to_split_names_its_file() {
     let one_point = doma::data::Trajectories::new(3, 1, vec![0.0; 9]).unwrap();
     let fit = FitConfig::doma(DomaFieldConfig::new(Variant::Trans));
-    let run = RunConfig::new(PathBuf::from("/data/one_point.traj"), fit);
+    let mut run = RunConfig::new(PathBuf::from("/data/one_point.traj"), fit);
+    run.test_fraction = 0.75;
     let err = run.split(&one_point).unwrap_err().to_string();
     assert!(
         err.contains("one_point.traj") && err.contains("--test-fraction"),

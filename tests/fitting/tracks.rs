@@ -101,10 +101,17 @@ fn frames_where_nothing_is_observed_add_nothing_and_never_panic() {
         // Nothing observed there: nothing to measure.
         assert!(report.epe_per_frame_x1e4[2].is_nan(), "{report:?}");
     }
+    // The completion fills the empty frames too, every value finite.
+    let out = dir.join("complete.npz");
+    let done = complete_run(&RunDir::new(dir.join("r2")), &out, None, &Device::flex()).unwrap();
+    let (filled, _) = doma::data::sequence::read_tracks(&out, &TrackFile::default()).unwrap();
+    assert_eq!(done.frames, t);
+    assert!(filled.positions().iter().all(|v| v.is_finite()));
+    assert_eq!(done.observed + done.filled, t * done.tracks);
 }
 
 #[test]
-fn held_out_observations_are_reported_beside_both_baselines_and_eval_repeats_them() {
+fn held_out_observations_are_reported_beside_every_baseline_and_eval_repeats_them() {
     let v = view();
     let dir = common::scratch("doma-holdout");
     let npz = dir.join("clip.npz");
@@ -116,8 +123,17 @@ fn held_out_observations_are_reported_beside_both_baselines_and_eval_repeats_the
     });
     let gaps = report.held_out_observations.clone().expect("a gap report");
     assert!(gaps.entries > 0);
-    for e in [gaps.epe_x1e4, gaps.linear_x1e4, gaps.neighbours_x1e4] {
-        assert!(e.is_finite() && e > 0.0, "{gaps:?}");
+    for m in [gaps.epe_x1e4, gaps.distance] {
+        for e in [
+            m.doma,
+            m.field,
+            m.linear,
+            m.spline,
+            m.neighbours,
+            m.low_rank,
+        ] {
+            assert!(e.is_finite() && e > 0.0, "{gaps:?}");
+        }
     }
     let again = eval_run(&run, None, &Device::flex()).unwrap();
     assert_eq!(again.held_out_observations, Some(gaps));
@@ -127,6 +143,8 @@ fn held_out_observations_are_reported_beside_both_baselines_and_eval_repeats_the
     assert!(about.observed_entries.unwrap() < about.frames * about.points);
     assert!(about.reference_frame.unwrap() < about.frames);
     assert!(about.tracks_unseen_in_reference.is_some());
+    assert_eq!(about.test_fraction, 0.25);
+    assert!(about.fitted_tracks < about.points && about.fitted_tracks > 0);
     // The plots of a run with gaps: the points observed in each plotted frame.
     let plots = doma::run::plot_run(&run, None, &Device::flex()).unwrap();
     assert!(

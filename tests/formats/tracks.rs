@@ -7,7 +7,7 @@ use crate::common;
 use std::path::Path;
 
 use doma::data::layout::{CoordFrame, Layout, TrackFile, read_npz_tracks};
-use doma::data::sequence::{LoadOptions, load_sequence_with};
+use doma::data::sequence::{HoldOut, LoadOptions, load_sequence_with};
 use doma::data::tracker::TrackerView;
 use doma_formats::npy::NpyValues;
 use doma_formats::npy::f32_to_f16;
@@ -246,7 +246,11 @@ fn a_hidden_entry_s_stored_value_changes_nothing() {
     .unwrap();
     let options = LoadOptions {
         drop_unobserved: true,
-        hold_out: Some((0.2, 4)),
+        hold_out: Some(HoldOut {
+            fraction: 0.2,
+            spans: doma::data::tracks::DEFAULT_SPANS,
+            seed: 4,
+        }),
         ..LoadOptions::default()
     };
     let (sa, sb) = (

@@ -1,0 +1,499 @@
+//! The gap-filling baselines that a motion field must beat on real markers: each track's
+//! linear and natural-cubic-spline interpolation, the neighbours' motion (the simplest form
+//! of the "pattern" or "rigid-body" fill of capture software), and a low-rank (PCA)
+//! reconstruction of the marker trajectories (Gløersen & Federolf 2016; Tits et al. 2018).
+//! All of them see only the observed entries (docs/design.md §7).
+
+/// Neighbours averaged by [`Marked::neighbours`].
+pub const NEIGHBOURS: usize = 4;
+
+/// Tracks with a mask: `positions` `[T, N, 3]` and `observed` `[T, N]`, frame-major.
+#[derive(Clone, Copy, Debug)]
+pub struct Marked<'a> {
+    /// Frames `T`.
+    pub frames: usize,
+    /// Tracks `N`.
+    pub points: usize,
+    /// `[T, N, 3]`; unobserved entries are never read.
+    pub positions: &'a [f32],
+    /// `[T, N]`.
+    pub observed: &'a [bool],
+}
+
+impl<'a> Marked<'a> {
+    /// The view of `positions` and `observed`; panics if their lengths are not `3·T·N` and
+    /// `T·N` (a caller's bug, not bad data).
+    pub fn new(frames: usize, points: usize, positions: &'a [f32], observed: &'a [bool]) -> Self {
+        assert_eq!(positions.len(), 3 * frames * points);
+        assert_eq!(observed.len(), frames * points);
+        Marked {
+            frames,
+            points,
+            positions,
+            observed,
+        }
+    }
+
+    fn seen(&self, k: usize, i: usize) -> bool {
+        self.observed[k * self.points + i]
+    }
+
+    fn at(&self, k: usize, i: usize) -> [f32; 3] {
+        let e = 3 * (k * self.points + i);
+        [
+            self.positions[e],
+            self.positions[e + 1],
+            self.positions[e + 2],
+        ]
+    }
+
+    /// Each track's linear interpolation in frame index between the observations on
+    /// either side of a gap, held at the first or last observation past the ends.
+    pub fn linear(&self) -> Vec<f32> {
+        let mut out = self.positions.to_vec();
+        crate::data::tracks::interpolate(self.frames, self.points, &mut out, self.observed);
+        out
+    }
+
+    /// Each track's natural cubic spline through its observed frames (per coordinate, in
+    /// frame index), held at the first or last observation past the ends; linear for a
+    /// track with fewer than 4 observations.
+    pub fn spline(&self) -> Vec<f32> {
+        let mut out = self.linear();
+        let (t, n) = (self.frames, self.points);
+        for i in 0..n {
+            let knots: Vec<usize> = (0..t).filter(|&k| self.seen(k, i)).collect();
+            if knots.len() < 4 || knots.len() == t {
+                continue;
+            }
+            let x: Vec<f64> = knots.iter().map(|&k| k as f64).collect();
+            for c in 0..3 {
+                let y: Vec<f64> = knots.iter().map(|&k| self.at(k, i)[c] as f64).collect();
+                let m = natural_second_derivatives(&x, &y);
+                let mut j = 0;
+                for k in knots[0] + 1..*knots.last().expect("4 knots") {
+                    if self.seen(k, i) {
+                        continue;
+                    }
+                    while x[j + 1] < k as f64 {
+                        j += 1;
+                    }
+                    out[3 * (k * n + i) + c] = spline_at(&x, &y, &m, j, k as f64) as f32;
+                }
+            }
+        }
+        out
+    }
+
+    /// The neighbours' motion at each entry `(k, i)`: from the nearest frame `s` where track
+    /// `i` is observed (the earlier of two as near), among the other tracks observed at both
+    /// `s` and `k`, the [`NEIGHBOURS`] nearest to `i` at `s`; `x_i(s)` moved by their mean
+    /// motion `x_j(k) − x_j(s)`, or held at `x_i(s)` when no track is observed at both.
+    /// An entry of a track never observed stays NaN.
+    pub fn neighbours(&self, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
+        let n = self.points;
+        let mut near: Vec<(f32, usize)> = Vec::with_capacity(n);
+        entries
+            .iter()
+            .map(|&(k, i)| {
+                let Some(s) = (0..self.frames)
+                    .filter(|&s| self.seen(s, i))
+                    .min_by_key(|&s| (s.abs_diff(k), s))
+                else {
+                    return [f32::NAN; 3];
+                };
+                let xi = self.at(s, i);
+                near.clear();
+                near.extend(
+                    (0..n)
+                        .filter(|&j| j != i && self.seen(s, j) && self.seen(k, j))
+                        .map(|j| {
+                            let xj = self.at(s, j);
+                            let d: f32 = (0..3).map(|c| (xj[c] - xi[c]).powi(2)).sum();
+                            (d, j)
+                        }),
+                );
+                let m = NEIGHBOURS.min(near.len());
+                if m == 0 {
+                    return xi;
+                }
+                near.select_nth_unstable_by(m - 1, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                std::array::from_fn(|c| {
+                    let motion: f64 = near[..m]
+                        .iter()
+                        .map(|&(_, j)| (self.at(k, j)[c] - self.at(s, j)[c]) as f64)
+                        .sum::<f64>()
+                        / m as f64;
+                    (xi[c] as f64 + motion) as f32
+                })
+            })
+            .collect()
+    }
+
+    /// A low-rank reconstruction: the `[T, 3N]` matrix of the tracks (those observed
+    /// somewhere), its unobserved entries started at [`Marked::linear`], then replaced by
+    /// the projection of the centred matrix onto its principal components that hold
+    /// [`LOW_RANK_ENERGY`] of its variance, until they change by less than 10⁻⁶ of the
+    /// data's spread (at most [`LOW_RANK_ITERATIONS`] rounds): the iterative PCA fill of
+    /// the gap-filling literature.
+    pub fn low_rank(&self) -> Vec<f32> {
+        let (t, n) = (self.frames, self.points);
+        let mut out = self.linear();
+        let tracks: Vec<usize> = (0..n)
+            .filter(|&i| (0..t).any(|k| self.seen(k, i)))
+            .collect();
+        let d = 3 * tracks.len();
+        if t < 2 || d == 0 {
+            return out;
+        }
+        // The matrix, row k = frame k, columns 3·r + c of track tracks[r].
+        let mut x = vec![0f64; t * d];
+        let mut missing = Vec::new();
+        for k in 0..t {
+            for (r, &i) in tracks.iter().enumerate() {
+                for c in 0..3 {
+                    x[k * d + 3 * r + c] = out[3 * (k * n + i) + c] as f64;
+                    if !self.seen(k, i) {
+                        missing.push(k * d + 3 * r + c);
+                    }
+                }
+            }
+        }
+        if missing.is_empty() {
+            return out;
+        }
+        let spread = x.iter().fold(0f64, |m, v| m.max(v.abs())).max(1e-30);
+        for _ in 0..LOW_RANK_ITERATIONS {
+            let r = low_rank_projection(&x, t, d, LOW_RANK_ENERGY);
+            let mut change = 0f64;
+            for &e in &missing {
+                change = change.max((r[e] - x[e]).abs());
+                x[e] = r[e];
+            }
+            if change < 1e-6 * spread {
+                break;
+            }
+        }
+        for k in 0..t {
+            for (r, &i) in tracks.iter().enumerate() {
+                for c in 0..3 {
+                    out[3 * (k * n + i) + c] = x[k * d + 3 * r + c] as f32;
+                }
+            }
+        }
+        out
+    }
+}
+
+/// The share of the variance kept by [`Marked::low_rank`].
+pub const LOW_RANK_ENERGY: f64 = 0.99;
+
+/// The most rounds of [`Marked::low_rank`].
+pub const LOW_RANK_ITERATIONS: usize = 100;
+
+/// The second derivatives of the natural cubic spline through `(x, y)` (0 at both ends),
+/// by the tridiagonal (Thomas) solve.
+fn natural_second_derivatives(x: &[f64], y: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    let mut m = vec![0f64; n];
+    if n < 3 {
+        return m;
+    }
+    // Rows 1..n-1: h[j-1] m[j-1] + 2 (h[j-1] + h[j]) m[j] + h[j] m[j+1] = 6 (slope_j − slope_{j-1}).
+    let h: Vec<f64> = x.windows(2).map(|w| w[1] - w[0]).collect();
+    let mut diag = vec![0f64; n];
+    let mut rhs = vec![0f64; n];
+    for j in 1..n - 1 {
+        diag[j] = 2.0 * (h[j - 1] + h[j]);
+        rhs[j] = 6.0 * ((y[j + 1] - y[j]) / h[j] - (y[j] - y[j - 1]) / h[j - 1]);
+    }
+    for j in 2..n - 1 {
+        let w = h[j - 1] / diag[j - 1];
+        diag[j] -= w * h[j - 1];
+        rhs[j] -= w * rhs[j - 1];
+    }
+    for j in (1..n - 1).rev() {
+        m[j] = (rhs[j] - h[j] * m[j + 1]) / diag[j];
+    }
+    m
+}
+
+/// The spline of [`natural_second_derivatives`] at `v` in `[x[j], x[j+1]]`.
+fn spline_at(x: &[f64], y: &[f64], m: &[f64], j: usize, v: f64) -> f64 {
+    let h = x[j + 1] - x[j];
+    let (a, b) = ((x[j + 1] - v) / h, (v - x[j]) / h);
+    a * y[j] + b * y[j + 1] + ((a * a * a - a) * m[j] + (b * b * b - b) * m[j + 1]) * h * h / 6.0
+}
+
+/// `x` (`[t, d]`, row-major) projected onto its column means plus the principal components
+/// that hold `energy` of its variance.
+fn low_rank_projection(x: &[f64], t: usize, d: usize, energy: f64) -> Vec<f64> {
+    let mut mean = vec![0f64; d];
+    for row in x.chunks(d) {
+        for (m, v) in mean.iter_mut().zip(row) {
+            *m += v / t as f64;
+        }
+    }
+    let c: Vec<f64> = x
+        .chunks(d)
+        .flat_map(|row| row.iter().zip(&mean).map(|(v, m)| v - m))
+        .collect();
+    // The components from the smaller Gram matrix: frames × frames or columns × columns.
+    let by_frames = t <= d;
+    let g_size = if by_frames { t } else { d };
+    let mut g = vec![0f64; g_size * g_size];
+    for a in 0..g_size {
+        for b in a..g_size {
+            let v: f64 = if by_frames {
+                (0..d).map(|j| c[a * d + j] * c[b * d + j]).sum()
+            } else {
+                (0..t).map(|k| c[k * d + a] * c[k * d + b]).sum()
+            };
+            g[a * g_size + b] = v;
+            g[b * g_size + a] = v;
+        }
+    }
+    let (values, vectors) = symmetric_eigen(g, g_size);
+    let mut order: Vec<usize> = (0..g_size).collect();
+    order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
+    let total: f64 = values.iter().map(|v| v.max(0.0)).sum();
+    let mut kept = Vec::new();
+    let mut held = 0f64;
+    for &o in &order {
+        if total <= 0.0 || held >= energy * total {
+            break;
+        }
+        held += values[o].max(0.0);
+        kept.push(o);
+    }
+    let mut out = vec![0f64; t * d];
+    for &o in &kept {
+        let v: Vec<f64> = (0..g_size).map(|a| vectors[a * g_size + o]).collect();
+        if by_frames {
+            // u uᵀ C: the row combination of the frames.
+            let mut row = vec![0f64; d];
+            for (k, &vk) in v.iter().enumerate() {
+                for j in 0..d {
+                    row[j] += vk * c[k * d + j];
+                }
+            }
+            for (k, &vk) in v.iter().enumerate() {
+                for j in 0..d {
+                    out[k * d + j] += vk * row[j];
+                }
+            }
+        } else {
+            // C v vᵀ.
+            for k in 0..t {
+                let p: f64 = (0..d).map(|j| c[k * d + j] * v[j]).sum();
+                for j in 0..d {
+                    out[k * d + j] += p * v[j];
+                }
+            }
+        }
+    }
+    for row in out.chunks_mut(d) {
+        for (o, m) in row.iter_mut().zip(&mean) {
+            *o += m;
+        }
+    }
+    out
+}
+
+/// The eigenvalues and eigenvectors (columns of the returned `[n, n]`) of the symmetric
+/// `a` (`[n, n]`, row-major), by cyclic Jacobi rotations.
+fn symmetric_eigen(mut a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut v = vec![0f64; n * n];
+    for i in 0..n {
+        v[i * n + i] = 1.0;
+    }
+    let scale: f64 = a.iter().map(|x| x * x).sum::<f64>().max(1e-300);
+    for _sweep in 0..60 {
+        let off: f64 = (0..n)
+            .flat_map(|p| (0..n).filter(move |&q| q != p).map(move |q| (p, q)))
+            .map(|(p, q)| a[p * n + q] * a[p * n + q])
+            .sum();
+        if off <= 1e-24 * scale {
+            break;
+        }
+        for p in 0..n {
+            for q in p + 1..n {
+                let apq = a[p * n + q];
+                if apq.abs() <= 1e-300 {
+                    continue;
+                }
+                let theta = (a[q * n + q] - a[p * n + p]) / (2.0 * apq);
+                let tan = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let tan = if theta == 0.0 { 1.0 } else { tan };
+                let cos = 1.0 / (tan * tan + 1.0).sqrt();
+                let sin = tan * cos;
+                for k in 0..n {
+                    let (akp, akq) = (a[k * n + p], a[k * n + q]);
+                    a[k * n + p] = cos * akp - sin * akq;
+                    a[k * n + q] = sin * akp + cos * akq;
+                }
+                for k in 0..n {
+                    let (apk, aqk) = (a[p * n + k], a[q * n + k]);
+                    a[p * n + k] = cos * apk - sin * aqk;
+                    a[q * n + k] = sin * apk + cos * aqk;
+                }
+                for k in 0..n {
+                    let (vkp, vkq) = (v[k * n + p], v[k * n + q]);
+                    v[k * n + p] = cos * vkp - sin * vkq;
+                    v[k * n + q] = sin * vkp + cos * vkq;
+                }
+            }
+        }
+    }
+    ((0..n).map(|i| a[i * n + i]).collect(), v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One track per closure, `T` frames.
+    fn tracks(t: usize, f: &[&dyn Fn(f64) -> [f64; 3]]) -> Vec<f32> {
+        (0..t)
+            .flat_map(|k| f.iter().flat_map(move |g| g(k as f64).map(|v| v as f32)))
+            .collect()
+    }
+
+    #[test]
+    fn the_spline_reproduces_a_cubic_inside_and_holds_past_the_ends() {
+        // A natural spline is exact for a line, and reproduces a cubic closely inside.
+        let line = |k: f64| [2.0 * k + 1.0, -k, 0.5];
+        let positions = tracks(12, &[&line]);
+        let observed: Vec<bool> = (0..12).map(|k| ![0, 4, 5, 6, 11].contains(&k)).collect();
+        let filled = Marked::new(12, 1, &positions, &observed).spline();
+        for k in 1..11 {
+            for c in 0..3 {
+                assert!((filled[3 * k + c] - positions[3 * k + c]).abs() < 1e-4);
+            }
+        }
+        // Past the ends: held at the first and last observation.
+        assert_eq!(&filled[0..3], &positions[3..6]);
+        assert_eq!(&filled[33..36], &positions[30..33]);
+    }
+
+    #[test]
+    fn natural_spline_values_match_a_hand_solved_case() {
+        // Knots (0,0), (1,1), (2,0): m1 = 6·(−1 − 1)/(2·2) = −3, so at 0.5:
+        // 0.5·0 + 0.5·1 + (0.125 − 0.5)·(−3)/6 = 0.5 + 0.1875.
+        let (x, y) = ([0.0, 1.0, 2.0], [0.0, 1.0, 0.0]);
+        let m = natural_second_derivatives(&x, &y);
+        assert_eq!(m, vec![0.0, -3.0, 0.0]);
+        assert!((spline_at(&x, &y, &m, 0, 0.5) - 0.6875).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_neighbours_carry_a_hidden_marker_with_their_rigid_motion() {
+        // A rigid translation of 5 markers; marker 0 hidden at frames 2..5.
+        let t = 7;
+        let offsets = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [9.0, 9.0, 9.0],
+        ];
+        let motion = |k: f64| [k * k * 0.1, (k * 0.7).sin(), 0.3 * k];
+        let positions: Vec<f32> = (0..t)
+            .flat_map(|k| {
+                offsets.iter().flat_map(move |o| {
+                    let m = motion(k as f64);
+                    [0, 1, 2].map(|c| (o[c] + m[c]) as f32)
+                })
+            })
+            .collect();
+        let mut observed = vec![true; t * 5];
+        for k in 2..5 {
+            observed[k * 5] = false;
+        }
+        let marked = Marked::new(t, 5, &positions, &observed);
+        let entries: Vec<(usize, usize)> = (2..5).map(|k| (k, 0)).collect();
+        for (p, &(k, _)) in marked.neighbours(&entries).iter().zip(&entries) {
+            for c in 0..3 {
+                assert!((p[c] - positions[3 * k * 5 + c]).abs() < 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn the_neighbours_use_the_nearest_frame_and_the_nearest_tracks_there() {
+        // Marker 0 seen at frame 0 only; marker 1 near it moves +1 per frame, marker 2 far
+        // moves −5, marker 3 is not seen at frame 2.
+        let positions: Vec<f32> = vec![
+            0.0, 0.0, 0.0, 0.1, 0.0, 0.0, 50.0, 0.0, 0.0, 0.2, 0.0, 0.0, // frame 0
+            9.0, 9.0, 9.0, 1.1, 0.0, 0.0, 45.0, 0.0, 0.0, 9.0, 9.0, 9.0, // frame 1
+            9.0, 9.0, 9.0, 2.1, 0.0, 0.0, 40.0, 0.0, 0.0, 9.0, 9.0, 9.0, // frame 2
+        ];
+        let observed = [
+            true, true, true, true, //
+            false, true, true, false, //
+            false, true, true, false,
+        ];
+        let marked = Marked::new(3, 4, &positions, &observed);
+        // Among 1 and 2 (3 is unseen at 2), the mean of both: (2 + (−10)) / 2 = −4.
+        let p = marked.neighbours(&[(2, 0)])[0];
+        assert!(
+            (p[0] + 4.0).abs() < 1e-5 && p[1] == 0.0 && p[2] == 0.0,
+            "{p:?}"
+        );
+    }
+
+    #[test]
+    fn the_low_rank_fill_recovers_a_hidden_span_of_rank_one_motion() {
+        // Every coordinate of every track is a multiple of one time signal plus an offset:
+        // rank 1 after centring. A span of track 2 is hidden.
+        let (t, n) = (30, 6);
+        let signal = |k: usize| (k as f64 * 0.3).sin() + 0.05 * k as f64;
+        let positions: Vec<f32> = (0..t)
+            .flat_map(|k| {
+                (0..n).flat_map(move |i| {
+                    [0, 1, 2].map(|c| {
+                        (i as f64 + c as f64 + (1.0 + (i * 3 + c) as f64 * 0.2) * signal(k)) as f32
+                    })
+                })
+            })
+            .collect();
+        let mut observed = vec![true; t * n];
+        for k in 10..18 {
+            observed[k * n + 2] = false;
+        }
+        let marked = Marked::new(t, n, &positions, &observed);
+        let filled = marked.low_rank();
+        let linear = marked.linear();
+        let err = |f: &[f32]| {
+            (10..18)
+                .map(|k| {
+                    (0..3)
+                        .map(|c| (f[3 * (k * n + 2) + c] - positions[3 * (k * n + 2) + c]).abs())
+                        .sum::<f32>()
+                })
+                .sum::<f32>()
+        };
+        assert!(
+            err(&filled) < 1e-3 * err(&linear),
+            "{} vs {}",
+            err(&filled),
+            err(&linear)
+        );
+    }
+
+    #[test]
+    fn jacobi_diagonalises_a_known_matrix() {
+        // [[2, 1], [1, 2]]: eigenvalues 1 and 3.
+        let (values, vectors) = symmetric_eigen(vec![2.0, 1.0, 1.0, 2.0], 2);
+        let mut sorted = values.clone();
+        sorted.sort_by(f64::total_cmp);
+        assert!((sorted[0] - 1.0).abs() < 1e-12 && (sorted[1] - 3.0).abs() < 1e-12);
+        // A v = λ v for each column.
+        for j in 0..2 {
+            let v = [vectors[j], vectors[2 + j]];
+            let av = [2.0 * v[0] + v[1], v[0] + 2.0 * v[1]];
+            assert!((av[0] - values[j] * v[0]).abs() < 1e-12);
+            assert!((av[1] - values[j] * v[1]).abs() < 1e-12);
+        }
+    }
+}
