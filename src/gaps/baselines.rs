@@ -71,7 +71,7 @@ impl<'a> Marked<'a> {
                 let y: Vec<f64> = knots.iter().map(|&k| self.at(k, i)[c] as f64).collect();
                 let m = natural_second_derivatives(&x, &y);
                 let mut j = 0;
-                for k in knots[0] + 1..*knots.last().expect("4 knots") {
+                for k in knots[0] + 1..knots[knots.len() - 1] {
                     if self.seen(k, i) {
                         continue;
                     }

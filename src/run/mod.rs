@@ -261,15 +261,6 @@ pub struct GapErrors {
     pub low_rank: f64,
 }
 
-impl GapErrors {
-    /// The lowest error among the baselines (linear, spline, neighbours, low rank).
-    pub fn best_baseline(&self) -> f64 {
-        [self.linear, self.spline, self.neighbours, self.low_rank]
-            .into_iter()
-            .fold(f64::INFINITY, f64::min)
-    }
-}
-
 /// A per-frame list with NaN (a frame with nothing to measure) written as JSON's `null`.
 mod nan_as_null {
     use serde::{Deserialize, Deserializer, Serializer};
