@@ -1,6 +1,7 @@
 //! The file formats of doma as pure functions over bytes and text: `.traj` ([`traj`]),
 //! DeformingThings4D `.anime` ([`anime`]), NumPy `.npy` ([`npy`]) and `.npz` ([`npz`]),
-//! OBJ meshes ([`obj`]), and any OBJ with its materials for display ([`textured`]).
+//! OBJ meshes ([`obj`]), any OBJ with its materials for display ([`textured`]), and C3D
+//! motion-capture files ([`c3d`]).
 //!
 //! This crate has no Burn dependency, so that the readers can be fuzzed (`fuzz/` in the
 //! doma repository) without building a deep-learning framework under coverage
@@ -10,6 +11,7 @@
 #![forbid(unsafe_code)]
 
 pub mod anime;
+pub mod c3d;
 pub mod npy;
 pub mod npz;
 pub mod obj;

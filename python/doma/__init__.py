@@ -273,7 +273,8 @@ def read_tracks(
     confidence: Optional[str] = None,
 ) -> Tracks:
     """Reads ``.traj``, ``.anime``, ``.npy``, ``.npz`` (plain, PointOdyssey, TAPVid-3D,
-    masked) or a folder of OBJ frames.
+    masked), ``.c3d`` (motion-capture markers in the file's units; a marker not measured
+    in a frame is unobserved) or a folder of OBJ frames.
 
     ``layout`` forces an ``.npz`` layout (default: detected from its keys); ``frame``
     (``world``/``camera``), ``count_hidden`` and ``confidence`` are those of ``doma fit``.

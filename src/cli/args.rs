@@ -177,7 +177,7 @@ pub struct ClipArgs {
 /// Where a mesh experiment's sequence comes from (`novel-points`, `mesh-alignment`).
 #[derive(clap::Args, Debug, Clone)]
 pub struct SequenceArgs {
-    /// The sequence: .traj, .anime, .npy, .npz or a folder of OBJ frames (default: the
+    /// The sequence: .traj, .anime, .npy, .npz, .c3d or a folder of OBJ frames (default: the
     /// crate's data/cdp_male_wave.traj).
     #[arg(long)]
     pub data: Option<PathBuf>,

@@ -10,12 +10,14 @@ use crate::run::{RunDir, complete_run};
 /// The flags of `doma complete`.
 #[derive(clap::Parser, Debug, Clone)]
 #[command(
-    about = "Write every track of a fitted run at every frame (.npz), gaps filled by the field"
+    about = "Write every track of a fitted run at every frame (.npz, or .c3d from a C3D input), gaps filled by the field"
 )]
 pub struct CompleteArgs {
     /// The run folder.
     pub run: PathBuf,
-    /// The .npz to write: `tracks` f32 [T, N, 3] and `observed` bool [T, N].
+    /// The file to write: a .npz (`tracks` f32 [T, N, 3] and `observed` bool [T, N]), or,
+    /// when the run fitted a .c3d, a .c3d with its labels, rate and units, where a filled
+    /// marker has residual 0 (computed, not measured).
     #[arg(long)]
     pub out: PathBuf,
     /// Write a tracker's keys instead (pointodyssey: trajs_3d, visibs, valids; tapvid3d:

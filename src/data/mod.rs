@@ -1,6 +1,7 @@
 //! Point trajectories and their splits.
 
 pub mod anime;
+pub mod c3d;
 pub mod layout;
 pub mod mesh;
 pub mod npy;

@@ -1,5 +1,5 @@
-//! Loading a user's sequence: any supported file (`.traj`, `.anime`, `.npy`, `.npz`, a
-//! folder of OBJ frames) with its faces, a clip and a stride, normalised; and the seeded
+//! Loading a user's sequence: any supported file (`.traj`, `.anime`, `.npy`, `.npz`,
+//! `.c3d`, a folder of OBJ frames) with its faces, a clip and a stride, normalised; and the seeded
 //! split of its points into training and held-out sets (the paper's Tab. 1 protocol).
 
 use std::ops::Range;
@@ -12,7 +12,7 @@ use rand_chacha::ChaCha8Rng;
 use super::layout::TrackFile;
 use super::mesh::read_obj;
 use super::tracks::{Tracks, hold_out_spans};
-use super::{Trajectories, anime, layout, npy, traj};
+use super::{Trajectories, anime, c3d, layout, npy, traj};
 use crate::{DomaError, Result};
 
 /// An animated mesh: vertex trajectories `[T, V, 3]` and, when known, the triangles.
@@ -236,7 +236,8 @@ pub fn sequence_reads() -> usize {
 }
 
 /// Reads any supported sequence file (or OBJ folder) by its extension as tracks (a
-/// tracker's `.npz` with its mask, [`layout`]; every other file complete), and the faces
+/// tracker's `.npz` with its mask, [`layout`]; a C3D file's markers with theirs,
+/// [`c3d`]; every other file complete), and the faces
 /// where the format has them. A `file` other than the default applies to `.npz` alone.
 pub fn read_tracks(data: &Path, file: &TrackFile) -> Result<(Tracks, Option<Vec<[u32; 3]>>)> {
     check_readable(data)?;
@@ -249,6 +250,14 @@ pub fn read_tracks(data: &Path, file: &TrackFile) -> Result<(Tracks, Option<Vec<
             "--layout, --frame and --count-hidden apply to a tracker's .npz, not to {}",
             data.display()
         )));
+    }
+    if extension(data) == "c3d" && !data.is_dir() {
+        let markers = c3d::read_c3d(data)?;
+        let tracks = c3d::c3d_tracks(&markers).map_err(|reason| DomaError::Malformed {
+            path: data.to_path_buf(),
+            reason,
+        })?;
+        return Ok((tracks, None));
     }
     let (t, faces) = read_any(data)?;
     Ok((Tracks::complete(t), faces))
@@ -270,11 +279,23 @@ pub fn read_any(data: &Path) -> Result<(Trajectories, Option<Vec<[u32; 3]>>)> {
         }
         "npy" => (npy::read_npy_trajectories(data)?, None),
         "npz" => (npy::read_npz_trajectories(data, None)?, None),
+        "c3d" => {
+            let (tracks, _) = read_tracks(data, &TrackFile::default())?;
+            if tracks.observed_count() != tracks.frames() * tracks.points() {
+                return Err(DomaError::Malformed {
+                    path: data.to_path_buf(),
+                    reason: "some markers are not measured in some frames: read it as tracks \
+                             (doma fit reads the gaps, doma complete fills them)"
+                        .into(),
+                });
+            }
+            (tracks.into_trajectories(None)?, None)
+        }
         _ => {
             return Err(DomaError::Malformed {
                 path: data.to_path_buf(),
                 reason:
-                    "unknown format: expected .traj, .anime, .npy, .npz or a folder of .obj frames"
+                    "unknown format: expected .traj, .anime, .npy, .npz, .c3d or a folder of .obj frames"
                         .into(),
             });
         }

@@ -1,4 +1,5 @@
-//! `doma complete`: every track of a fitted run at every frame, gaps filled by the field.
+//! `doma complete`: every track of a fitted run at every frame, gaps filled by the field,
+//! as a `.npz` or, from a C3D input, a `.c3d`.
 
 use std::path::Path;
 
@@ -6,6 +7,7 @@ use burn::tensor::Device;
 use doma_formats::npy::NpyValues;
 
 use super::{RunDir, field_everywhere};
+use crate::data::c3d::{c3d_tracks, read_c3d, write_c3d};
 use crate::data::layout::Layout;
 use crate::data::sequence::read_tracks;
 use crate::gaps::carry_residuals;
@@ -25,34 +27,68 @@ pub struct Completion {
     pub filled: usize,
 }
 
-/// Writes every track of the run in `run` at every frame of its clip into the `.npz`
-/// `out`, in the input's frame, units and track order: an observed entry as the input
-/// holds it, every other one filled by the fitted field from the track's canonical
-/// position plus the track's own residual carried across the gap
-/// ([`crate::gaps::carry_residuals`]), so that a fill meets the observations around it. The keys are `tracks` (`f32 [T, N, 3]`) and `observed` (`bool [T, N]`, the
-/// input's mask), plus `kept` (`i64 [N]`, the input's index of each track) when the fit
-/// dropped tracks that were never observed. `layout` writes the keys of a tracker's
-/// layout instead: PointOdyssey's `trajs_3d` (as `f32`), `visibs` (the mask) and `valids`
-/// (all true), or TAPVid-3D's `tracks_XYZ` and `visibility`. The observations held out of
-/// the fit count as observed: they are the input's.
+/// Writes every track of the run in `run` at every frame of its clip into `out`, in the
+/// input's frame, units and track order: an observed entry as the input holds it, every
+/// other one filled by the fitted field from the track's canonical position plus the
+/// track's own residual carried across the gap ([`crate::gaps::carry_residuals`]), so
+/// that a fill meets the observations around it. The observations held out of the fit
+/// count as observed: they are the input's.
+///
+/// A `.npz` holds `tracks` (`f32 [T, N, 3]`) and `observed` (`bool [T, N]`, the input's
+/// mask), plus `kept` (`i64 [N]`, the input's index of each track) when the fit dropped
+/// tracks that were never observed. `layout` writes the keys of a tracker's layout
+/// instead: PointOdyssey's `trajs_3d` (as `f32`), `visibs` (the mask) and `valids` (all
+/// true), or TAPVid-3D's `tracks_XYZ` and `visibility`.
+///
+/// A `.c3d` (from a C3D input alone, [`crate::data::c3d`]) holds the markers with the
+/// input's labels, units and scale, its rate divided by the stride and the clip's first
+/// frame number; a measured entry keeps its residual and cameras, and a filled one has
+/// residual 0, which marks a point computed rather than measured.
 pub fn complete_run(
     run: &RunDir,
     out: &Path,
     layout: Option<Layout>,
     device: &Device,
 ) -> Result<Completion> {
+    let to_c3d = out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("c3d"));
+    if to_c3d && layout.is_some() {
+        return Err(DomaError::Usage(
+            "--layout names the keys of a .npz; a .c3d output has none".into(),
+        ));
+    }
     let config = run.load_config()?;
+    let markers = if to_c3d {
+        let is_c3d = config
+            .data
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("c3d"));
+        if !is_c3d {
+            return Err(DomaError::Usage(format!(
+                "a .c3d output takes its labels, rate and units from a C3D input, and this run \
+                 fitted {}: write a .npz",
+                config.data.display()
+            )));
+        }
+        Some(read_c3d(&config.data)?)
+    } else {
+        None
+    };
     let field = run.load_field(&config, device)?;
     let sequence = run.load_data(&config)?;
     // The input again, clipped and kept as the fit's data was, for its own values.
-    let (mut input, _) = read_tracks(&config.data, &config.tracks)?;
-    if let Some([a, b]) = config.frames {
+    let mut input = match &markers {
+        Some(m) => c3d_tracks(m).map_err(|reason| DomaError::Malformed {
+            path: config.data.clone(),
+            reason,
+        })?,
+        None => read_tracks(&config.data, &config.tracks)?.0,
+    };
+    let frame_range = config.frames.map_or(0..input.frames(), |[a, b]| a..b);
+    if config.frames.is_some() || config.stride > 1 {
         input = input
-            .select_frames(a..b, config.stride)
-            .map_err(DomaError::InvalidData)?;
-    } else if config.stride > 1 {
-        input = input
-            .select_frames(0..input.frames(), config.stride)
+            .select_frames(frame_range.clone(), config.stride)
             .map_err(DomaError::InvalidData)?;
     }
     if let Some(kept) = &sequence.kept {
@@ -96,10 +132,64 @@ pub fn complete_run(
         )
         .collect();
     let observed = seen.to_vec();
-    let kept: Option<Vec<i64>> = sequence
-        .kept
-        .as_ref()
-        .map(|k| k.iter().map(|&i| i as i64).collect());
+    if let Some(m) = &markers {
+        let stride = config.stride.max(1);
+        let source_frames: Vec<usize> = frame_range.clone().step_by(stride).collect();
+        let source_points: Vec<usize> = sequence.kept.clone().unwrap_or_else(|| (0..n).collect());
+        let source = |e: usize| source_frames[e / n] * m.points + source_points[e % n];
+        let (residuals, cameras) = (0..t * n)
+            .map(|e| {
+                if observed[e] {
+                    (m.residuals[source(e)].max(0.0), m.cameras[source(e)])
+                } else {
+                    (0.0, 0)
+                }
+            })
+            .unzip();
+        let completed = crate::data::c3d::C3d {
+            frames: t,
+            points: n,
+            first_frame: m.first_frame.saturating_add(frame_range.start as u32),
+            rate: m.rate / stride as f32,
+            scale: m.scale,
+            units: m.units.clone(),
+            labels: source_points.iter().map(|&i| m.labels[i].clone()).collect(),
+            positions: tracks,
+            residuals,
+            cameras,
+        };
+        write_c3d(out, &completed)?;
+    } else {
+        write_npz(
+            out,
+            t,
+            n,
+            &tracks,
+            &observed,
+            layout,
+            sequence.kept.as_deref(),
+        )?;
+    }
+    let observed = observed.iter().filter(|&&o| o).count();
+    Ok(Completion {
+        frames: t,
+        tracks: n,
+        observed,
+        filled: t * n - observed,
+    })
+}
+
+/// The completion as a `.npz`, in the keys of `layout` ([`complete_run`]).
+fn write_npz(
+    out: &Path,
+    t: usize,
+    n: usize,
+    tracks: &[f32],
+    observed: &[bool],
+    layout: Option<Layout>,
+    kept: Option<&[usize]>,
+) -> Result<()> {
+    let kept: Option<Vec<i64>> = kept.map(|k| k.iter().map(|&i| i as i64).collect());
     let all_valid = vec![true; t * n];
     let (tracks_key, mask_key) = match layout {
         Some(Layout::PointOdyssey) => ("trajs_3d", "visibs"),
@@ -108,8 +198,8 @@ pub fn complete_run(
     };
     let (shape3, shape2, shape1) = ([t, n, 3], [t, n], [n]);
     let mut members: Vec<(&str, &[usize], NpyValues)> = vec![
-        (tracks_key, &shape3, NpyValues::F32(&tracks)),
-        (mask_key, &shape2, NpyValues::Bool(&observed)),
+        (tracks_key, &shape3, NpyValues::F32(tracks)),
+        (mask_key, &shape2, NpyValues::Bool(observed)),
     ];
     if layout == Some(Layout::PointOdyssey) {
         members.push(("valids", &shape2, NpyValues::Bool(&all_valid)));
@@ -117,12 +207,5 @@ pub fn complete_run(
     if let Some(kept) = &kept {
         members.push(("kept", &shape1, NpyValues::I64(kept)));
     }
-    write_atomic(out, &doma_formats::npz::encode_npz_values(&members))?;
-    let observed = observed.iter().filter(|&&o| o).count();
-    Ok(Completion {
-        frames: t,
-        tracks: n,
-        observed,
-        filled: t * n - observed,
-    })
+    write_atomic(out, &doma_formats::npz::encode_npz_values(&members))
 }

@@ -75,7 +75,7 @@ crate::names::value_names!(ModelChoice);
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, clap::Args)]
 #[serde(deny_unknown_fields)]
 pub struct RunSpec {
-    /// The data: .traj, .anime, .npy, .npz, or a folder of OBJ frames with equal vertex counts.
+    /// The data: .traj, .anime, .npy, .npz, .c3d, or a folder of OBJ frames with equal vertex counts.
     #[arg(value_name = "DATA", required_unless_present = "resume")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub data: Option<PathBuf>,

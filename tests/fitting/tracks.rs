@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 use burn::tensor::Device;
+use doma::data::c3d::{C3d, read_c3d, write_c3d};
 use doma::data::layout::{Layout, TrackFile, read_npz_tracks};
 use doma::data::npy::read_npz;
 use doma::data::tracker::TrackerView;
@@ -350,4 +351,81 @@ fn a_fit_that_holds_tracks_back_for_convergence_keeps_every_tracks_canonical_pos
     // canonical positions for every training track and repeats the report.
     let again = eval_run(&run, None, &Device::flex()).unwrap();
     assert_eq!(again.epe_x1e4.to_bits(), report.epe_x1e4.to_bits());
+}
+
+#[test]
+fn a_c3d_clip_completes_into_a_c3d_with_its_labels_rate_and_measured_markers() {
+    let v = view();
+    let dir = common::scratch("doma-c3d-complete");
+    let (t, n) = (v.truth.frames(), v.truth.points());
+    let seen = v.observed();
+    let input = dir.join("markers.c3d");
+    let markers = C3d {
+        frames: t,
+        points: n,
+        first_frame: 10,
+        rate: 120.0,
+        scale: -0.01,
+        units: "mm".into(),
+        labels: (0..n).map(|i| format!("M{i:03}")).collect(),
+        positions: v.truth.positions().to_vec(),
+        residuals: seen.iter().map(|&s| if s { 0.5 } else { -1.0 }).collect(),
+        cameras: (0..t * n).map(|e| (e % 100) as u8).collect(),
+    };
+    write_c3d(&input, &markers).unwrap();
+    let run = RunDir::new(dir.join("run"));
+    fit(&input, &run, |c| {
+        c.frames = Some([1, t]);
+        c.stride = 2;
+        c.drop_unobserved = true;
+    });
+    let out = dir.join("filled.c3d");
+    let done = complete_run(&run, &out, None, &Device::flex()).unwrap();
+    let back = read_c3d(&out).unwrap();
+    let kept = run.load_data(&run.load_config().unwrap()).unwrap().kept;
+    let kept = kept.unwrap_or_else(|| (0..n).collect());
+    let frames: Vec<usize> = (1..t).step_by(2).collect();
+    assert_eq!((back.frames, back.points), (frames.len(), kept.len()));
+    assert_eq!(
+        (back.first_frame, back.rate, back.units.as_str()),
+        (11, 60.0, "mm")
+    );
+    let labels: Vec<String> = kept.iter().map(|&i| markers.labels[i].clone()).collect();
+    assert_eq!(back.labels, labels);
+    let m = kept.len();
+    let mut filled = 0;
+    for (r, &k) in frames.iter().enumerate() {
+        for (j, &i) in kept.iter().enumerate() {
+            let (e, src) = (r * m + j, k * n + i);
+            let got = &back.positions[3 * e..3 * e + 3];
+            assert!(back.present()[e], "frame {k}, marker {i} is left missing");
+            if seen[src] {
+                assert_eq!(got, &markers.positions[3 * src..3 * src + 3]);
+                assert!((back.residuals[e] - 0.5).abs() < 1e-6);
+                assert_eq!(back.cameras[e], markers.cameras[src]);
+            } else {
+                assert!(got.iter().all(|x| x.is_finite()));
+                assert_eq!((back.residuals[e], back.cameras[e]), (0.0, 0));
+                filled += 1;
+            }
+        }
+    }
+    assert!(filled > 0);
+    assert_eq!(done.filled, filled);
+    // A .c3d takes no tracker keys, and needs a C3D input for its labels and rate.
+    let refused = complete_run(&run, &out, Some(Layout::TapVid3d), &Device::flex());
+    assert!(
+        matches!(refused, Err(doma::DomaError::Usage(_))),
+        "{refused:?}"
+    );
+    let npz = dir.join("clip.npz");
+    v.write(&npz, Layout::TapVid3d).unwrap();
+    let from_npz = RunDir::new(dir.join("npz_run"));
+    fit(&npz, &from_npz, |c| c.drop_unobserved = true);
+    let refused = complete_run(&from_npz, &dir.join("x.c3d"), None, &Device::flex());
+    match refused {
+        Err(doma::DomaError::Usage(m)) => assert!(m.contains("clip.npz"), "{m}"),
+        other => panic!("{other:?}"),
+    }
+    assert!(!dir.join("x.c3d").exists());
 }

@@ -1,4 +1,4 @@
-//! The file formats and data: `.traj`, `.anime`, `.npy`/`.npz`, OBJ meshes and sequences,
+//! The file formats and data: `.traj`, `.anime`, `.npy`/`.npz`, C3D, OBJ meshes and sequences,
 //! the synthetic benchmark's data; round trips, shipped files, and every bad file refused
 //! with an error naming the file and the problem.
 
@@ -6,6 +6,7 @@
 mod common;
 
 mod anime;
+mod c3d;
 mod data;
 mod mesh;
 mod npy;

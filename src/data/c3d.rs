@@ -1,0 +1,96 @@
+//! C3D motion-capture files ([`doma_formats::c3d`]): the markers of every frame, a marker
+//! that was not measured (a negative residual, or the origin as some systems write it)
+//! unobserved, in the file's own units and axes.
+//!
+//! doma writes a completed recording back as C3D ([`crate::run::complete::complete_run`]):
+//! the same labels, rate and units, the measured entries as they were, and every filled
+//! entry with a residual of 0, which C3D reserves for a point computed rather than
+//! measured, as capture software marks its own gap fills.
+
+use std::path::Path;
+
+pub use doma_formats::c3d::C3d;
+
+use super::tracks::Tracks;
+use crate::io::write_atomic;
+use crate::{DomaError, Result};
+
+/// Reads a C3D file's points (the analog channels are skipped). Every defect is a
+/// [`DomaError::Malformed`] naming the file.
+pub fn read_c3d(path: impl AsRef<Path>) -> Result<C3d> {
+    let path = path.as_ref();
+    let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
+    doma_formats::c3d::parse(&bytes).map_err(|reason| DomaError::Malformed {
+        path: path.to_path_buf(),
+        reason,
+    })
+}
+
+/// The markers as tracks: an entry is observed where the file holds a point
+/// ([`C3d::present`]). A measured point that is not finite is refused, naming its frame
+/// and marker.
+pub fn c3d_tracks(c: &C3d) -> std::result::Result<Tracks, String> {
+    let present = c.present();
+    if let Some(e) = (0..present.len())
+        .find(|&e| present[e] && c.positions[3 * e..3 * e + 3].iter().any(|v| !v.is_finite()))
+    {
+        return Err(format!(
+            "marker {} ({:?}) of frame {} is measured but not finite ({:?})",
+            e % c.points,
+            c.labels[e % c.points],
+            e / c.points,
+            &c.positions[3 * e..3 * e + 3]
+        ));
+    }
+    Tracks::new(c.frames, c.points, c.positions.clone(), present)
+}
+
+/// Writes `data` to `path` as a C3D file, atomically (temporary file, then rename).
+pub fn write_c3d(path: impl AsRef<Path>, data: &C3d) -> Result<()> {
+    let path = path.as_ref();
+    let bytes = doma_formats::c3d::encode(data).map_err(|reason| {
+        DomaError::InvalidData(format!("cannot write {}: {reason}", path.display()))
+    })?;
+    write_atomic(path, &bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_measured_nan_names_the_marker() {
+        let c = C3d {
+            frames: 2,
+            points: 2,
+            first_frame: 1,
+            rate: 100.0,
+            scale: -0.1,
+            units: "mm".into(),
+            labels: vec!["LASI".into(), "RASI".into()],
+            positions: vec![
+                1.0,
+                2.0,
+                3.0,
+                0.0,
+                0.0,
+                0.0,
+                1.0,
+                2.0,
+                3.0,
+                f32::NAN,
+                1.0,
+                1.0,
+            ],
+            residuals: vec![1.0, 1.0, 1.0, 1.0],
+            cameras: vec![0; 4],
+        };
+        let e = c3d_tracks(&c).unwrap_err();
+        assert!(e.contains("frame 1") && e.contains("\"RASI\""), "{e}");
+        // The origin counts as not measured, whatever its residual.
+        let mut ok = c.clone();
+        ok.residuals[3] = -1.0;
+        let t = c3d_tracks(&ok).unwrap();
+        assert_eq!(t.observed(), &[true, false, true, false]);
+    }
+}
