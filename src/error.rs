@@ -65,6 +65,14 @@ pub enum DomaError {
         /// Who holds it: "process 1234", or "another process".
         holder: String,
     },
+    /// An output would replace something a run reads ([`crate::io::check_output`]).
+    #[error("{out}: refusing to write there: {why}")]
+    WouldReplaceInput {
+        /// The output asked for.
+        out: PathBuf,
+        /// Which input it would reach: inside the run folder, or an input file.
+        why: String,
+    },
     /// A new fit was asked into a folder that already holds a run.
     #[error("{0} already holds a run; resume it with --resume or choose another folder")]
     RunExists(PathBuf),

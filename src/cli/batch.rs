@@ -85,6 +85,12 @@ pub fn run(args: &BatchArgs) -> Result<()> {
         }
         return Ok(());
     }
+    // The batch folder's own files must not replace the manifest or an entry's data.
+    let mut inputs: Vec<&std::path::Path> = vec![path.as_path()];
+    inputs.extend(manifest.items.iter().filter_map(|i| i.spec.data.as_deref()));
+    for name in [crate::batch::MANIFEST_COPY, "summary.json", "summary.csv"] {
+        crate::io::check_output(&out.join(name), None, &inputs)?;
+    }
     let interrupt = crate::cli::interrupt::install();
     let mine = (0..manifest.items.len()).filter(|&i| shard.owns(i)).count();
     eprintln!(

@@ -74,6 +74,8 @@ pub fn export_gltf(
         data: own,
         frames: range,
     } = run.open(options.frames.clone(), device)?;
+    let inputs: Vec<&Path> = std::iter::once(config.data.as_path()).chain(mesh).collect();
+    crate::io::check_output(out, Some(&run.dir), &inputs)?;
     let total = own.trajectories.frames();
     let to_data =
         |p: [f32; 3]| -> [f32; 3] { std::array::from_fn(|c| p[c] * own.scale + own.center[c]) };

@@ -275,6 +275,60 @@ fn process_alive(pid: u32) -> bool {
     r == 0 || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM)
 }
 
+/// Where `path` leads: absolute, with the links of its longest existing prefix followed and
+/// the rest appended as written.
+pub fn resolved(path: &Path) -> PathBuf {
+    let absolute = if path.is_absolute() {
+        path.to_path_buf()
+    } else {
+        std::env::current_dir()
+            .map(|d| d.join(path))
+            .unwrap_or_else(|_| path.to_path_buf())
+    };
+    let mut rest = Vec::new();
+    let mut prefix = absolute.as_path();
+    loop {
+        if let Ok(mut real) = prefix.canonicalize() {
+            real.extend(rest.iter().rev());
+            return real;
+        }
+        match (prefix.parent(), prefix.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name.to_os_string());
+                prefix = parent;
+            }
+            _ => return absolute,
+        }
+    }
+}
+
+/// Refuses an output that would replace what a run reads: `out` resolving (links followed,
+/// [`resolved`]) to anything inside the run folder `run`, or to one of `inputs` (the run's
+/// data file, a mesh). Every writer of a run's products calls it before it writes; the
+/// error names the output and what it would replace.
+pub fn check_output(out: &Path, run: Option<&Path>, inputs: &[&Path]) -> Result<()> {
+    let target = resolved(out);
+    if let Some(run) = run {
+        let folder = resolved(run);
+        if target.starts_with(&folder) {
+            return Err(DomaError::WouldReplaceInput {
+                out: out.to_path_buf(),
+                why: format!(
+                    "it lies inside the run folder {}, whose files the run reads",
+                    run.display()
+                ),
+            });
+        }
+    }
+    if let Some(input) = inputs.iter().find(|i| resolved(i) == target) {
+        return Err(DomaError::WouldReplaceInput {
+            out: out.to_path_buf(),
+            why: format!("it is the input {}", input.display()),
+        });
+    }
+    Ok(())
+}
+
 /// Fails early, before minutes of work, when `path` cannot be written: its folder is
 /// missing or not writable. Probes with a temporary file that it removes.
 pub fn check_writable(path: &Path) -> Result<()> {
@@ -289,4 +343,42 @@ pub fn check_writable(path: &Path) -> Result<()> {
     std::fs::File::create(&probe).map_err(|e| DomaError::io(dir, e))?;
     let _ = std::fs::remove_file(&probe);
     Ok(())
+}
+
+#[cfg(test)]
+mod output_tests {
+    use super::*;
+
+    #[test]
+    fn outputs_that_reach_an_input_are_refused_through_links() {
+        let root = std::env::temp_dir().join(format!("doma-check-output-{}", std::process::id()));
+        let run = root.join("run");
+        std::fs::create_dir_all(&run).unwrap();
+        let data = root.join("data.npz");
+        std::fs::write(&data, b"x").unwrap();
+        std::fs::write(run.join("config.json"), b"{}").unwrap();
+        let refused = |out: &Path| {
+            matches!(
+                check_output(out, Some(&run), &[&data]),
+                Err(DomaError::WouldReplaceInput { .. })
+            )
+        };
+        assert!(refused(&run.join("config.json")));
+        assert!(refused(&run.join("new.npz")));
+        assert!(refused(&root.join("run/../run/model.bpk")));
+        assert!(refused(&data));
+        // Links are followed: to a run file, to the run folder, to the data.
+        #[cfg(unix)]
+        {
+            std::os::unix::fs::symlink(run.join("config.json"), root.join("a.json")).unwrap();
+            std::os::unix::fs::symlink(&run, root.join("alias")).unwrap();
+            std::os::unix::fs::symlink(&data, root.join("b.npz")).unwrap();
+            assert!(refused(&root.join("a.json")));
+            assert!(refused(&root.join("alias").join("out.npz")));
+            assert!(refused(&root.join("b.npz")));
+        }
+        assert!(check_output(&root.join("out.npz"), Some(&run), &[&data]).is_ok());
+        assert!(check_output(&root.join("run2/out.npz"), Some(&run), &[&data]).is_ok());
+        let _ = std::fs::remove_dir_all(&root);
+    }
 }

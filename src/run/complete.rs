@@ -59,6 +59,7 @@ pub fn complete_run(
         ));
     }
     let config = run.load_config()?;
+    crate::io::check_output(out, Some(&run.dir), &[&config.data])?;
     let markers = if to_c3d {
         let is_c3d = config
             .data

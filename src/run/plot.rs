@@ -32,6 +32,8 @@ pub fn plot_run(run: &RunDir, frames: Option<&[usize]>, device: &Device) -> Resu
     }
     let history: Vec<IterationRecord> = load_json(&run.history())?;
     let dir = run.dir.join("plots");
+    // The plots belong in the run folder; only the data must not be among them.
+    crate::io::check_output(&dir, None, &[&config.data])?;
     std::fs::create_dir_all(&dir).map_err(|e| DomaError::io(&dir, e))?;
     let predicted = predict(&field, &test, device)?;
     let per_frame = epe_per_frame(&predicted, &test)?;

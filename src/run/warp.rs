@@ -31,11 +31,18 @@ pub fn warp_run(
         frames: range,
     } = run.open(frames, device)?;
     let total = own.trajectories.frames();
+    let inputs: Vec<&Path> = std::iter::once(config.data.as_path()).chain(mesh).collect();
+    crate::io::check_output(out, Some(&run.dir), &inputs)?;
     // The mesh and every file it names are checked before the output folder is made, so
     // that a refusal leaves nothing behind.
     let canonical = canonical_mesh(mesh)?;
     if let Canonical::Textured(textured) = &canonical {
         textured.material_files()?;
+    }
+    let frame_path = |k: usize| out.join(format!("frame_{k:04}.obj"));
+    // Nor may a frame replace the mesh or the data (a mesh warped into its own folder).
+    for k in range.clone() {
+        crate::io::check_output(&frame_path(k), None, &inputs)?;
     }
     std::fs::create_dir_all(out).map_err(|e| DomaError::io(out, e))?;
     let to_norm =
@@ -55,7 +62,6 @@ pub fn warp_run(
         }
     };
     let mut paths = Vec::new();
-    let frame_path = |k: usize| out.join(format!("frame_{k:04}.obj"));
     // One frame at a time, each streamed to its file: memory holds the mesh, one warped
     // frame and its normals, whatever the number of frames.
     match canonical {

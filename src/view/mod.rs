@@ -236,6 +236,9 @@ pub fn write_view(
     device: &Device,
 ) -> Result<usize> {
     crate::io::check_writable(out)?;
+    let data = run.load_config()?.data;
+    let inputs: Vec<&Path> = std::iter::once(data.as_path()).chain(mesh).collect();
+    crate::io::check_output(out, Some(&run.dir), &inputs)?;
     let html = view_html(run, mesh, frames, up, device)?;
     crate::io::write_atomic(out, html.as_bytes())?;
     Ok(html.len())

@@ -449,3 +449,22 @@ fn the_kubernetes_recipe_runs_every_entry_once_across_its_completions() {
         .collect();
     check_recipe(&args, &envs);
 }
+
+#[test]
+fn the_batch_folder_s_files_never_replace_the_manifest() {
+    let dir = temp("own-manifest");
+    let written = manifest(&dir, &[faerie("a", 0)]);
+    // The manifest kept in the batch folder under a name the batch writes.
+    let kept = dir.join("summary.json");
+    std::fs::rename(&written, &kept).unwrap();
+    let before = std::fs::read(&kept).unwrap();
+    let out = batch_quietly(&kept, &dir);
+    assert_eq!(out.status.code(), Some(1));
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("refusing to write there") && err.contains("summary.json"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&kept).unwrap(), before);
+    assert!(!dir.join("a").exists());
+}

@@ -221,3 +221,105 @@ fn fifos_and_devices_as_mesh_config_or_manifest_are_refused_at_once() {
         refused_in_time(&["batch", special, "--out", s(&dir.join("batch"))], special);
     }
 }
+
+/// Every file under `dir` with its bytes.
+fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut files = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            files.extend(snapshot(&p));
+        } else if let Ok(b) = std::fs::read(&p) {
+            files.push((p, b));
+        }
+    }
+    files.sort();
+    files
+}
+
+#[test]
+fn no_writer_replaces_the_run_or_its_data() {
+    let dir = common::scratch("doma-nooverwrite");
+    let data = dir.join("faerie.traj");
+    std::fs::copy(FAERIE, &data).unwrap();
+    let run = fitted(&dir, s(&data), "112..116");
+    let mesh = dir.join("canonical.obj");
+    std::fs::write(&mesh, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    symlink(run.join("config.json"), dir.join("link.glb")).unwrap();
+    symlink(&run, dir.join("alias")).unwrap();
+    let before = (snapshot(&run), std::fs::read(&data).unwrap());
+    let frames = dir.join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    let first = frames.join("frame_0000.obj");
+    std::fs::copy(&mesh, &first).unwrap();
+    let cases: Vec<Vec<String>> = vec![
+        vec![
+            "complete".into(),
+            s(&run).into(),
+            "--out".into(),
+            s(&run.join("config.json")).into(),
+        ],
+        vec![
+            "complete".into(),
+            s(&run).into(),
+            "--out".into(),
+            s(&run.join("model.bpk")).into(),
+        ],
+        vec![
+            "complete".into(),
+            s(&run).into(),
+            "--out".into(),
+            s(&data).into(),
+        ],
+        vec![
+            "complete".into(),
+            s(&run).into(),
+            "--out".into(),
+            s(&dir.join("alias/filled.npz")).into(),
+        ],
+        vec![
+            "view".into(),
+            s(&run).into(),
+            "--out".into(),
+            s(&run.join("report.json")).into(),
+        ],
+        vec![
+            "view".into(),
+            s(&run).into(),
+            "--out".into(),
+            s(&data).into(),
+        ],
+        vec![
+            "export".into(),
+            s(&run).into(),
+            "--gltf".into(),
+            s(&dir.join("link.glb")).into(),
+        ],
+        vec![
+            "warp".into(),
+            s(&run).into(),
+            "--out".into(),
+            s(&run.join("frames")).into(),
+        ],
+        // A mesh warped into its own folder would replace it with frame 0.
+        vec![
+            "warp".into(),
+            s(&run).into(),
+            "--mesh".into(),
+            s(&first).into(),
+            "--out".into(),
+            s(&frames).into(),
+        ],
+    ];
+    for args in &cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (code, err) = doma(&args);
+        assert_eq!(code, Some(1), "{args:?}: {err}");
+        assert!(err.contains("refusing to write there"), "{args:?}: {err}");
+    }
+    assert_eq!((snapshot(&run), std::fs::read(&data).unwrap()), before);
+    assert_eq!(
+        std::fs::read(&first).unwrap(),
+        std::fs::read(&mesh).unwrap()
+    );
+}
