@@ -186,7 +186,8 @@ def fit(
         **options: the fit's options, below.
         h_weight: L_H's weight (0: off), or ``"auto"`` to choose it by validation on
             held-out training points; a weight alone turns L_H on.
-        iters: iterations (passes over all frames; default 1000, the paper's).
+        iters: iterations (passes over all frames; default 1000, the paper's, or 300 for
+            tracks with gaps).
         learning_rate: Adam's base learning rate (default 1e-4, the authors'; it wins over
             a recipe's).
         recipe: ``"paper"`` (the paper's protocol, the default) or ``"fast"`` (1.5 times

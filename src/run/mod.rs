@@ -33,7 +33,9 @@ pub use fit::{FitOutcome, fit_run};
 pub use info::{RunInfo, info};
 pub use lock::RunLock;
 pub use plot::plot_run;
-pub use spec::{ModelChoice, NewFit, RunSpec, fraction};
+pub use spec::{
+    GAP_FILLING_H_WEIGHT, GAP_FILLING_ITERATIONS, ModelChoice, NewFit, RunSpec, fraction,
+};
 pub use warp::warp_run;
 
 use std::path::PathBuf;

@@ -429,3 +429,40 @@ fn a_c3d_clip_completes_into_a_c3d_with_its_labels_rate_and_measured_markers() {
     }
     assert!(!dir.join("x.c3d").exists());
 }
+
+#[test]
+fn tracks_with_gaps_take_the_gap_filling_defaults_unless_the_options_set_them() {
+    use doma::run::RunSpec;
+    use doma::run::{GAP_FILLING_H_WEIGHT, GAP_FILLING_ITERATIONS};
+    use doma::train::select::WeightSearch;
+    let v = view();
+    let dir = common::scratch("doma-gapdefaults");
+    let (npz, traj) = (dir.join("clip.npz"), dir.join("clip.traj"));
+    v.write(&npz, Layout::TapVid3d).unwrap();
+    write_traj(&traj, &v.truth).unwrap();
+    let prepared = |data: &Path, edit: fn(&mut RunSpec)| {
+        let mut spec = RunSpec {
+            data: Some(data.to_path_buf()),
+            drop_unobserved: Some(true),
+            ..RunSpec::default()
+        };
+        edit(&mut spec);
+        let fit = spec.prepare(&WeightSearch::default(), |_| {}).unwrap();
+        let f = &fit.config.fit;
+        (f.schedule.iterations, f.loss.smoothness_weight)
+    };
+    assert_eq!(
+        prepared(&npz, |_| {}),
+        (GAP_FILLING_ITERATIONS, GAP_FILLING_H_WEIGHT)
+    );
+    assert_eq!(
+        prepared(&npz, |s| s.iterations = Some(20)),
+        (20, GAP_FILLING_H_WEIGHT)
+    );
+    assert_eq!(
+        prepared(&npz, |s| s.recipe = Some(doma::train::Recipe::Fast)).0,
+        1000
+    );
+    // Complete data keeps the paper's protocol.
+    assert_eq!(prepared(&traj, |_| {}), (1000, 0.0));
+}
