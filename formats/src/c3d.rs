@@ -459,7 +459,8 @@ impl Section {
 }
 
 /// The bytes of `data` as a C3D file: Intel floats, the header and the `POINT` group
-/// (`USED`, `FRAMES`, `SCALE`, `RATE`, `DATA_START`, `UNITS`, `LABELS`, `LABELS2`, ...),
+/// (`USED`, `FRAMES`, `SCALE`, `RATE`, `DATA_START`, `UNITS`, `LABELS`, `LABELS2`, ...,
+/// and blank `DESCRIPTIONS` beside them),
 /// `ANALOG:USED = 0` (at the points' rate), and `TRIAL:ACTUAL_START_FIELD`/`ACTUAL_END_FIELD` when a frame
 /// number passes 65535. A negative residual is written as `−1` (not measured); every other
 /// is rounded to the nearest multiple of `|scale|` up to 255 of them. Refuses what the
@@ -528,6 +529,9 @@ pub fn encode(data: &C3d) -> Result<Vec<u8>, String> {
         };
         let labels: Vec<&str> = chunk.iter().map(String::as_str).collect();
         s.strings(point, &name, &labels);
+        // Readers expect a description beside each label; doma has none to give.
+        let blank = vec![""; chunk.len()];
+        s.strings(point, &name.replace("LABELS", "DESCRIPTIONS"), &blank);
     }
     s.group(analog, "ANALOG");
     s.i16s(analog, "USED", &[0]);
