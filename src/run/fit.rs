@@ -40,13 +40,48 @@ pub fn fit_run(
     stop_after: Option<usize>,
     progress: bool,
 ) -> Result<FitOutcome> {
+    fit_holding(run, new, None, device, interrupt, stop_after, progress)
+}
+
+/// [`fit_run`] of a new fit into a folder whose lock the caller took first
+/// ([`RunLock::acquire`]), so that nothing it wrote there before the fit (its data, as the
+/// Python package writes it) could be replaced or read by another writer meanwhile.
+pub fn fit_run_locked(
+    run: &RunDir,
+    new: NewFit,
+    lock: RunLock,
+    device: &Device,
+    interrupt: &AtomicBool,
+    stop_after: Option<usize>,
+    progress: bool,
+) -> Result<FitOutcome> {
+    fit_holding(
+        run,
+        Some(new),
+        Some(lock),
+        device,
+        interrupt,
+        stop_after,
+        progress,
+    )
+}
+
+fn fit_holding(
+    run: &RunDir,
+    new: Option<NewFit>,
+    held: Option<RunLock>,
+    device: &Device,
+    interrupt: &AtomicBool,
+    stop_after: Option<usize>,
+    progress: bool,
+) -> Result<FitOutcome> {
     let resume = new.is_none();
-    let (NewFit { config, sequence }, _lock) = match new {
-        Some(n) => start(run, n)?,
+    let (NewFit { config, sequence }, resumed) = match new {
+        Some(n) => (n, None),
         None => {
             let config = run.load_config()?;
             let lock = RunLock::acquire(&run.dir)?;
-            (NewFit::load(config)?, lock)
+            (NewFit::load(config)?, Some(lock))
         }
     };
     let (train, _) = config.split(&sequence.trajectories)?;
@@ -54,6 +89,12 @@ pub fn fit_run(
     let fit = &config.fit;
     let field = fit.model.init(fit.seed, train.canonical(), &ad);
     let mut trainer = Trainer::new(field, fit, &train, device)?.progress(progress);
+    // A new fit's folder is made only now, once the trainer took the data: a refusal
+    // until here leaves nothing behind.
+    let _lock = match resumed {
+        Some(lock) => lock,
+        None => start(run, &config, held)?,
+    };
     if resume && run.resume().is_file() {
         let snapshot = run.read_resume()?;
         trainer
@@ -80,21 +121,27 @@ pub fn fit_run(
     }
 }
 
-/// Makes the run folder of a new fit, locks it and writes its config. The data was read
+/// Makes the run folder of a new fit, locks it (unless its lock is `held`) and writes its
+/// config. The data was read
 /// and checked before ([`NewFit`]), so that bad data leaves nothing behind.
-fn start(run: &RunDir, new: NewFit) -> Result<(NewFit, RunLock)> {
+fn start(run: &RunDir, config: &RunConfig, held: Option<RunLock>) -> Result<RunLock> {
     let taken = || DomaError::RunExists(run.dir.clone());
     if run.config().exists() {
         return Err(taken());
     }
-    std::fs::create_dir_all(&run.dir).map_err(|e| DomaError::io(&run.dir, e))?;
-    let lock = RunLock::acquire(&run.dir)?;
+    let lock = match held {
+        Some(lock) => lock,
+        None => {
+            std::fs::create_dir_all(&run.dir).map_err(|e| DomaError::io(&run.dir, e))?;
+            RunLock::acquire(&run.dir)?
+        }
+    };
     // Checked again under the lock: another fit may have started here meanwhile.
     if run.config().exists() {
         return Err(taken());
     }
-    save_json(&new.config, &run.config())?;
-    Ok((new, lock))
+    save_json(config, &run.config())?;
+    Ok(lock)
 }
 
 /// Writes `model.bpk`, `canonical.npy` when the fit learned canonical positions, and

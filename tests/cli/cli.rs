@@ -835,3 +835,30 @@ fn bench_time_to_accuracy_writes_the_curves_the_targets_and_the_plots() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_fit_refused_by_its_trainer_leaves_no_run_folder() {
+    let dir = common::scratch("doma-halfmade");
+    let data = dir.join("tiny.traj");
+    let positions: Vec<f32> = (0..5 * 4 * 3).map(|v| (v as f32 * 0.37).sin()).collect();
+    doma::data::traj::write_traj(
+        &data,
+        &doma::data::Trajectories::new(5, 4, positions).unwrap(),
+    )
+    .unwrap();
+    let run = dir.join("run");
+    let (ok, _, err) = doma(&[
+        "fit",
+        data.to_str().unwrap(),
+        "--out",
+        run.to_str().unwrap(),
+        "--until-converged",
+        "5",
+    ]);
+    assert!(!ok && err.contains("validate"), "{err}");
+    assert!(
+        !run.exists(),
+        "{:?}",
+        std::fs::read_dir(&run).map(|d| d.count())
+    );
+}
