@@ -167,6 +167,7 @@ def fit(
     reg: Optional[str] = None,
     progress: bool = True,
     out: Optional[PathLike] = None,
+    overwrite: bool = False,
     **options: Any,
 ) -> Field:
     """Fits a motion field to ``tracks``, as ``doma fit`` does.
@@ -212,11 +213,17 @@ def fit(
         checkpoint_every: iterations between checkpoints (default 50).
         progress: show a progress bar on stderr.
         out: the run folder to write (it must not hold a run); default a temporary one,
-            removed with the field (:meth:`Field.save` keeps it).
+            removed with the field (:meth:`Field.save` keeps it). The folder is locked
+            before anything in it is touched: a second fit into it is refused, and a
+            refused fit leaves every file there as it was.
+        overwrite: replace files of an earlier fit's kind (``tracks.npz``, ``model.bpk``,
+            ``report.json``, ...) that ``out`` holds outside a run; without it they are
+            refused (FileExistsError).
 
     Raises:
         ValueError: bad shapes, dtypes, values or options. TypeError: an option of the
-        wrong type. FileExistsError: ``out`` holds a run. KeyboardInterrupt: Ctrl-C; the
+        wrong type. FileExistsError: ``out`` holds a run, or a file a fit writes.
+        OSError: another fit holds ``out``. KeyboardInterrupt: Ctrl-C; the
         checkpoint is saved (see :func:`resume`).
     """
     positions = _float_array(tracks, "tracks", (None, None, 3))
@@ -236,7 +243,12 @@ def fit(
     if reg == "h" and options.get("h_weight") is None:
         options["h_weight"] = 0.1
     native = _native.fit(
-        positions, mask, out=None if out is None else os.fspath(out), progress=bool(progress), **options
+        positions,
+        mask,
+        out=None if out is None else os.fspath(out),
+        progress=bool(progress),
+        overwrite=bool(overwrite),
+        **options,
     )
     return Field(native)
 

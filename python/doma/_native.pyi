@@ -39,6 +39,7 @@ def fit(
     *,
     out: Optional[str] = None,
     progress: bool = True,
+    overwrite: bool = False,
     **options: object,
 ) -> Field: ...
 def resume(run_dir: str, progress: bool) -> Field: ...

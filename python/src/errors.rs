@@ -25,6 +25,7 @@ pub fn to_py(error: DomaError) -> PyErr {
         DomaError::RunExists(_) => PyFileExistsError::new_err(message),
         DomaError::Busy { .. } => PyOSError::new_err(message),
         DomaError::Malformed { .. }
+        | DomaError::WouldReplaceInput { .. }
         | DomaError::InvalidData(_)
         | DomaError::InvalidConfig(_)
         | DomaError::Usage(_) => PyValueError::new_err(message),

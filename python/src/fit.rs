@@ -8,11 +8,11 @@ use doma::DomaError;
 use doma::Result;
 use doma::backend::BackendKind;
 use doma::data::layout::Layout;
-use doma::run::{FitOutcome, NewFit, RunDir, fit_run};
+use doma::run::{FitOutcome, NewFit, RunDir, RunLock, fit_run, fit_run_locked};
 use doma::train::select::WeightSearch;
 use doma_formats::npy::NpyValues;
 use pyo3::buffer::PyBuffer;
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::{PyFileExistsError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -25,6 +25,18 @@ use crate::interrupt;
 /// The data file of a fit from NumPy, inside its run folder.
 const DATA_FILE: &str = "tracks.npz";
 
+/// The files a fit writes into its folder beside `config.json`: a folder holding one is
+/// refused unless the caller says to replace it.
+const RUN_FILES: [&str; 7] = [
+    DATA_FILE,
+    "model.bpk",
+    "report.json",
+    "history.json",
+    "canonical.npy",
+    "resume.ckpt",
+    "plots",
+];
+
 /// The options that read a data file, which a fit of arrays has no use for.
 const FILE_OPTIONS: [&str; 5] = ["data", "layout", "frame", "count_hidden", "confidence"];
 
@@ -33,13 +45,14 @@ const FILE_OPTIONS: [&str; 5] = ["data", "layout", "frame", "count_hidden", "con
 /// `None`, removed with the field), as `doma fit` would with the same options: `options`
 /// are [`doma::run::RunSpec`]'s fields by name (`variant`, `iters`, `h_weight`, …).
 #[pyfunction]
-#[pyo3(signature = (tracks, observed=None, *, out=None, progress=true, **options))]
+#[pyo3(signature = (tracks, observed=None, *, out=None, progress=true, overwrite=false, **options))]
 pub fn fit(
     py: Python<'_>,
     tracks: PyBuffer<f32>,
     observed: Option<PyBuffer<u8>>,
     out: Option<PathBuf>,
     progress: bool,
+    overwrite: bool,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Field> {
     if let Some(given) = options {
@@ -83,17 +96,48 @@ pub fn fit(
     std::fs::create_dir_all(&dir)
         .map_err(|e| DomaError::io(&dir, e))
         .py()?;
-    let data = dir.join(DATA_FILE);
-    // Nothing of a fit that does not start is left behind: the data file, and the folder
-    // when this call made it.
-    let clean_up = || {
-        if !run.config().exists() {
-            let _ = std::fs::remove_file(&data);
+    let lock_file = dir.join(".lock");
+    let had_lock_file = lock_file.exists();
+    // The lock before anything in the folder is read, written or deleted: a second caller
+    // is refused here, and touches nothing of the first one's.
+    let lock = match RunLock::acquire(&dir) {
+        Ok(lock) => lock,
+        Err(e) => {
             if made {
+                // Empty unless the other caller is in it; then it stays.
                 let _ = std::fs::remove_dir(&dir);
             }
+            return Err(errors::to_py(e));
         }
     };
+    let data = dir.join(DATA_FILE);
+    // What this call made, undone under the lock if the fit does not start.
+    let undo = |wrote_data: bool| {
+        if run.config().exists() {
+            return;
+        }
+        if wrote_data {
+            let _ = std::fs::remove_file(&data);
+        }
+        if !had_lock_file {
+            let _ = std::fs::remove_file(&lock_file);
+        }
+        if made {
+            let _ = std::fs::remove_dir(&dir);
+        }
+    };
+    if run.config().exists() {
+        return Err(errors::to_py(DomaError::RunExists(dir.clone())));
+    }
+    if !overwrite && let Some(file) = RUN_FILES.iter().map(|f| dir.join(f)).find(|f| f.exists()) {
+        undo(false);
+        return Err(PyFileExistsError::new_err(format!(
+            "{}: the folder is not a doma run but holds {}, which a fit writes; choose \
+             another `out`, or pass overwrite=True to replace it",
+            dir.display(),
+            file.display()
+        )));
+    }
     // The data file is written once and read once, by `prepare`; the fit runs on what it
     // read.
     let prepared = (|| -> Result<NewFit> {
@@ -121,14 +165,17 @@ pub fn fit(
     let new = match prepared {
         Ok(new) => new,
         Err(e) => {
-            clean_up();
+            undo(true);
             return Err(errors::to_py(e));
         }
     };
     let shape = DataShape::of(&new.sequence);
-    let result = run_fit(py, &run, Some(new), progress);
+    let result = run_fit(py, &run, Some((new, lock)), progress);
     if result.is_err() {
-        clean_up();
+        // The lock went with the fit: undo only what is still ours.
+        if let Ok(_again) = RunLock::acquire(&dir) {
+            undo(true);
+        }
         if temporary {
             let _ = std::fs::remove_dir_all(&dir);
         }
@@ -169,16 +216,18 @@ fn check_tracks(t: usize, n: usize, positions: &[f32], mask: Option<&[bool]>) ->
 fn run_fit(
     py: Python<'_>,
     run: &RunDir,
-    new: Option<NewFit>,
+    new: Option<(NewFit, RunLock)>,
     progress: bool,
 ) -> PyResult<burn::tensor::Device> {
     let backend = match &new {
-        Some(n) => n.config.backend,
+        Some((n, _)) => n.config.backend,
         None => run.load_config().py()?.backend,
     };
     let device = backend.device().py()?;
-    let (outcome, raised) =
-        interrupt::run_interruptible(py, |flag| fit_run(run, new, &device, flag, None, progress));
+    let (outcome, raised) = interrupt::run_interruptible(py, |flag| match new {
+        Some((new, lock)) => fit_run_locked(run, new, lock, &device, flag, None, progress),
+        None => fit_run(run, None, &device, flag, None, progress),
+    });
     match (outcome.py()?, raised) {
         (FitOutcome::Finished(_), None) => Ok(device),
         (FitOutcome::Interrupted { iterations_done }, raised) => {

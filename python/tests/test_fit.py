@@ -5,6 +5,7 @@ import json
 import pathlib
 import subprocess
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -117,3 +118,56 @@ def test_a_recipe_and_a_stop_on_convergence_go_into_the_run_config(clip, tmp_pat
     assert fit["points_per_step"] is not None
     assert field.config["fit"] == fit
     assert np.isfinite(field.report["epe_x1e4"])
+
+
+def test_a_refused_fit_leaves_every_file_of_the_folder_as_it_was(clip, tmp_path):
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "tracks.npz").write_bytes(b"the user's own tracks")
+    (folder / "notes.txt").write_text("kept")
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    with pytest.raises(ValueError, match="test_fraction"):
+        doma.fit(clip, iters=2, progress=False, out=folder, test_fraction=2.0)
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+    # A file a fit would write is refused, naming it, unless the caller says to replace it.
+    with pytest.raises(FileExistsError, match="tracks.npz"):
+        doma.fit(clip, iters=2, progress=False, out=folder)
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+    field = doma.fit(clip, iters=2, progress=False, out=folder, overwrite=True)
+    assert field.frames == 20 and (folder / "notes.txt").read_text() == "kept"
+    # A refused fit in a folder it made leaves no folder.
+    with pytest.raises(ValueError):
+        doma.fit(clip, iters=2, progress=False, out=tmp_path / "new", test_fraction=2.0)
+    assert not (tmp_path / "new").exists()
+
+
+def test_two_fits_into_one_folder_one_refused_the_other_fitted_to_its_own_array(clip, tmp_path):
+    for attempt in range(3):
+        out = tmp_path / f"race{attempt}"
+        arrays = [clip, clip[::-1].copy()]
+        results: list = [None, None]
+
+        def go(i: int) -> None:
+            try:
+                results[i] = doma.fit(arrays[i], iters=15, progress=False, out=out)
+            except Exception as e:  # noqa: BLE001 - the refusal is the result
+                results[i] = e
+
+        threads = [threading.Thread(target=go, args=(i,)) for i in range(2)]
+        threads[0].start()
+        time.sleep(0.05)
+        threads[1].start()
+        for t in threads:
+            t.join()
+        won = [i for i in range(2) if isinstance(results[i], doma.Field)]
+        assert len(won) == 1, results
+        lost = results[1 - won[0]]
+        assert isinstance(lost, (OSError, FileExistsError)), lost
+        assert "being fitted" in str(lost) or "already holds a run" in str(lost), lost
+        # The folder holds the winner's array, and its field was fitted to it.
+        stored = doma.read_tracks(out / "tracks.npz").tracks
+        assert np.array_equal(stored, arrays[won[0]])
+        field = results[won[0]]
+        mine = np.abs(field.warp(arrays[won[0]][0], 19) - arrays[won[0]][19]).mean()
+        other = np.abs(field.warp(arrays[won[0]][0], 19) - arrays[1 - won[0]][19]).mean()
+        assert mine < other, (mine, other)

@@ -1,4 +1,5 @@
-"""What needs a process of its own: Ctrl-C during a fit, and the peak memory of a warp."""
+"""What needs a process of its own: Ctrl-C during a fit, two processes fitting into one
+folder, and the peak memory of a warp."""
 
 import os
 import pathlib
@@ -101,3 +102,40 @@ def test_the_example_fits_and_plots_without_a_display(tmp_path):
     png = tmp_path / "fit_and_plot.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "EPE" in done.stdout
+
+
+def test_two_processes_fitting_into_one_folder_one_refused_the_other_whole(tmp_path):
+    from conftest import ROOT
+
+    data = str(ROOT / "data" / "md2_faerie.traj")
+    for attempt in range(3):
+        out = tmp_path / f"race{attempt}"
+        children = []
+        for reverse in (False, True):
+            children.append(
+                python(
+                    f"""
+                    import sys, doma
+                    clip = {CLIP.format(data=data)}
+                    if sys.argv[2] == "1":
+                        clip = clip[::-1].copy()
+                    try:
+                        doma.fit(clip, iters=15, progress=False, out=sys.argv[1])
+                        print("fitted")
+                    except OSError as e:
+                        print("refused:", e)
+                    """,
+                    str(out),
+                    "1" if reverse else "0",
+                )
+            )
+            time.sleep(0.05)
+        outputs = [c.communicate(timeout=300) for c in children]
+        assert all(c.returncode == 0 for c in children), outputs
+        said = [o.strip() for o, _ in outputs]
+        won = [i for i, s in enumerate(said) if s == "fitted"]
+        assert len(won) == 1, said
+        assert said[1 - won[0]].startswith("refused:"), said
+        clip = doma.read_tracks(data).tracks[112:132]
+        expected = clip[::-1] if won[0] == 1 else clip
+        assert np.array_equal(doma.read_tracks(out / "tracks.npz").tracks, expected)

@@ -29,7 +29,7 @@ mod warp;
 
 pub use complete::{Completion, complete_run};
 pub use eval::{eval_run, evaluate, field_everywhere, gap_report};
-pub use fit::{FitOutcome, fit_run};
+pub use fit::{FitOutcome, fit_run, fit_run_locked};
 pub use info::{RunInfo, info};
 pub use lock::RunLock;
 pub use plot::plot_run;
