@@ -46,6 +46,17 @@ pub struct NpyHeader {
 /// The longest `.npy` header read (NumPy writes about 128 bytes; version 1 caps it at 64 KiB).
 pub const MAX_HEADER_BYTES: usize = 1 << 16;
 
+/// What an array's values are ([`NpyHeader::kind`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ValueKind {
+    /// `f2`, `f4`, `f8`.
+    Float,
+    /// Signed or unsigned integers.
+    Integer,
+    /// NumPy's `?`.
+    Bool,
+}
+
 /// The element types the reader accepts.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Dtype {
@@ -128,6 +139,13 @@ fn parse_descr(descr: &str) -> Result<(Dtype, bool), String> {
 /// delimiter (a quoted string, a parenthesised tuple or a bare word).
 fn header_value<'a>(header: &'a str, key: &str) -> Result<&'a str, String> {
     let missing = || format!("the header has no '{key}' entry");
+    // Python's dict literal keeps the last of two equal keys, a first-match reader the
+    // first: refused rather than read either way.
+    let count =
+        header.matches(&format!("'{key}'")).count() + header.matches(&format!("\"{key}\"")).count();
+    if count > 1 {
+        return Err(format!("the header has {count} '{key}' entries"));
+    }
     let at = header
         .find(&format!("'{key}'"))
         .or_else(|| header.find(&format!("\"{key}\"")))
@@ -233,6 +251,15 @@ impl NpyHeader {
     /// Whether the values are IEEE halves (`f2`), whose overflow reads as infinity.
     pub fn is_half(&self) -> bool {
         self.dtype == Dtype::Float(2)
+    }
+
+    /// What its values are: floats, integers or bools.
+    pub fn kind(&self) -> ValueKind {
+        match self.dtype {
+            Dtype::Float(_) => ValueKind::Float,
+            Dtype::Int(_) | Dtype::Uint(_) => ValueKind::Integer,
+            Dtype::Bool => ValueKind::Bool,
+        }
     }
 
     pub(crate) fn describe(&self) -> String {
@@ -453,6 +480,19 @@ pub fn encode_npy_values(shape: &[usize], values: NpyValues) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_header_with_two_entries_of_one_key_is_refused() {
+        // NumPy's `ast.literal_eval` keeps the second shape, (2,); a first-match reader
+        // would take (1,).
+        let header = "{'descr': '<f4', 'fortran_order': False, 'shape': (1,), 'shape': (2,), }\n";
+        let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+        bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+        bytes.extend_from_slice(header.as_bytes());
+        bytes.extend_from_slice(&[0; 8]);
+        let e = parse_npy(&bytes).unwrap_err();
+        assert!(e.contains("2 'shape' entries"), "{e}");
+    }
 
     #[test]
     fn a_non_ascii_dtype_is_refused_not_a_panic() {

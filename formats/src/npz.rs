@@ -93,6 +93,14 @@ pub fn npz_members(bytes: &[u8]) -> Result<Vec<NpzMember>, String> {
     let mut members = Vec::new();
     for _ in 0..entries {
         let (member, next) = directory_entry(bytes, at)?;
+        // NumPy reads the last of two members of one name, a first-match reader the
+        // first: neither reading is the file's, so it has none.
+        if members.iter().any(|m: &NpzMember| m.name == member.name) {
+            return Err(format!(
+                "two members are named {:?}: which one is meant is ambiguous",
+                member.name
+            ));
+        }
         members.push(member);
         at = next;
     }
@@ -359,6 +367,19 @@ pub fn encode_npz_values(members: &[(&str, &[usize], NpyValues)]) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::npy::NpyValues;
+
+    #[test]
+    fn two_members_of_one_name_are_refused_naming_it() {
+        let (a, b) = ([1.0f32, 2.0, 3.0], [4.0f32, 5.0, 6.0]);
+        let bytes = encode_npz_values(&[
+            ("tracks", &[1, 1, 3], NpyValues::F32(&a)),
+            ("tracks", &[1, 1, 3], NpyValues::F32(&b)),
+        ]);
+        let e = npz_members(&bytes).unwrap_err();
+        assert!(e.contains("\"tracks\""), "{e}");
+        assert!(parse_npz(&bytes).is_err());
+    }
 
     #[test]
     fn a_lying_offset_near_the_top_of_memory_is_a_truncated_record() {

@@ -284,6 +284,7 @@ def read_tracks(
     frame: Optional[str] = None,
     count_hidden: bool = False,
     confidence: Optional[str] = None,
+    visibility_threshold: Optional[float] = None,
 ) -> Tracks:
     """Reads ``.traj``, ``.anime``, ``.npy``, ``.npz`` (plain, PointOdyssey, TAPVid-3D,
     masked), ``.c3d`` (motion-capture markers in the file's units; a marker not measured
@@ -291,9 +292,12 @@ def read_tracks(
 
     ``layout`` forces an ``.npz`` layout (default: detected from its keys); ``frame``
     (``world``/``camera``), ``count_hidden`` and ``confidence`` are those of ``doma fit``.
+    A visibility is read by its dtype: bool as it is, integers 0 or 1, floats a
+    probability in [0, 1] observed from ``visibility_threshold`` (default 0.5); any other
+    value (a code such as 2 or -1, NaN) is refused, naming the entry.
     """
     positions, (t, n), observed, faces, weights = _native.read_tracks(
-        os.fspath(path), layout, frame, bool(count_hidden), confidence
+        os.fspath(path), layout, frame, bool(count_hidden), confidence, visibility_threshold
     )
     return Tracks(
         tracks=np.frombuffer(positions, dtype=np.float32).reshape(t, n, 3),

@@ -50,5 +50,6 @@ def read_tracks(
     frame: Optional[str] = None,
     count_hidden: bool = False,
     confidence: Optional[str] = None,
+    visibility_threshold: Optional[float] = None,
 ) -> tuple[bytearray, tuple[int, int], bytearray, Optional[bytearray], Optional[bytearray]]: ...
 def sequence_reads() -> int: ...

@@ -38,7 +38,14 @@ const RUN_FILES: [&str; 7] = [
 ];
 
 /// The options that read a data file, which a fit of arrays has no use for.
-const FILE_OPTIONS: [&str; 5] = ["data", "layout", "frame", "count_hidden", "confidence"];
+const FILE_OPTIONS: [&str; 6] = [
+    "data",
+    "layout",
+    "frame",
+    "count_hidden",
+    "confidence",
+    "visibility_threshold",
+];
 
 /// Fits a field to `tracks` ([T, N, 3] float32) with the mask `observed` ([T, N] uint8,
 /// `None`: every entry observed) into the run folder `out` (a new temporary folder when

@@ -12,7 +12,7 @@ use crate::errors::IntoPy;
 /// Reads a sequence file as `doma fit` reads it: `(tracks bytes, [T, N], observed bytes,
 /// faces bytes or None, weights bytes or None, layout)`.
 #[pyfunction]
-#[pyo3(signature = (path, layout=None, frame=None, count_hidden=false, confidence=None))]
+#[pyo3(signature = (path, layout=None, frame=None, count_hidden=false, confidence=None, visibility_threshold=None))]
 #[allow(clippy::type_complexity)]
 pub fn read_tracks<'py>(
     py: Python<'py>,
@@ -21,6 +21,7 @@ pub fn read_tracks<'py>(
     frame: Option<Wrap<CoordFrame>>,
     count_hidden: bool,
     confidence: Option<String>,
+    visibility_threshold: Option<f64>,
 ) -> PyResult<(
     Bound<'py, pyo3::types::PyByteArray>,
     (usize, usize),
@@ -33,6 +34,7 @@ pub fn read_tracks<'py>(
         frame: frame.map(|Wrap(f)| f),
         count_hidden,
         confidence,
+        visibility_threshold,
     };
     let (tracks, faces) = py
         .detach(|| doma::data::sequence::read_tracks(&path, &file))

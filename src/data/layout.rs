@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use super::npy::{npz_member_header, npz_members, read_npz_member, read_npz_trajectories};
 use super::tracks::Tracks;
 use crate::{DomaError, Result};
+use doma_formats::npy::ValueKind;
 use doma_formats::npz::NpzMember;
 
 /// The layout of a `.npz` file.
@@ -80,7 +81,7 @@ pub enum CoordFrame {
 }
 
 /// How a tracker's file is read.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct TrackFile {
     /// The layout (default: detected from the keys).
     #[serde(default)]
@@ -94,6 +95,45 @@ pub struct TrackFile {
     /// The key of a `[T, N]` array of per-observation confidence weights.
     #[serde(default)]
     pub confidence: Option<String>,
+    /// The probability from which a float visibility counts as observed (default
+    /// [`VISIBILITY_THRESHOLD`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub visibility_threshold: Option<f64>,
+}
+
+/// The probability from which a float visibility (a tracker's confidence that the point
+/// is seen) counts as observed.
+pub const VISIBILITY_THRESHOLD: f64 = 0.5;
+
+/// A visibility array as a mask, by its dtype: bools as they are; integers 0 or 1; floats
+/// a probability in `[0, 1]`, observed from `threshold` on. Any other value (an integer
+/// code such as 2 or −1, a NaN, a probability outside `[0, 1]`) is refused, naming the
+/// entry of `key`.
+pub fn visibility_mask(
+    key: &str,
+    kind: ValueKind,
+    values: &[f32],
+    points: usize,
+    threshold: f64,
+) -> std::result::Result<Vec<bool>, String> {
+    let at = |e: usize| format!("{key}[{}, {}]", e / points.max(1), e % points.max(1));
+    values
+        .iter()
+        .enumerate()
+        .map(|(e, &v)| match kind {
+            ValueKind::Bool => Ok(v != 0.0),
+            ValueKind::Integer if v == 0.0 || v == 1.0 => Ok(v == 1.0),
+            ValueKind::Integer => Err(format!(
+                "{} is {v}: an integer visibility holds 0 or 1 (a float one, a probability)",
+                at(e)
+            )),
+            ValueKind::Float if (0.0..=1.0).contains(&v) => Ok(v as f64 >= threshold),
+            ValueKind::Float => Err(format!(
+                "{} is {v}: a float visibility is a probability in [0, 1] (observed from {threshold})",
+                at(e)
+            )),
+        })
+        .collect()
 }
 
 impl TrackFile {
@@ -136,9 +176,19 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
     if file.count_hidden && layout != Layout::PointOdyssey {
         return Err(usage("--count-hidden applies to PointOdyssey's valids"));
     }
+    if let Some(p) = file.visibility_threshold
+        && !(p > 0.0 && p <= 1.0)
+    {
+        return Err(DomaError::Usage(format!(
+            "--visibility-threshold {p} is not a probability in (0, 1]"
+        )));
+    }
     if layout == Layout::Plain {
         if file.confidence.is_some() {
             return Err(usage("--confidence needs a tracker layout"));
+        }
+        if file.visibility_threshold.is_some() {
+            return Err(usage("--visibility-threshold needs a tracker layout"));
         }
         let data = read_npz_trajectories(path, None)?;
         return Ok(Tracks::complete(data));
@@ -177,8 +227,12 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
         }
         Ok(read_npz_member(&bytes, m).map_err(malformed)?.data)
     };
+    let threshold = file.visibility_threshold.unwrap_or(VISIBILITY_THRESHOLD);
     let read_mask = |key: &str| -> Result<Vec<bool>> {
-        Ok(read_entries(key)?.iter().map(|&v| v != 0.0).collect())
+        let kind = npz_member_header(&bytes, member(key)?)
+            .map_err(malformed)?
+            .kind();
+        visibility_mask(key, kind, &read_entries(key)?, n, threshold).map_err(malformed)
     };
     let observed = match layout {
         Layout::PointOdyssey => {

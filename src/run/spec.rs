@@ -182,6 +182,11 @@ pub struct RunSpec {
     #[arg(long, value_name = "A..=B", value_parser = span_lengths)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout_span: Option<[usize; 2]>,
+    /// The probability from which a tracker's float visibility counts as observed
+    /// (default 0.5); a bool or 0/1 visibility is read as it is.
+    #[arg(long, value_name = "P")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub visibility_threshold: Option<f64>,
     /// The key of a `[T, N]` array of per-observation confidence weights in a tracker's
     /// .npz: each observation's share of the trajectory loss.
     #[arg(long, value_name = "KEY")]
@@ -350,6 +355,13 @@ impl RunSpec {
             check_held_fraction(f)
                 .map_err(|e| DomaError::InvalidConfig(format!("test_fraction: {e}")))?;
         }
+        if let Some(p) = self.visibility_threshold
+            && !(p > 0.0 && p <= 1.0)
+        {
+            return Err(DomaError::InvalidConfig(format!(
+                "visibility_threshold: {p} is not a probability in (0, 1]"
+            )));
+        }
         if let Some([a, b]) = self.holdout_span
             && (a == 0 || a > b)
         {
@@ -462,6 +474,7 @@ impl RunSpec {
             frame: self.frame,
             count_hidden: self.count_hidden.unwrap_or(false),
             confidence: self.confidence.clone(),
+            visibility_threshold: self.visibility_threshold,
         };
         config.reference_frame = self.reference_frame;
         config.drop_unobserved = self.drop_unobserved.unwrap_or(false);

@@ -311,3 +311,79 @@ fn confidence_weights_are_read_from_their_key_and_checked_where_observed() {
     .to_string();
     assert!(err.contains("no key \"nope\""), "{err}");
 }
+
+#[test]
+fn a_visibility_is_read_by_its_dtype_and_odd_codes_are_refused() {
+    let dir = common::scratch("doma-visibility");
+    let (t, n) = (2, 3);
+    let positions: Vec<f32> = (0..t * n * 3).map(|v| v as f32).collect();
+    let write = |name: &str, visibility: NpyValues| {
+        let path = dir.join(name);
+        std::fs::write(
+            &path,
+            encode_npz_values(&[
+                ("tracks_XYZ", &[t, n, 3], NpyValues::F32(&positions)),
+                ("visibility", &[t, n], visibility),
+            ]),
+        )
+        .unwrap();
+        path
+    };
+    let observed = |path: &Path, threshold: Option<f64>| {
+        let file = TrackFile {
+            visibility_threshold: threshold,
+            ..TrackFile::default()
+        };
+        read(path, &file).map(|tr| tr.observed().to_vec())
+    };
+    // A probability (CoTracker-like): observed from 0.5, or from the threshold given.
+    let probabilities = write("p.npz", NpyValues::F32(&[0.3, 0.9, 0.5, 1.0, 0.0, 0.49]));
+    assert_eq!(
+        observed(&probabilities, None).unwrap(),
+        [false, true, true, true, false, false]
+    );
+    assert_eq!(
+        observed(&probabilities, Some(0.25)).unwrap(),
+        [true, true, true, true, false, true]
+    );
+    // Integers 0 and 1 are a mask; any other code, and a NaN, is refused naming the entry.
+    let codes = write("i.npz", NpyValues::I64(&[1, 0, 1, 1, 1, 1]));
+    assert_eq!(
+        observed(&codes, None).unwrap(),
+        [true, false, true, true, true, true]
+    );
+    for (name, values, entry) in [
+        (
+            "two.npz",
+            NpyValues::I64(&[1, 2, 1, 1, 1, 1]),
+            "visibility[0, 1]",
+        ),
+        (
+            "minus.npz",
+            NpyValues::I64(&[1, 1, 1, 1, -1, 1]),
+            "visibility[1, 1]",
+        ),
+        (
+            "nan.npz",
+            NpyValues::F32(&[1.0, 1.0, f32::NAN, 1.0, 1.0, 1.0]),
+            "visibility[0, 2]",
+        ),
+        (
+            "big.npz",
+            NpyValues::F32(&[1.0, 1.0, 1.0, 1.5, 1.0, 1.0]),
+            "visibility[1, 0]",
+        ),
+    ] {
+        let path = write(name, values);
+        match observed(&path, None) {
+            Err(doma::DomaError::Malformed { path: p, reason }) => {
+                assert_eq!(p, path);
+                assert!(reason.contains(entry), "{name}: {reason}");
+            }
+            other => panic!("{name}: {other:?}"),
+        }
+    }
+    // A threshold outside (0, 1] is refused naming the flag.
+    let e = observed(&probabilities, Some(0.0)).unwrap_err().to_string();
+    assert!(e.contains("--visibility-threshold"), "{e}");
+}
