@@ -98,6 +98,17 @@ impl SirenConfig {
         shapes
     }
 
+    /// [`SirenConfig::num_params`] without allocating or overflowing: `None` past
+    /// `usize` (a config's sizes are checked with it before anything is built).
+    pub fn checked_params(&self) -> Option<usize> {
+        let d = self.shape.hidden;
+        stacked_params(&[
+            (1, self.d_in, d),
+            (self.shape.n_hidden, d, d),
+            (1, d, self.d_out),
+        ])
+    }
+
     /// The number of trainable parameters (weights and biases).
     pub fn num_params(&self) -> usize {
         self.layer_shapes().iter().map(|(i, o)| i * o + o).sum()
@@ -110,6 +121,17 @@ impl SirenConfig {
         let layers = SirenInitializer::new(omega).init(self, &mut rng);
         Siren::from_weights(&layers, omega, device)
     }
+}
+
+/// The weights and biases of stacks of dense layers, `(count, fan_in, fan_out)` each, in
+/// checked arithmetic: `None` where the count passes `usize`.
+pub fn stacked_params(stacks: &[(usize, usize, usize)]) -> Option<usize> {
+    stacks
+        .iter()
+        .try_fold(0usize, |total, &(count, fan_in, fan_out)| {
+            let layer = fan_in.checked_mul(fan_out)?.checked_add(fan_out)?;
+            total.checked_add(count.checked_mul(layer)?)
+        })
 }
 
 /// Host-side weights of one layer: `weight` is `[fan_in, fan_out]` row-major

@@ -183,6 +183,19 @@ impl ModelConfig {
         }
     }
 
+    /// [`ModelConfig::num_params`] in checked arithmetic, without allocating: `None` past
+    /// `usize`.
+    pub fn checked_params(&self) -> Option<usize> {
+        match self {
+            ModelConfig::Doma(c) => c.siren().checked_params(),
+            ModelConfig::Dpf(c) => c.siren().checked_params()?.checked_mul(c.frames),
+            ModelConfig::Mlp(c) => c.checked_params(),
+            ModelConfig::DctNerf(c) => c.checked_params(),
+            ModelConfig::Banmo(c) => c.checked_params(),
+            ModelConfig::BoneCloud(c) => c.checked_params(),
+        }
+    }
+
     /// The number of trainable parameters.
     pub fn num_params(&self) -> usize {
         match self {
@@ -210,6 +223,13 @@ impl ModelConfig {
             ModelConfig::Mlp(c) if c.hidden == 0 => {
                 return bad("hidden width must be at least 1".into());
             }
+            ModelConfig::Mlp(c) if c.d_in != 4 || c.d_out != 3 => {
+                return bad(format!(
+                    "the MLP baseline maps [x, y, z, t] to a displacement: d_in 4 and d_out 3, \
+                     not {} and {}",
+                    c.d_in, c.d_out
+                ));
+            }
             ModelConfig::DctNerf(c) if c.hidden == 0 || c.frames == 0 => {
                 return bad("DCT-NeRF needs a hidden width and frames".into());
             }
@@ -224,19 +244,37 @@ impl ModelConfig {
             {
                 return bad("BANMO needs bones, frames, a code, and layers at least 2 wide".into());
             }
+            ModelConfig::Banmo(c) if c.frequencies > MAX_FREQUENCIES => {
+                return bad(format!(
+                    "BANMO's {} frequencies are more than the {MAX_FREQUENCIES} its encoding \
+                     computes (2^k for k < L, in 64 bits)",
+                    c.frequencies
+                ));
+            }
             ModelConfig::BoneCloud(c) if c.bones == 0 || c.frames == 0 => {
                 return bad("BoneCloud needs bones and frames".into());
             }
+            ModelConfig::BoneCloud(c) if !(c.sigma.is_finite() && c.sigma > 0.0) => {
+                return bad(format!(
+                    "BoneCloud's sharpness sigma must be positive, not {}",
+                    c.sigma
+                ));
+            }
             _ => {}
         }
-        let params = self.num_params();
-        if params > MAX_PARAMS {
-            return bad(format!(
+        // Counted in closed form and checked arithmetic: a config of 10⁹ layers is refused
+        // here, not after a 16 GB list of their shapes.
+        match self.checked_params() {
+            Some(params) if params <= MAX_PARAMS => Ok(()),
+            Some(params) => bad(format!(
                 "{} with {params} parameters is over the limit of {MAX_PARAMS}",
                 self.paper_name()
-            ));
+            )),
+            None => bad(format!(
+                "{}'s parameter count overflows (the limit is {MAX_PARAMS})",
+                self.paper_name()
+            )),
         }
-        Ok(())
     }
 
     /// The model initialised from `seed` on `device`. `canonical` (`[N·3]`, the canonical
@@ -252,6 +290,10 @@ impl ModelConfig {
         }
     }
 }
+
+/// The most frequencies of BANMO's positional encoding: its `2^k` (`k < L`) is computed in
+/// 64 bits (an `f32` argument has lost every bit of a unit-scale input long before).
+pub const MAX_FREQUENCIES: usize = 63;
 
 /// The largest model a config may ask for: 10⁸ parameters (400 MB of f32 weights, and as
 /// much again for each of Adam's moments).
@@ -337,5 +379,55 @@ impl MotionField for Model {
 
     fn param_count(&self) -> usize {
         self.as_field().param_count()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::siren::WithSirenShape;
+
+    fn every_model(frames: usize) -> Vec<ModelConfig> {
+        vec![
+            ModelConfig::Doma(DomaFieldConfig::new(Variant::Affinity).with_n_hidden(3)),
+            ModelConfig::Dpf(DpfConfig::new(frames).with_hidden(32)),
+            ModelConfig::Mlp(MlpConfig::new().with_pe_octaves(6)),
+            ModelConfig::Mlp(MlpConfig::new().with_layers(0)),
+            ModelConfig::DctNerf(DctConfig::new(frames).with_layers(1)),
+            ModelConfig::Banmo(BanmoConfig::new(frames)),
+            ModelConfig::Banmo(BanmoConfig::new(frames).with_transform_layers(3)),
+            ModelConfig::BoneCloud(BoneCloudConfig::new(frames)),
+        ]
+    }
+
+    #[test]
+    fn the_closed_form_counts_are_the_built_models_counts() {
+        for m in every_model(7) {
+            assert_eq!(m.checked_params(), Some(m.num_params()), "{m:?}");
+        }
+    }
+
+    #[test]
+    fn sizes_past_memory_or_usize_are_refused_before_anything_is_built() {
+        let huge = usize::MAX / 3;
+        let refused = [
+            ModelConfig::Doma(DomaFieldConfig::new(Variant::Se3).with_n_hidden(1_000_000_000)),
+            ModelConfig::Doma(DomaFieldConfig::new(Variant::Se3).with_hidden(huge)),
+            ModelConfig::Dpf(DpfConfig::new(huge)),
+            ModelConfig::Mlp(MlpConfig::new().with_layers((1 << 60) + 1)),
+            ModelConfig::Mlp(MlpConfig::new().with_d_in(0)),
+            ModelConfig::Mlp(MlpConfig::new().with_d_out(7)),
+            ModelConfig::DctNerf(DctConfig::new(10).with_coefficients(Some(huge))),
+            ModelConfig::DctNerf(DctConfig::new(10).with_layers((1 << 60) + 1)),
+            ModelConfig::Banmo(BanmoConfig::new(10).with_frequencies(1 << 62)),
+            ModelConfig::Banmo(BanmoConfig::new(10).with_frequencies(64)),
+            ModelConfig::Banmo(BanmoConfig::new(10).with_transform_layers(1_000_000_000)),
+            ModelConfig::BoneCloud(BoneCloudConfig::new(10).with_bones(1 << 62)),
+            ModelConfig::BoneCloud(BoneCloudConfig::new(10).with_sigma(-1.0)),
+        ];
+        for m in refused {
+            let e = m.validate().unwrap_err().to_string();
+            assert!(!e.is_empty(), "{m:?}");
+        }
     }
 }

@@ -108,6 +108,45 @@ impl BanmoConfig {
         )
     }
 
+    /// [`BanmoConfig::num_params`] in checked arithmetic, without building the layer
+    /// lists: `None` past `usize`.
+    pub fn checked_params(&self) -> Option<usize> {
+        let nerf = |input: usize, layers: usize, width: usize, output: usize| {
+            let trunk = match layers {
+                0 => vec![],
+                l if l > SKIP => vec![
+                    (1, input, width),
+                    (1, input.checked_add(width)?, width),
+                    (l - 2, width, width),
+                ],
+                l => vec![(1, input, width), (l - 1, width, width)],
+            };
+            let head = [
+                (1, width, width),
+                (1, width, width / 2),
+                (1, width / 2, output),
+            ];
+            crate::siren::stacked_params(&[trunk.as_slice(), &head].concat())
+        };
+        let encode = |d: usize| d.checked_mul(self.frequencies.checked_mul(2)?.checked_add(1)?);
+        let transform = nerf(
+            self.code_size,
+            self.transform_layers,
+            self.transform_width,
+            self.bones.checked_mul(6)?,
+        )?;
+        let skin = nerf(
+            encode(3)?.checked_add(self.code_size)?,
+            self.skin_layers,
+            self.skin_width,
+            self.bones,
+        )?;
+        let code = encode(1)?.checked_add(1)?.checked_mul(self.code_size)?;
+        [skin, code, self.code_size, self.bones.checked_mul(10)?, 2]
+            .iter()
+            .try_fold(transform, |a, &b| a.checked_add(b))
+    }
+
     /// Trainable parameters: the transform network, the skinning MLP, the pose code's
     /// linear map, the rest code, the bones (`10 B`) and the two skinning scalars (the
     /// authors' `skin_aux`, of which only the first is read). 695,787 at the authors' sizes.

@@ -37,6 +37,12 @@ pub struct BoneCloudConfig {
 }
 
 impl BoneCloudConfig {
+    /// [`BoneCloudConfig::num_params`] in checked arithmetic: `None` past `usize`.
+    pub fn checked_params(&self) -> Option<usize> {
+        let poses = self.frames.checked_mul(self.bones)?.checked_mul(9)?;
+        self.bones.checked_mul(3)?.checked_add(poses)
+    }
+
     /// Trainable parameters: `3K` bone positions and `9TK` per-frame bone transforms.
     pub fn num_params(&self) -> usize {
         3 * self.bones + 9 * self.frames * self.bones

@@ -47,6 +47,16 @@ impl DctConfig {
             .with_layers(self.layers)
     }
 
+    /// [`DctConfig::num_params`] in checked arithmetic: `None` past `usize`.
+    pub fn checked_params(&self) -> Option<usize> {
+        MlpConfig::new()
+            .with_d_in(3)
+            .with_d_out(self.k().checked_mul(3)?)
+            .with_hidden(self.hidden)
+            .with_layers(self.layers)
+            .checked_params()
+    }
+
     /// Trainable parameters.
     pub fn num_params(&self) -> usize {
         self.mlp().num_params()

@@ -73,6 +73,21 @@ impl MlpConfig {
         self.d_in * (1 + 2 * self.pe_octaves)
     }
 
+    /// [`MlpConfig::num_params`] in checked arithmetic, without its loop: `None` past
+    /// `usize`.
+    pub fn checked_params(&self) -> Option<usize> {
+        let encoded = self
+            .d_in
+            .checked_mul(self.pe_octaves.checked_mul(2)?.checked_add(1)?)?;
+        let h = self.hidden;
+        match self.layers {
+            0 => crate::siren::stacked_params(&[(1, encoded, self.d_out)]),
+            l => {
+                crate::siren::stacked_params(&[(1, encoded, h), (l - 1, h, h), (1, h, self.d_out)])
+            }
+        }
+    }
+
     /// Trainable parameters.
     pub fn num_params(&self) -> usize {
         let mut fan_in = self.encoded_width();
