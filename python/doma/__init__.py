@@ -81,7 +81,8 @@ class Field:
         self._native = native
 
     def warp(self, points: Any, t: Frames) -> np.ndarray:
-        """Moves reference-frame ``points`` ([M, 3]) to frame ``t``: ``y = A x + u`` (Eq. 4).
+        """Moves ``points`` ([M, 3]) given at the reference frame (:attr:`reference_frame`)
+        to frame ``t``: ``y = A x + u`` (Eq. 4).
 
         Returns [M, 3], or [K, M, 3] for K frames. Memory holds the input, the output and
         one chunk of 16,384 points' activations, however large M is.
@@ -103,6 +104,32 @@ class Field:
         out = np.empty((len(frames), x.shape[0], 3, 3), dtype=np.float32)
         self._native.jacobian_into(x, frames, out)
         return out[0] if one else out
+
+    def complete(self) -> "Tracks":
+        """Every track at every frame of the fitted clip, gaps filled: what ``doma complete``
+        writes, to the last bit.
+
+        Returns a :class:`Tracks` in the input's units, frame and track order: ``tracks``
+        [T, N, 3] float32 (an observed entry as the input holds it, every other filled by
+        the field plus the track's own residual carried across the gap), ``observed`` the
+        input's mask, and ``kept`` the input's index of each track when the fit dropped
+        tracks never observed (else None).
+        """
+        positions, (t, n), observed, kept = self._native.complete()
+        return Tracks(
+            tracks=np.frombuffer(positions, dtype=np.float32).reshape(t, n, 3),
+            observed=np.frombuffer(observed, dtype=np.bool_).reshape(t, n),
+            faces=None,
+            weights=None,
+            kept=None if kept is None else np.asarray(kept, dtype=np.int64),
+        )
+
+    @property
+    def reference_frame(self) -> int:
+        """The frame of the clip whose positions ``warp`` takes as ``points``: the one with
+        the most observed tracks, unless the fit named one (``reference_frame=``). Points
+        given at another frame must first be brought to it."""
+        return self._native.reference_frame
 
     def evaluate(self, data: Optional[PathLike] = None) -> dict:
         """The metrics of ``doma eval``: on the run's held-out points, or on ``data``."""
@@ -265,7 +292,7 @@ def load(run_dir: PathLike, *, backend: Optional[str] = None) -> Field:
 
 @dataclass(frozen=True)
 class Tracks:
-    """A sequence file read as ``doma fit`` reads it."""
+    """A sequence file read as ``doma fit`` reads it, or a completion (:meth:`Field.complete`)."""
 
     #: [T, N, 3] float32 positions; NaN where not observed.
     tracks: np.ndarray
@@ -275,6 +302,9 @@ class Tracks:
     faces: Optional[np.ndarray]
     #: [T, N] float32 confidence weights with ``confidence=KEY``; else None.
     weights: Optional[np.ndarray]
+    #: [N] int64: the input's index of each track, from :meth:`Field.complete` when the
+    #: fit dropped tracks never observed; else None.
+    kept: Optional[np.ndarray] = None
 
 
 def read_tracks(

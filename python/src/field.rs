@@ -15,7 +15,7 @@ use pyo3::buffer::PyBuffer;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use crate::arrays::contiguous;
+use crate::arrays::{contiguous, to_bytearray};
 use crate::errors::IntoPy;
 
 /// Rows sent through the field at once by `warp` ([`doma::warp::WARP_CHUNK`]), and by
@@ -36,6 +36,7 @@ pub struct Field {
     scale: f32,
     frames: usize,
     points: usize,
+    reference: usize,
 }
 
 impl Drop for Field {
@@ -54,6 +55,7 @@ pub struct DataShape {
     points: usize,
     center: [f32; 3],
     scale: f32,
+    reference: usize,
 }
 
 impl DataShape {
@@ -64,6 +66,7 @@ impl DataShape {
             points: data.trajectories.points(),
             center: data.center,
             scale: data.scale,
+            reference: data.trajectories.reference(),
         }
     }
 }
@@ -99,6 +102,7 @@ impl Field {
             points: shape.points,
             center: shape.center,
             scale: shape.scale,
+            reference: shape.reference,
             config,
             model: Mutex::new(model),
             device,
@@ -269,6 +273,38 @@ impl Field {
     /// the run (a fit from NumPy), with `config.json` written last and pointed at the copy.
     fn save(&self, dir: PathBuf) -> PyResult<()> {
         save_run(&self.run, &self.config, &dir).py()
+    }
+
+    /// Every track at every frame of the clip, as `doma complete` writes it: `(tracks bytes
+    /// [T, N, 3] f32 in the input's units, [T, N], observed bytes [T, N], the input's index
+    /// of each track or None)`.
+    #[allow(clippy::type_complexity)]
+    fn complete<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(
+        Bound<'py, pyo3::types::PyByteArray>,
+        (usize, usize),
+        Bound<'py, pyo3::types::PyByteArray>,
+        Option<Vec<usize>>,
+    )> {
+        let done = py
+            .detach(|| doma::run::complete_tracks(&self.run, &self.device))
+            .py()?;
+        let observed: Vec<u8> = done.observed.iter().map(|&o| o as u8).collect();
+        Ok((
+            to_bytearray(py, &done.tracks),
+            (done.frames, done.points),
+            to_bytearray(py, &observed),
+            done.kept,
+        ))
+    }
+
+    /// The frame of the clip whose positions are the field's input `x`: the one with the
+    /// most observed tracks, unless the fit named one.
+    #[getter]
+    fn reference_frame(&self) -> usize {
+        self.reference
     }
 
     /// The run folder, or `None` for a temporary one (a fit without `out`).

@@ -171,3 +171,35 @@ def test_two_fits_into_one_folder_one_refused_the_other_fitted_to_its_own_array(
         mine = np.abs(field.warp(arrays[won[0]][0], 19) - arrays[won[0]][19]).mean()
         other = np.abs(field.warp(arrays[won[0]][0], 19) - arrays[1 - won[0]][19]).mean()
         assert mine < other, (mine, other)
+
+
+def test_complete_is_doma_complete_to_the_last_bit_in_the_input_units(cli, clip, tmp_path):
+    # A tracker's gaps: spans hidden in a third of the tracks, one track never seen.
+    observed = np.ones(clip.shape[:2], dtype=bool)
+    rng = np.random.default_rng(0)
+    for i in rng.choice(clip.shape[1], 120, replace=False):
+        a = rng.integers(0, 15)
+        observed[a : a + 5, i] = False
+    observed[:, 7] = False
+    tracks = np.where(observed[..., None], clip, np.nan).astype(np.float32)
+    run = tmp_path / "run"
+    field = doma.fit(tracks, observed, iters=20, progress=False, out=run, drop_unobserved=True)
+    done = field.complete()
+    subprocess.run([cli, "complete", run, "--out", tmp_path / "c.npz"], check=True, capture_output=True)
+    written = np.load(tmp_path / "c.npz")
+    assert np.array_equal(done.tracks, written["tracks"])
+    assert np.array_equal(done.observed, written["observed"])
+    assert np.array_equal(done.kept, written["kept"]) and 7 not in done.kept
+    kept = done.kept
+    # Observed entries as given, in the input's units; every gap filled near the truth.
+    seen = observed[:, kept]
+    assert np.array_equal(done.tracks[seen], clip[:, kept][seen])
+    assert np.isfinite(done.tracks).all()
+    gap_error = np.linalg.norm(done.tracks[~seen] - clip[:, kept][~seen], axis=-1).mean()
+    assert gap_error < 5.0, gap_error  # the faerie is about 52 units tall
+    # The reference frame is the most observed one, and warp takes points given there.
+    k = field.reference_frame
+    assert observed[:, kept].sum(1)[k] == observed[:, kept].sum(1).max()
+    other = 0 if k > 9 else 19
+    moved = field.warp(done.tracks[k], other)
+    assert np.abs(moved - clip[other, kept]).mean() < 0.5 * np.abs(done.tracks[k] - clip[other, kept]).mean()

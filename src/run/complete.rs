@@ -6,8 +6,8 @@ use std::path::Path;
 use burn::tensor::Device;
 use doma_formats::npy::NpyValues;
 
-use super::{RunDir, field_everywhere};
-use crate::data::c3d::{c3d_tracks, read_c3d, write_c3d};
+use super::{RunConfig, RunDir, field_everywhere};
+use crate::data::c3d::{C3d, c3d_tracks, read_c3d, write_c3d};
 use crate::data::layout::Layout;
 use crate::data::sequence::read_tracks;
 use crate::gaps::carry_residuals;
@@ -76,10 +76,84 @@ pub fn complete_run(
     } else {
         None
     };
-    let field = run.load_field(&config, device)?;
-    let sequence = run.load_data(&config)?;
+    let done = complete_with(run, &config, markers.as_ref(), device)?;
+    let (t, n) = (done.frames, done.points);
+    if let Some(m) = &markers {
+        let source_points: Vec<usize> = done.kept.clone().unwrap_or_else(|| (0..n).collect());
+        let source = |e: usize| done.source_frames[e / n] * m.points + source_points[e % n];
+        let (residuals, cameras) = (0..t * n)
+            .map(|e| {
+                if done.observed[e] {
+                    (m.residuals[source(e)].max(0.0), m.cameras[source(e)])
+                } else {
+                    (0.0, 0)
+                }
+            })
+            .unzip();
+        let stride = config.stride.max(1);
+        let completed = C3d {
+            frames: t,
+            points: n,
+            first_frame: m.first_frame.saturating_add(done.source_frames[0] as u32),
+            rate: m.rate / stride as f32,
+            scale: m.scale,
+            units: m.units.clone(),
+            labels: source_points.iter().map(|&i| m.labels[i].clone()).collect(),
+            positions: done.tracks.clone(),
+            residuals,
+            cameras,
+        };
+        write_c3d(out, &completed)?;
+    } else {
+        write_npz(out, &done, layout)?;
+    }
+    let observed = &done.observed;
+    let observed = observed.iter().filter(|&&o| o).count();
+    Ok(Completion {
+        frames: t,
+        tracks: n,
+        observed,
+        filled: t * n - observed,
+    })
+}
+
+/// Every track of a run at every frame of its clip ([`complete_tracks`]), in the input's
+/// frame, units and track order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CompletedTracks {
+    /// `T`, the clip's frames.
+    pub frames: usize,
+    /// `N`, the fitted tracks.
+    pub points: usize,
+    /// `[T, N, 3]`: observed entries as the input holds them, the rest filled.
+    pub tracks: Vec<f32>,
+    /// `[T, N]`: the input's mask (held-out observations count as observed).
+    pub observed: Vec<bool>,
+    /// The input's index of each track when the fit dropped tracks never observed.
+    pub kept: Option<Vec<usize>>,
+    /// The input's frame of each of the clip's frames.
+    pub source_frames: Vec<usize>,
+}
+
+/// The completion that [`complete_run`] writes, in memory: every track of the run in `run`
+/// at every frame of its clip, gaps filled by the field plus the track's carried residual
+/// ([`crate::gaps::carry_residuals`]).
+pub fn complete_tracks(run: &RunDir, device: &Device) -> Result<CompletedTracks> {
+    let config = run.load_config()?;
+    complete_with(run, &config, None, device)
+}
+
+/// [`complete_tracks`] of the run's `config`, its input read from `markers` when given.
+fn complete_with(
+    run: &RunDir,
+    config: &RunConfig,
+    markers: Option<&C3d>,
+    device: &Device,
+) -> Result<CompletedTracks> {
+    let field = run.load_field(config, device)?;
+    let sequence = run.load_data(config)?;
     // The input again, clipped and kept as the fit's data was, for its own values.
-    let mut input = match &markers {
+    let mut input = match markers {
         Some(m) => c3d_tracks(m).map_err(|reason| DomaError::Malformed {
             path: config.data.clone(),
             reason,
@@ -132,64 +206,21 @@ pub fn complete_run(
             },
         )
         .collect();
-    let observed = seen.to_vec();
-    if let Some(m) = &markers {
-        let stride = config.stride.max(1);
-        let source_frames: Vec<usize> = frame_range.clone().step_by(stride).collect();
-        let source_points: Vec<usize> = sequence.kept.clone().unwrap_or_else(|| (0..n).collect());
-        let source = |e: usize| source_frames[e / n] * m.points + source_points[e % n];
-        let (residuals, cameras) = (0..t * n)
-            .map(|e| {
-                if observed[e] {
-                    (m.residuals[source(e)].max(0.0), m.cameras[source(e)])
-                } else {
-                    (0.0, 0)
-                }
-            })
-            .unzip();
-        let completed = crate::data::c3d::C3d {
-            frames: t,
-            points: n,
-            first_frame: m.first_frame.saturating_add(frame_range.start as u32),
-            rate: m.rate / stride as f32,
-            scale: m.scale,
-            units: m.units.clone(),
-            labels: source_points.iter().map(|&i| m.labels[i].clone()).collect(),
-            positions: tracks,
-            residuals,
-            cameras,
-        };
-        write_c3d(out, &completed)?;
-    } else {
-        write_npz(
-            out,
-            t,
-            n,
-            &tracks,
-            &observed,
-            layout,
-            sequence.kept.as_deref(),
-        )?;
-    }
-    let observed = observed.iter().filter(|&&o| o).count();
-    Ok(Completion {
+    let stride = config.stride.max(1);
+    Ok(CompletedTracks {
         frames: t,
-        tracks: n,
-        observed,
-        filled: t * n - observed,
+        points: n,
+        tracks,
+        observed: seen.to_vec(),
+        kept: sequence.kept.clone(),
+        source_frames: frame_range.step_by(stride).collect(),
     })
 }
 
 /// The completion as a `.npz`, in the keys of `layout` ([`complete_run`]).
-fn write_npz(
-    out: &Path,
-    t: usize,
-    n: usize,
-    tracks: &[f32],
-    observed: &[bool],
-    layout: Option<Layout>,
-    kept: Option<&[usize]>,
-) -> Result<()> {
+fn write_npz(out: &Path, done: &CompletedTracks, layout: Option<Layout>) -> Result<()> {
+    let (t, n) = (done.frames, done.points);
+    let (tracks, observed, kept) = (&done.tracks, &done.observed, done.kept.as_deref());
     let kept: Option<Vec<i64>> = kept.map(|k| k.iter().map(|&i| i as i64).collect());
     let all_valid = vec![true; t * n];
     let (tracks_key, mask_key) = match layout {

@@ -27,7 +27,7 @@ mod resume;
 mod spec;
 mod warp;
 
-pub use complete::{Completion, complete_run};
+pub use complete::{CompletedTracks, Completion, complete_run, complete_tracks};
 pub use eval::{eval_run, evaluate, field_everywhere, gap_report};
 pub use fit::{FitOutcome, fit_run, fit_run_locked};
 pub use info::{RunInfo, info};
