@@ -7,10 +7,12 @@
 //! | `fit.rs` | `fit`, `resume`, `load`: fits into run folders, runs opened |
 //! | `field.rs` | `Field`: a fitted run's warp, Jacobian, evaluation and files |
 //! | `tracks.rs` | `read_tracks`: a sequence file as arrays |
+//! | `command.rs` | `main`: the `doma` command line, for the console script |
 //! | `convert.rs` | Python values into the library's types (enums, the fit options) |
 //! | `arrays.rs`, `errors.rs`, `interrupt.rs` | buffers, exceptions, Ctrl-C |
 
 mod arrays;
+mod command;
 mod convert;
 mod errors;
 mod field;
@@ -30,6 +32,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit::load, m)?)?;
     m.add_function(wrap_pyfunction!(tracks::read_tracks, m)?)?;
     m.add_function(wrap_pyfunction!(tracks::sequence_reads, m)?)?;
+    m.add_function(wrap_pyfunction!(command::main, m)?)?;
     m.add_class::<field::Field>()?;
     m.add("CHOICES", convert::choices(m.py())?)?;
     m.add("__version__", VERSION)?;

@@ -203,3 +203,22 @@ def test_complete_is_doma_complete_to_the_last_bit_in_the_input_units(cli, clip,
     other = 0 if k > 9 else 19
     moved = field.warp(done.tracks[k], other)
     assert np.abs(moved - clip[other, kept]).mean() < 0.5 * np.abs(done.tracks[k] - clip[other, kept]).mean()
+
+
+def test_the_doma_command_of_the_package_is_the_binary_s(cli, fitted):
+    import shutil
+    import sys
+
+    command = shutil.which("doma", path=str(pathlib.Path(sys.executable).parent))
+    assert command is not None, "pip install put no doma command beside the interpreter"
+    run = fitted.run_dir
+    ours = subprocess.run([command, "info", run], capture_output=True, text=True)
+    theirs = subprocess.run([cli, "info", run], capture_output=True, text=True)
+    assert (ours.returncode, ours.stdout) == (theirs.returncode, theirs.stdout) == (0, theirs.stdout)
+    # Errors and bad flags exit as the binary's do, with its message.
+    for args in (["info", "/nonexistent/run"], ["fit", "--iters", "0"], ["--version"]):
+        ours = subprocess.run([command, *args], capture_output=True, text=True)
+        theirs = subprocess.run([cli, *args], capture_output=True, text=True)
+        assert (ours.returncode, ours.stdout, ours.stderr) == (theirs.returncode, theirs.stdout, theirs.stderr), args
+    module = subprocess.run([sys.executable, "-m", "doma", "--version"], capture_output=True, text=True)
+    assert module.stdout == theirs.stdout and module.returncode == 0

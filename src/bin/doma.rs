@@ -3,18 +3,8 @@
 
 use std::process::ExitCode;
 
-use clap::Parser;
-use doma::cli::Cli;
-
 fn main() -> ExitCode {
     // SAFETY: first thing in main; no other thread exists yet.
     unsafe { doma::cli::init_process() };
-    let cli = Cli::parse();
-    match cli.command.run() {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    ExitCode::from(doma::cli::run_args(std::env::args_os()).clamp(0, 255) as u8)
 }

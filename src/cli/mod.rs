@@ -111,3 +111,29 @@ pub unsafe fn init_process() {
         crate::backend::pin_default_device();
     }
 }
+
+/// The `doma` command line on `args` (the program name first): parses them (a bad flag
+/// or `--help` prints clap's message) and runs the command, printing an error as
+/// `error: …`. Returns the exit status: 0, 1 for an error, clap's for a bad flag. The
+/// binary and the Python package's console script both run it.
+pub fn run_args<I, T>(args: I) -> i32
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    use clap::Parser;
+    let cli = match Cli::try_parse_from(args) {
+        Ok(cli) => cli,
+        Err(e) => {
+            let _ = e.print();
+            return e.exit_code();
+        }
+    };
+    match cli.command.run() {
+        Ok(()) => 0,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            1
+        }
+    }
+}
