@@ -265,6 +265,8 @@ def fit(
                 f"{list(positions.shape)} need {list(positions.shape[:2])}"
             )
         mask = np.ascontiguousarray(mask_array).view(np.uint8)
+    if isinstance(reg, str):
+        reg = reg.lower()
     if reg not in (None, "h"):
         raise ValueError(f"reg {reg!r} is not None or 'h' (the smoothness loss L_H)")
     if reg == "h" and options.get("h_weight") is None:

@@ -71,7 +71,8 @@ def test_read_tracks_reads_every_shipped_format(tmp_path):
         (lambda c: doma.read_tracks("/nonexistent/x.traj"), FileNotFoundError, "/nonexistent/x.traj"),
         (lambda c: doma.read_tracks("x.npz", layout="po"), ValueError, "layout `po` is not one of plain, pointodyssey"),
         (lambda c: doma.load("/nonexistent/run", backend="cuda"), ValueError, "backend `cuda` is not one of flex, ndarray, wgpu"),
-        (lambda c: doma.load("/nonexistent/run"), ValueError, "not a doma run folder"),
+        (lambda c: doma.load("/nonexistent/run"), FileNotFoundError, "/nonexistent/run: no such run folder"),
+        (lambda c: doma.load("/"), ValueError, "not a doma run folder"),
     ],
 )
 def test_bad_input_is_refused_with_a_clear_message(clip, call, error, message):
@@ -129,3 +130,8 @@ def test_a_fit_reads_its_data_once(clip, tmp_path):
     before = doma._native.sequence_reads()
     doma.fit(clip, iters=1, progress=False, out=tmp_path / "r")
     assert doma._native.sequence_reads() - before == 1
+
+
+def test_reg_is_read_like_variant_whatever_its_case(clip):
+    field = doma.fit(clip, reg="H", iters=1, progress=False)
+    assert field.config["fit"]["loss"]["smoothness_weight"] == 0.1

@@ -357,6 +357,12 @@ impl RunDir {
     /// The run's config; a folder without one is not a run.
     pub fn load_config(&self) -> Result<RunConfig> {
         let path = self.config();
+        if !self.dir.exists() {
+            return Err(DomaError::io(
+                &self.dir,
+                std::io::Error::new(std::io::ErrorKind::NotFound, "no such run folder"),
+            ));
+        }
         if !path.is_file() {
             return Err(DomaError::Malformed {
                 path: self.dir.clone(),
