@@ -330,17 +330,27 @@ pub fn check_output(out: &Path, run: Option<&Path>, inputs: &[&Path]) -> Result<
 }
 
 /// Fails early, before minutes of work, when `path` cannot be written: its folder is
-/// missing or not writable. Probes with a temporary file that it removes.
+/// missing or not writable. Probes with a temporary file that it removes. The error names
+/// `path`, the file meant, and its folder.
 pub fn check_writable(path: &Path) -> Result<()> {
     let dir = folder_of(path);
     if !dir.is_dir() {
         return Err(DomaError::Io {
-            path: dir.to_path_buf(),
-            error: std::io::Error::new(std::io::ErrorKind::NotFound, "the folder does not exist"),
+            path: path.to_path_buf(),
+            error: std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!("its folder {} does not exist", dir.display()),
+            ),
         });
     }
     let probe = dir.join(format!(".doma-write-probe{}", std::process::id()));
-    std::fs::File::create(&probe).map_err(|e| DomaError::io(dir, e))?;
+    std::fs::File::create(&probe).map_err(|e| DomaError::Io {
+        path: path.to_path_buf(),
+        error: std::io::Error::new(
+            e.kind(),
+            format!("its folder {} cannot be written: {e}", dir.display()),
+        ),
+    })?;
     let _ = std::fs::remove_file(&probe);
     Ok(())
 }
@@ -380,5 +390,20 @@ mod output_tests {
         assert!(check_output(&root.join("out.npz"), Some(&run), &[&data]).is_ok());
         assert!(check_output(&root.join("run2/out.npz"), Some(&run), &[&data]).is_ok());
         let _ = std::fs::remove_dir_all(&root);
+    }
+}
+
+#[cfg(test)]
+mod writable_tests {
+    use super::*;
+
+    #[test]
+    fn an_unwritable_output_is_named_with_its_folder() {
+        let missing = Path::new("/nonexistent-doma-folder/out.json");
+        let e = check_writable(missing).unwrap_err().to_string();
+        assert!(
+            e.starts_with("/nonexistent-doma-folder/out.json:") && e.contains("does not exist"),
+            "{e}"
+        );
     }
 }
