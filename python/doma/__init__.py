@@ -49,15 +49,42 @@ JACOBIANS = _CHOICES["jacobian"]
 RECIPES = _CHOICES["recipe"]
 
 
-def _float_array(value: Any, name: str, shape: Sequence[Optional[int]]) -> np.ndarray:
-    """``value`` as a C-contiguous float32 array of ``shape`` (None: any length)."""
+def _checked_array(value: Any, name: str, shape: Sequence[Optional[int]]) -> np.ndarray:
+    """``value`` as an array of ``shape`` (None: any length) and a float dtype, not copied."""
     array = np.asarray(value)
     if array.dtype.kind != "f":
         raise ValueError(f"{name} must be a float array (float16, float32 or float64), not {array.dtype}")
     if array.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, array.shape)):
         want = ", ".join("any" if s is None else str(s) for s in shape)
         raise ValueError(f"{name} has shape {list(array.shape)}, not [{want}]")
-    return np.ascontiguousarray(array, dtype=np.float32)
+    return array
+
+
+def _float_array(value: Any, name: str, shape: Sequence[Optional[int]]) -> np.ndarray:
+    """``value`` as a C-contiguous float32 array of ``shape`` (None: any length)."""
+    return np.ascontiguousarray(_checked_array(value, name, shape), dtype=np.float32)
+
+
+def _memory_bytes() -> Optional[int]:
+    """This machine's physical memory, where the system says."""
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _check_size(what: str, count: int, frames: int, per_point: int) -> None:
+    """Refuses, before anything is allocated, a call whose float32 input and output
+    (``count`` points, ``per_point`` outputs each at ``frames`` frames) exceed the
+    machine's memory: a stride-0 view of 10⁹ points would otherwise be copied first."""
+    need = 4 * count * (3 + frames * per_point)
+    have = _memory_bytes()
+    if have is not None and need > have:
+        raise MemoryError(
+            f"{what} of {count} points at {frames} frame(s) needs {need / 2**30:.1f} GiB of "
+            f"float32 input and output, more than this machine's {have / 2**30:.1f} GiB: "
+            "call it on chunks of the points"
+        )
 
 
 def _frames(t: Frames) -> tuple[list[float], bool]:
@@ -87,8 +114,9 @@ class Field:
         Returns [M, 3], or [K, M, 3] for K frames. Memory holds the input, the output and
         one chunk of 16,384 points' activations, however large M is.
         """
-        x = _float_array(points, "points", (None, 3))
         frames, one = _frames(t)
+        _check_size("warp", _checked_array(points, "points", (None, 3)).shape[0], len(frames), 3)
+        x = _float_array(points, "points", (None, 3))
         out = np.empty((len(frames), x.shape[0], 3), dtype=np.float32)
         self._native.warp_into(x, frames, out)
         return out[0] if one else out
@@ -99,8 +127,9 @@ class Field:
         Returns [M, 3, 3] (or [K, M, 3, 3]) with ``J[m, i, j] = ∂y_i/∂x_j``: the local
         deformation gradient, ``A`` plus the terms of A's and u's variation (Eq. 6).
         """
-        x = _float_array(points, "points", (None, 3))
         frames, one = _frames(t)
+        _check_size("jacobian", _checked_array(points, "points", (None, 3)).shape[0], len(frames), 9)
+        x = _float_array(points, "points", (None, 3))
         out = np.empty((len(frames), x.shape[0], 3, 3), dtype=np.float32)
         self._native.jacobian_into(x, frames, out)
         return out[0] if one else out

@@ -135,3 +135,12 @@ def test_a_fit_reads_its_data_once(clip, tmp_path):
 def test_reg_is_read_like_variant_whatever_its_case(clip):
     field = doma.fit(clip, reg="H", iters=1, progress=False)
     assert field.config["fit"]["loss"]["smoothness_weight"] == 0.1
+
+
+def test_a_warp_larger_than_memory_is_refused_before_it_is_copied(fitted):
+    # A stride-0 view: 10^11 points that take 12 bytes of memory until copied.
+    huge = np.lib.stride_tricks.as_strided(np.zeros(3, np.float32), (10**11, 3), (0, 4))
+    with pytest.raises(MemoryError, match="warp of 100000000000 points at 1 frame"):
+        fitted.warp(huge, 0)
+    with pytest.raises(MemoryError, match="jacobian of 100000000000 points"):
+        fitted.jacobian(huge, [0, 1])
