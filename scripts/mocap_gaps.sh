@@ -6,7 +6,7 @@
 # entries are hidden in spans inside the tracks' observations, short (2–8 frames) or long
 # (10–30 frames), and one fit at the defaults but 300 iterations fills them. Writes
 # results/mocap/NAME_SPAN_SEED.json (each fit's report) and prints the table, in mm.
-#   scripts/mocap_gaps.sh MOCAP_DIR [SEEDS] [DOMA_BINARY]
+#   scripts/mocap_gaps.sh MOCAP_DIR [SEEDS] [DOMA_BINARY]     (SEEDS: "0 1 2" for the table)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 dir=${1:?the folder of the recordings}
@@ -35,14 +35,17 @@ python3 - "$seeds" <<'PY'
 import json, sys
 seeds = sys.argv[1].split()
 cols = ["doma", "field", "linear", "spline", "neighbours", "low_rank"]
-print("| recording | gaps | hidden | " + " | ".join(cols) + " | doma / best baseline |")
-print("|---" * (4 + len(cols)) + "|")
+fmt = lambda v: f"{v:.1f}" if v >= 10 else f"{v:.2f}"
+print("| recording | gaps | hidden | " + " | ".join(cols) + " | doma / best baseline | per seed |")
+print("|---" * (5 + len(cols)) + "|")
 for name in ["85_12", "Qualisys", "right_knee", "codamotion_gaitwands_20150204", "Walking_Hybrid_1_5"]:
     for span, label in [("2-8", "short"), ("10-30", "long")]:
         gs = [json.load(open(f"results/mocap/{name}_{span}_{s}.json"))["held_out_observations"] for s in seeds]
-        mean = {c: 1000 * sum(g["distance"][c] for g in gs) / len(gs) for c in cols}
+        mm = [{c: 1000 * g["distance"][c] for c in cols} for g in gs]
+        mean = {c: sum(m[c] for m in mm) / len(mm) for c in cols}
         best = min(mean[c] for c in ["linear", "spline", "neighbours", "low_rank"])
+        per = [m["doma"] / min(m[c] for c in ["linear", "spline", "neighbours", "low_rank"]) for m in mm]
         n = sum(g["entries"] for g in gs) // len(gs)
-        print(f"| `{name}` | {label} | {n} | " + " | ".join(f"{mean[c]:.1f}" for c in cols)
-              + f" | {mean['doma'] / best:.2f} |")
+        print(f"| `{name}` | {label} | {n} | " + " | ".join(fmt(mean[c]) for c in cols)
+              + f" | {mean['doma'] / best:.2f} | " + ", ".join(f"{p:.2f}" for p in per) + " |")
 PY
