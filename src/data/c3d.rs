@@ -2,7 +2,7 @@
 //! that was not measured (a negative residual, or the origin as some systems write it)
 //! unobserved, in the file's own units and axes.
 //!
-//! doma writes a completed recording back as C3D ([`crate::run::complete::complete_run`]):
+//! doma writes a completed recording back as C3D ([`crate::run::complete_run`]):
 //! the same labels, rate and units, the measured entries as they were, and every filled
 //! entry with a residual of 0, which C3D reserves for a point computed rather than
 //! measured, as capture software marks its own gap fills.
