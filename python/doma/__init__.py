@@ -205,7 +205,7 @@ class Field:
 
         ``epe_x1e4`` is the mean L1 end-point error × 10⁴ on the held-out tracks (or the
         fitted ones', when none is held out; ``evaluated_on`` says which), in normalised
-        units: the data's reference box, its longest side spanning 2 (see
+        units: the canonical positions' bounding box, its longest side spanning 2 (see
         :attr:`normalisation`). ``held_out_observations.distance`` is the gap fill's mean
         Euclidean error in the data's own units."""
         text = self._native.report
