@@ -118,13 +118,21 @@ pub fn fit(
         }
     };
     let data = dir.join(DATA_FILE);
+    // A data file that `overwrite` lets this call replace is set aside until the fit has
+    // started, so that a refused call puts it back.
+    let replaced = dir.join(".tracks.npz.replaced");
+    let had_data = data.exists();
     // What this call made, undone under the lock if the fit does not start.
     let undo = |wrote_data: bool| {
         if run.config().exists() {
+            let _ = std::fs::remove_file(&replaced);
             return;
         }
         if wrote_data {
             let _ = std::fs::remove_file(&data);
+        }
+        if had_data {
+            let _ = std::fs::rename(&replaced, &data);
         }
         if !had_lock_file {
             let _ = std::fs::remove_file(&lock_file);
@@ -144,6 +152,10 @@ pub fn fit(
             dir.display(),
             file.display()
         )));
+    }
+    if had_data && let Err(e) = std::fs::rename(&data, &replaced) {
+        undo(false);
+        return Err(errors::to_py(DomaError::io(&data, e)));
     }
     // The data file is written once and read once, by `prepare`; the fit runs on what it
     // read.
@@ -188,6 +200,7 @@ pub fn fit(
         }
     }
     let device = result?;
+    let _ = std::fs::remove_file(&replaced);
     Field::fitted(&dir, temporary, device, shape).py()
 }
 

@@ -133,8 +133,14 @@ def test_a_refused_fit_leaves_every_file_of_the_folder_as_it_was(clip, tmp_path)
     with pytest.raises(FileExistsError, match="tracks.npz"):
         doma.fit(clip, iters=2, progress=False, out=folder)
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+    # With overwrite=True too, a call refused after the data was written (a reference
+    # frame the clip does not have) puts the user's file back.
+    with pytest.raises(ValueError, match="reference frame 50"):
+        doma.fit(clip, iters=2, progress=False, out=folder, overwrite=True, reference_frame=50)
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
     field = doma.fit(clip, iters=2, progress=False, out=folder, overwrite=True)
     assert field.frames == 20 and (folder / "notes.txt").read_text() == "kept"
+    assert not (folder / ".tracks.npz.replaced").exists()
     # A refused fit in a folder it made leaves no folder.
     with pytest.raises(ValueError):
         doma.fit(clip, iters=2, progress=False, out=tmp_path / "new", test_fraction=2.0)
