@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Gap filling on tracker-like data made from the shipped meshes (examples/tracker_data.rs):
 # each sequence in both layouts, 20 % of the observations hidden in spans, 90 % of the
-# tracks fitted at the default budget (1000 iterations). Writes results/tracks/NAME.json
+# tracks fitted at doma fit's defaults. Writes results/tracks/NAME.json
 # (each fit's report) and prints the table of docs/results.md.
 #   scripts/gap_filling.sh [DOMA_BINARY]
 set -euo pipefail
