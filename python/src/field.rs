@@ -365,7 +365,7 @@ impl Field {
 
 /// The files a run folder may hold, copied in this order (`config.json` last: a folder
 /// without it is not a run, so a copy cut short is not mistaken for one).
-const RUN_FILES: [&str; 5] = [
+pub(crate) const RUN_FILES: [&str; 5] = [
     "model.bpk",
     "resume.ckpt",
     "history.json",

@@ -25,18 +25,6 @@ use crate::interrupt;
 /// The data file of a fit from NumPy, inside its run folder.
 const DATA_FILE: &str = "tracks.npz";
 
-/// The files a fit writes into its folder beside `config.json`: a folder holding one is
-/// refused unless the caller says to replace it.
-const RUN_FILES: [&str; 7] = [
-    DATA_FILE,
-    "model.bpk",
-    "report.json",
-    "history.json",
-    "canonical.npy",
-    "resume.ckpt",
-    "plots",
-];
-
 /// The options that read a data file, which a fit of arrays has no use for.
 const FILE_OPTIONS: [&str; 6] = [
     "data",
@@ -144,7 +132,9 @@ pub fn fit(
     if run.config().exists() {
         return Err(errors::to_py(DomaError::RunExists(dir.clone())));
     }
-    if !overwrite && let Some(file) = RUN_FILES.iter().map(|f| dir.join(f)).find(|f| f.exists()) {
+    // The files a fit writes beside `config.json`: the run's own, its data and its plots.
+    let written = crate::field::RUN_FILES.iter().chain(&[DATA_FILE, "plots"]);
+    if !overwrite && let Some(file) = written.map(|f| dir.join(f)).find(|f| f.exists()) {
         undo(false);
         return Err(PyFileExistsError::new_err(format!(
             "{}: the folder is not a doma run but holds {}, which a fit writes; choose \

@@ -252,15 +252,18 @@ pub fn read_tracks(data: &Path, file: &TrackFile) -> Result<(Tracks, Option<Vec<
         )));
     }
     if extension(data) == "c3d" && !data.is_dir() {
-        let markers = c3d::read_c3d(data)?;
-        let tracks = c3d::c3d_tracks(&markers).map_err(|reason| DomaError::Malformed {
-            path: data.to_path_buf(),
-            reason,
-        })?;
-        return Ok((tracks, None));
+        return Ok((read_c3d_tracks(data)?, None));
     }
     let (t, faces) = read_any(data)?;
     Ok((Tracks::complete(t), faces))
+}
+
+/// A C3D file's markers as tracks ([`c3d::c3d_tracks`]), every defect naming the file.
+fn read_c3d_tracks(data: &Path) -> Result<Tracks> {
+    c3d::c3d_tracks(&c3d::read_c3d(data)?).map_err(|reason| DomaError::Malformed {
+        path: data.to_path_buf(),
+        reason,
+    })
 }
 
 /// Reads any supported sequence file (or OBJ folder) by its extension: the trajectories,
@@ -280,7 +283,7 @@ pub fn read_any(data: &Path) -> Result<(Trajectories, Option<Vec<[u32; 3]>>)> {
         "npy" => (npy::read_npy_trajectories(data)?, None),
         "npz" => (npy::read_npz_trajectories(data, None)?, None),
         "c3d" => {
-            let (tracks, _) = read_tracks(data, &TrackFile::default())?;
+            let tracks = read_c3d_tracks(data)?;
             if tracks.observed_count() != tracks.frames() * tracks.points() {
                 return Err(DomaError::Malformed {
                     path: data.to_path_buf(),
