@@ -98,6 +98,22 @@ impl burn::module::ModuleVisitor for NonFinite {
     }
 }
 
+/// The shapes of a module's parameter tensors, in visiting order.
+#[derive(Default)]
+struct Shapes(Vec<Vec<usize>>);
+
+impl burn::module::ModuleVisitor for Shapes {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        self.0.push(param.val().dims().to_vec());
+    }
+}
+
+fn shapes<M: Module>(module: &M) -> Vec<Vec<usize>> {
+    let mut s = Shapes::default();
+    module.visit(&mut s);
+    s.0
+}
+
 /// Loads the burnpack `bytes` into `module` (a freshly initialised module of the same
 /// shape), casting them to the module's precision. Bytes that are not a burnpack, or hold
 /// other shapes, are [`DomaError::InvalidData`]; [`load_checkpoint`] names the file.
@@ -105,9 +121,26 @@ pub fn decode_checkpoint<M: Module>(module: M, bytes: &[u8]) -> Result<M> {
     let record = ModuleRecord::from_bytes(burn::tensor::Bytes::from_bytes_vec(bytes.to_vec()))
         .map_err(|e| DomaError::InvalidData(format!("not a burnpack checkpoint: {e}")))?
         .cast_to_module_dtype();
+    // Loading a record takes its tensors as they are: a checkpoint of another width would
+    // load, and run, as a model its config does not describe.
+    let expected = shapes(&module);
     let module = module
         .try_load_record(record)
         .map_err(|e| DomaError::InvalidData(format!("does not fit the model: {e}")))?;
+    let found = shapes(&module);
+    if found.len() != expected.len() {
+        return Err(DomaError::InvalidData(format!(
+            "holds {} parameter tensors, but the model has {}",
+            found.len(),
+            expected.len()
+        )));
+    }
+    if let Some(i) = (0..found.len()).find(|&i| found[i] != expected[i]) {
+        return Err(DomaError::InvalidData(format!(
+            "parameter tensor {i} has shape {:?}, but the model's is {:?}",
+            found[i], expected[i]
+        )));
+    }
     // NaN weights would surface later as NaN predictions blamed on the data.
     let mut check = NonFinite {
         index: 0,

@@ -93,3 +93,90 @@ impl DomaError {
 
 /// The crate's result type.
 pub type Result<T, E = DomaError> = std::result::Result<T, E>;
+
+/// How many [`catch_internal_errors`] calls are running: while any is, a panic is
+/// recorded for its thread rather than printed.
+static CATCHING: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+static HOOK: std::sync::Once = std::sync::Once::new();
+
+std::thread_local! {
+    static CAUGHT: std::cell::RefCell<Option<String>> = const { std::cell::RefCell::new(None) };
+}
+
+/// The text of a panic's payload.
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a panic".into())
+}
+
+/// Runs `f`, turning a panic into `Err(its message and place)`: a bug left in the code
+/// must reach a user as one error naming what they ran, not a backtrace or a dead Python
+/// interpreter; unwinding drops a run lock on the way out. While any call is catching, a
+/// panic is not printed (with `RUST_BACKTRACE` set, it is, with its backtrace); other
+/// panics go to the hook that was there before. Safe to call from several threads at once.
+pub fn catch_internal_errors<R>(f: impl FnOnce() -> R) -> std::result::Result<R, String> {
+    use std::sync::atomic::Ordering;
+    HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        let verbose = std::env::var_os("RUST_BACKTRACE").is_some_and(|v| v != "0");
+        std::panic::set_hook(Box::new(move |info| {
+            if CATCHING.load(Ordering::SeqCst) == 0 {
+                return previous(info);
+            }
+            let at = info
+                .location()
+                .map(|l| format!(" at {}:{}", l.file(), l.line()))
+                .unwrap_or_default();
+            let message = format!("{}{at}", panic_message(info.payload()));
+            CAUGHT.with(|c| {
+                c.borrow_mut().get_or_insert(message);
+            });
+            if verbose {
+                eprintln!("{info}\n{}", std::backtrace::Backtrace::force_capture());
+            }
+        }));
+    });
+    CAUGHT.with(|c| c.borrow_mut().take());
+    CATCHING.fetch_add(1, Ordering::SeqCst);
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    CATCHING.fetch_sub(1, Ordering::SeqCst);
+    // A panic on a worker thread reaches here as its payload, without its place.
+    let caught = CAUGHT.with(|c| c.borrow_mut().take());
+    result.map_err(|payload| caught.unwrap_or_else(|| panic_message(&*payload)))
+}
+
+#[cfg(test)]
+mod internal_error_tests {
+    use super::catch_internal_errors;
+
+    #[test]
+    fn a_panic_is_caught_as_its_message_and_place_on_each_thread() {
+        let threads: Vec<_> = (0..4)
+            .map(|i| {
+                std::thread::spawn(move || {
+                    let caught =
+                        catch_internal_errors(|| -> u8 { panic!("index {i} past the end") });
+                    (caught.unwrap_err(), catch_internal_errors(|| i))
+                })
+            })
+            .collect();
+        for (i, t) in threads.into_iter().enumerate() {
+            let (what, fine) = t.join().unwrap();
+            assert!(
+                what.contains(&format!("index {i} past the end")) && what.contains("src/error.rs"),
+                "{what}"
+            );
+            assert_eq!(fine, Ok(i));
+        }
+        // A panic on a thread the call spawned arrives as its payload.
+        let what = catch_internal_errors(|| {
+            std::thread::scope(|s| s.spawn(|| -> u8 { panic!("on a worker") }).join())
+                .unwrap_or_else(|p| std::panic::resume_unwind(p))
+        })
+        .unwrap_err();
+        assert!(what.contains("on a worker"), "{what}");
+    }
+}

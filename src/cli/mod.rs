@@ -136,7 +136,7 @@ where
             return e.exit_code();
         }
     };
-    match catch_internal_errors(move || cli.command.run()) {
+    match crate::error::catch_internal_errors(move || cli.command.run()) {
         Ok(Ok(())) => 0,
         Ok(Err(e)) => {
             eprintln!("error: {e:#}");
@@ -151,57 +151,5 @@ where
             );
             1
         }
-    }
-}
-
-/// Runs `f`, turning a panic into `Err(its message and place)`: a bug that is left must
-/// reach a user as one line naming the command, not a backtrace; unwinding drops the run
-/// lock on the way out. With `RUST_BACKTRACE` set the default report is printed too.
-fn catch_internal_errors<R>(f: impl FnOnce() -> R) -> std::result::Result<R, String> {
-    use std::sync::{Arc, Mutex};
-    let caught = Arc::new(Mutex::new(None::<String>));
-    let previous = std::panic::take_hook();
-    let verbose = std::env::var_os("RUST_BACKTRACE").is_some_and(|v| v != "0");
-    let sink = Arc::clone(&caught);
-    std::panic::set_hook(Box::new(move |info| {
-        let message = info
-            .payload()
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| info.payload().downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "a panic".into());
-        let at = info
-            .location()
-            .map(|l| format!(" at {}:{}", l.file(), l.line()))
-            .unwrap_or_default();
-        if let Ok(mut slot) = sink.lock() {
-            slot.get_or_insert(format!("{message}{at}"));
-        }
-        if verbose {
-            eprintln!("{info}\n{}", std::backtrace::Backtrace::force_capture());
-        }
-    }));
-    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
-    std::panic::set_hook(previous);
-    result.map_err(|_| {
-        caught
-            .lock()
-            .ok()
-            .and_then(|mut s| s.take())
-            .unwrap_or_else(|| "a panic".into())
-    })
-}
-
-#[cfg(test)]
-mod internal_error_tests {
-    #[test]
-    fn a_panic_is_caught_as_its_message_and_place() {
-        let caught = super::catch_internal_errors(|| -> u8 { panic!("an index past the end") });
-        let what = caught.unwrap_err();
-        assert!(
-            what.contains("an index past the end") && what.contains("src/cli/mod.rs"),
-            "{what}"
-        );
-        assert_eq!(super::catch_internal_errors(|| 7), Ok(7));
     }
 }

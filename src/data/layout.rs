@@ -141,6 +141,25 @@ impl TrackFile {
     pub fn is_default(&self) -> bool {
         *self == TrackFile::default()
     }
+
+    /// The command-line flags that set a field away from its default, in the order of
+    /// `doma fit --help`: what a refusal names when they do not apply.
+    pub fn flags_set(&self) -> Vec<&'static str> {
+        let d = TrackFile::default();
+        [
+            (self.layout != d.layout, "--layout"),
+            (self.frame != d.frame, "--frame"),
+            (self.count_hidden, "--count-hidden"),
+            (self.confidence.is_some(), "--confidence"),
+            (
+                self.visibility_threshold.is_some(),
+                "--visibility-threshold",
+            ),
+        ]
+        .into_iter()
+        .filter_map(|(set, flag)| set.then_some(flag))
+        .collect()
+    }
 }
 
 /// Reads the tracks of a `.npz` file in its layout ([`Layout::detect`], or `file.layout`).
@@ -261,6 +280,20 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
             )));
         }
         let e = read_npz_member(&bytes, m).map_err(malformed)?.data;
+        // A frame's matrix matters where one of its points is observed; a non-finite entry
+        // there would reach the points and be blamed on the tracks.
+        let seen = |k: usize| observed[k * n..(k + 1) * n].iter().any(|&o| o);
+        if let Some(i) = (0..16 * t).find(|&i| seen(i / 16) && !e[i].is_finite()) {
+            return Err(malformed(format!(
+                "extrinsics[{}, {}, {}] is {}: frame {} has observed points, so its \
+                 world-to-camera matrix must be finite",
+                i / 16,
+                (i % 16) / 4,
+                i % 4,
+                e[i],
+                i / 16
+            )));
+        }
         to_camera(&mut positions, &e, n);
     }
     let tracks = Tracks::new(t, n, positions, observed).map_err(|reason| {

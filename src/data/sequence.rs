@@ -247,7 +247,8 @@ pub fn read_tracks(data: &Path, file: &TrackFile) -> Result<(Tracks, Option<Vec<
     }
     if !file.is_default() {
         return Err(DomaError::Usage(format!(
-            "--layout, --frame and --count-hidden apply to a tracker's .npz, not to {}",
+            "{} applies to a tracker's .npz, not to {}",
+            file.flags_set().join(", "),
             data.display()
         )));
     }

@@ -6,6 +6,7 @@ use burn::tensor::Device;
 
 use super::{GapErrors, GapReport, Report, RunConfig, RunDir};
 use crate::data::Trajectories;
+use crate::data::layout::TrackFile;
 use crate::data::mesh::as_points;
 use crate::data::sequence::{LoadOptions, Sequence, load_sequence_with};
 use crate::field::MotionField;
@@ -163,6 +164,17 @@ pub fn field_everywhere(
 /// The metrics of the run in `run`: on its own held-out points, or on every point of
 /// `data` (normalised like the run's data).
 pub fn eval_run(run: &RunDir, data: Option<&Path>, device: &Device) -> Result<Report> {
+    eval_run_as(run, data, None, device)
+}
+
+/// [`eval_run`] on `data` read as `file` says (a Python `Tracks` written as a masked
+/// `.npz`), rather than as the run read its own data.
+pub fn eval_run_as(
+    run: &RunDir,
+    data: Option<&Path>,
+    file: Option<&TrackFile>,
+    device: &Device,
+) -> Result<Report> {
     let config = run.load_config()?;
     let field = run.load_field(&config, device)?;
     let own = run.load_data(&config)?;
@@ -181,12 +193,15 @@ pub fn eval_run(run: &RunDir, data: Option<&Path>, device: &Device) -> Result<Re
                 path,
                 &LoadOptions {
                     stride: 1,
-                    file: if npz {
-                        config.tracks.clone()
-                    } else {
-                        Default::default()
+                    file: match file {
+                        Some(file) => file.clone(),
+                        None if npz => config.tracks.clone(),
+                        None => Default::default(),
                     },
                     drop_unobserved: config.drop_unobserved,
+                    // The field takes points at the run's reference frame, whichever
+                    // frame the other file sees most.
+                    reference: Some(own.trajectories.reference()),
                     ..LoadOptions::default()
                 },
             )?;

@@ -10,7 +10,7 @@ use crate::data::sequence::Sequence;
 use crate::field::model::Model;
 use crate::io::save_json;
 use crate::io::write_atomic;
-use crate::train::{Fitted, Hooks, Outcome, Trainer};
+use crate::train::{Fitted, Hooks, Outcome, Progress, Trainer};
 use crate::{DomaError, Result};
 
 /// How a fit ended.
@@ -31,29 +31,37 @@ pub enum FitOutcome {
 /// `new` is `None`. A new fit's data is the sequence it carries (read once, by
 /// [`NewFit::load`] or [`super::RunSpec::prepare`]); a resumed fit reads its data once. `interrupt` is polled after every iteration: when set, the fit saves
 /// a checkpoint and returns [`FitOutcome::Interrupted`]. `stop_after` (for tests)
-/// interrupts after that many iterations. `progress` shows a progress bar.
-pub fn fit_run(
+/// interrupts after that many iterations. `progress` (a bool, or [`Progress`]) shows it.
+pub fn fit_run<'a>(
     run: &RunDir,
     new: Option<NewFit>,
     device: &Device,
-    interrupt: &AtomicBool,
+    interrupt: &'a AtomicBool,
     stop_after: Option<usize>,
-    progress: bool,
+    progress: impl Into<Progress<'a>>,
 ) -> Result<FitOutcome> {
-    fit_holding(run, new, None, device, interrupt, stop_after, progress)
+    fit_holding(
+        run,
+        new,
+        None,
+        device,
+        interrupt,
+        stop_after,
+        progress.into(),
+    )
 }
 
 /// [`fit_run`] of a new fit into a folder whose lock the caller took first
 /// ([`RunLock::acquire`]), so that nothing it wrote there before the fit (its data, as the
 /// Python package writes it) could be replaced or read by another writer meanwhile.
-pub fn fit_run_locked(
+pub fn fit_run_locked<'a>(
     run: &RunDir,
     new: NewFit,
     lock: RunLock,
     device: &Device,
-    interrupt: &AtomicBool,
+    interrupt: &'a AtomicBool,
     stop_after: Option<usize>,
-    progress: bool,
+    progress: impl Into<Progress<'a>>,
 ) -> Result<FitOutcome> {
     fit_holding(
         run,
@@ -62,22 +70,28 @@ pub fn fit_run_locked(
         device,
         interrupt,
         stop_after,
-        progress,
+        progress.into(),
     )
 }
 
-fn fit_holding(
+fn fit_holding<'a>(
     run: &RunDir,
     new: Option<NewFit>,
     held: Option<RunLock>,
     device: &Device,
-    interrupt: &AtomicBool,
+    interrupt: &'a AtomicBool,
     stop_after: Option<usize>,
-    progress: bool,
+    progress: Progress<'a>,
 ) -> Result<FitOutcome> {
     let resume = new.is_none();
     let (NewFit { config, sequence }, resumed) = match new {
-        Some(n) => (n, None),
+        Some(NewFit { config, sequence }) => (
+            NewFit {
+                config: config.recording(&sequence),
+                sequence,
+            },
+            None,
+        ),
         None => {
             let config = run.load_config()?;
             let lock = RunLock::acquire(&run.dir)?;
@@ -88,7 +102,8 @@ fn fit_holding(
     let ad = device.clone().autodiff();
     let fit = &config.fit;
     let field = fit.model.init(fit.seed, train.canonical(), &ad);
-    let mut trainer = Trainer::new(field, fit, &train, device)?.progress(progress);
+    let mut trainer =
+        Trainer::new(field, fit, &train, device)?.progress(matches!(progress, Progress::Shown));
     // A new fit's folder is made only now, once the trainer took the data: a refusal
     // until here leaves nothing behind.
     let _lock = match resumed {
@@ -113,6 +128,9 @@ fn fit_holding(
     if let Some(n) = stop_after {
         hooks = hooks.stop_after(n);
     }
+    if let Progress::Each(each) = progress {
+        hooks = hooks.each(each);
+    }
     match trainer.run_with(hooks)? {
         Outcome::Finished(fitted) => {
             finish(run, &config, &sequence, &fitted, device).map(FitOutcome::Finished)
@@ -125,10 +143,8 @@ fn fit_holding(
 /// config. The data was read
 /// and checked before ([`NewFit`]), so that bad data leaves nothing behind.
 fn start(run: &RunDir, config: &RunConfig, held: Option<RunLock>) -> Result<RunLock> {
-    let taken = || DomaError::RunExists(run.dir.clone());
-    if run.config().exists() {
-        return Err(taken());
-    }
+    // The lock first: a folder being fitted is refused naming the process that fits it,
+    // rather than as a run to resume (which that process would refuse too).
     let lock = match held {
         Some(lock) => lock,
         None => {
@@ -136,9 +152,8 @@ fn start(run: &RunDir, config: &RunConfig, held: Option<RunLock>) -> Result<RunL
             RunLock::acquire(&run.dir)?
         }
     };
-    // Checked again under the lock: another fit may have started here meanwhile.
     if run.config().exists() {
-        return Err(taken());
+        return Err(DomaError::RunExists(run.dir.clone()));
     }
     save_json(config, &run.config())?;
     Ok(lock)

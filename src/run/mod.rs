@@ -28,7 +28,7 @@ mod spec;
 mod warp;
 
 pub use complete::{CompletedTracks, Completion, complete_run, complete_tracks};
-pub use eval::{eval_run, evaluate, field_everywhere, gap_report};
+pub use eval::{eval_run, eval_run_as, evaluate, field_everywhere, gap_report};
 pub use fit::{FitOutcome, fit_run, fit_run_locked};
 pub use info::{RunInfo, info};
 pub use lock::RunLock;
@@ -95,6 +95,43 @@ pub struct RunConfig {
     /// 2 and 10).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout_span: Option<[usize; 2]>,
+    /// A digest of the data as the fit read it ([`data_digest`]), so that a run whose data
+    /// file was replaced or edited since is refused rather than read with another
+    /// normalisation (absent in runs made before it was recorded: not checked).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data_digest: Option<String>,
+}
+
+/// A digest of a loaded sequence: FNV-1a (64 bits) over its size, positions, mask,
+/// confidence weights and normalisation. Loading is deterministic, so the same file and
+/// options give the same digest; any change to what the fit would see changes it.
+pub fn data_digest(data: &Sequence) -> String {
+    let t = &data.trajectories;
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |bytes: &[u8]| {
+        for &b in bytes {
+            h = (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    };
+    eat(&(t.frames() as u64).to_le_bytes());
+    eat(&(t.points() as u64).to_le_bytes());
+    for v in t
+        .positions()
+        .iter()
+        .chain(&data.center)
+        .chain([&data.scale])
+    {
+        eat(&v.to_bits().to_le_bytes());
+    }
+    if let Some(o) = t.observed() {
+        eat(&o.iter().map(|&b| b as u8).collect::<Vec<_>>());
+    }
+    for k in 0..t.frames() {
+        for w in t.weights_in_frame(k).unwrap_or(&[]) {
+            eat(&w.to_bits().to_le_bytes());
+        }
+    }
+    format!("fnv1a64:{h:016x}")
 }
 
 fn default_backend() -> crate::backend::BackendKind {
@@ -120,7 +157,16 @@ impl RunConfig {
             drop_unobserved: false,
             holdout_observations: None,
             holdout_span: None,
+            data_digest: None,
         }
+    }
+
+    /// This config with what its data turned out to be written down: the reference frame
+    /// the canonical positions were taken at, and the data's digest ([`data_digest`]).
+    pub fn recording(mut self, data: &Sequence) -> Self {
+        self.reference_frame = Some(data.trajectories.reference());
+        self.data_digest = Some(data_digest(data));
+        self
     }
 
     /// Refuses values that cannot run.
@@ -143,6 +189,24 @@ impl RunConfig {
     /// Loads the run's data, normalised as when it was fitted, with its held-out
     /// observations hidden.
     pub fn load(&self) -> Result<Sequence> {
+        let data = self.load_unchecked()?;
+        if let Some(fitted) = &self.data_digest {
+            let now = data_digest(&data);
+            if now != *fitted {
+                return Err(DomaError::Malformed {
+                    path: self.data.clone(),
+                    reason: format!(
+                        "reads differently from when the run was fitted (digest {fitted} \
+                         then, {now} now): it was replaced or edited since; put the fitted \
+                         data back, or fit this data again"
+                    ),
+                });
+            }
+        }
+        Ok(data)
+    }
+
+    fn load_unchecked(&self) -> Result<Sequence> {
         load_sequence_with(
             &self.data,
             &LoadOptions {

@@ -9,6 +9,30 @@ use crate::Result;
 /// What [`Trainer::run_with`] does between iterations besides fitting.
 type ObserveFn<'a, M> = Box<dyn FnMut(&IterationRecord, M) -> Result<()> + 'a>;
 type CheckpointFn<'a> = Box<dyn FnMut(&TrainerSnapshot) -> Result<()> + 'a>;
+/// Called after every iteration with its record and the schedule's iteration count.
+pub type EachFn<'a> = Box<dyn FnMut(&IterationRecord, usize) -> Result<()> + 'a>;
+
+/// How a fit shows its progress.
+pub enum Progress<'a> {
+    /// Nothing.
+    Off,
+    /// A bar on a terminal; where stderr is not one (a log, a pipe), a plain line every
+    /// tenth of the fit.
+    Shown,
+    /// `each(record, iterations)` after every iteration, nothing printed (the Python
+    /// package's `progress=` callable).
+    Each(EachFn<'a>),
+}
+
+impl From<bool> for Progress<'_> {
+    fn from(shown: bool) -> Self {
+        if shown {
+            Progress::Shown
+        } else {
+            Progress::Off
+        }
+    }
+}
 
 /// Hooks of a run: observation, checkpoints and interrupts.
 pub struct Hooks<'a, M> {
@@ -16,6 +40,7 @@ pub struct Hooks<'a, M> {
     pub(super) checkpoint: Option<(usize, CheckpointFn<'a>)>,
     pub(super) interrupt: Option<&'a AtomicBool>,
     pub(super) stop_after: Option<usize>,
+    pub(super) each: Option<EachFn<'a>>,
 }
 
 impl<M> Default for Hooks<'_, M> {
@@ -25,6 +50,7 @@ impl<M> Default for Hooks<'_, M> {
             checkpoint: None,
             interrupt: None,
             stop_after: None,
+            each: None,
         }
     }
 }
@@ -62,6 +88,13 @@ impl<'a, M> Hooks<'a, M> {
     /// Stops after the iteration during which `flag` was set (e.g. by Ctrl-C).
     pub fn interrupt(mut self, flag: &'a AtomicBool) -> Self {
         self.interrupt = Some(flag);
+        self
+    }
+
+    /// Calls `each(record, iterations)` after every iteration, before an interrupt is
+    /// looked at (so that `each` may set it and stop the fit there).
+    pub fn each(mut self, each: EachFn<'a>) -> Self {
+        self.each = Some(each);
         self
     }
 

@@ -22,7 +22,7 @@ mod trainer;
 mod trajectory;
 
 pub use config::{FitConfig, LossConfig, SmoothnessSampling, WithSchedule, check_weights};
-pub use hooks::Hooks;
+pub use hooks::{EachFn, Hooks, Progress};
 pub use objective::Objective;
 pub use recipe::{
     FAST_LR_FACTOR, FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, FAST_WARMUP, Recipe, RecipeChoice,

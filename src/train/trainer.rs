@@ -285,6 +285,8 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
     pub fn run_with(mut self, mut hooks: Hooks<'_, M>) -> Result<Outcome<M>> {
         let total = self.schedule.iterations;
         let bar = self.progress_bar();
+        // Outside a terminal (a log, a pipe) the bar draws nothing: plain lines instead.
+        let lines = self.progress && !std::io::IsTerminal::is_terminal(&std::io::stderr());
         while self.history.len() < total && !self.converged() {
             let record = self.iteration()?.clone();
             let converged = self.converged();
@@ -296,6 +298,18 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
                 record.total_loss
             ));
             bar.set_position(done as u64);
+            if lines && (done % total.div_ceil(10).max(1) == 0 || done == total || converged) {
+                eprintln!(
+                    "iteration {done}/{total}  {} {:.2e}  loss {:.2e}  {:.1} s",
+                    self.objective.primary_name(),
+                    record.trajectory_loss,
+                    record.total_loss,
+                    record.seconds
+                );
+            }
+            if let Some(each) = &mut hooks.each {
+                each(&record, total)?;
+            }
             if let Some((every, observe)) = &mut hooks.observe
                 && (done % *every == 0 || done == total || converged)
             {

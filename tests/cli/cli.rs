@@ -702,6 +702,10 @@ fn tracker_flags_that_do_not_fit_the_data_are_refused_naming_the_file_or_flag() 
             vec!["md2_faerie.traj", "--layout"],
         ),
         (
+            vec!["fit", faerie, "--frames", "0..4", "--confidence", "conf"],
+            vec!["md2_faerie.traj", "--confidence applies"],
+        ),
+        (
             vec!["fit", npz, "--frame", "camera"],
             vec!["clip.npz", "--frame needs a tracker layout"],
         ),

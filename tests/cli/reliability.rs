@@ -43,19 +43,24 @@ fn s(p: &Path) -> &str {
 /// A short finished run of the faerie clip.
 fn finished_run(tag: &str) -> PathBuf {
     let run = temp(tag).join("run");
+    fit_clip(Path::new(FAERIE), &run);
+    run
+}
+
+/// A 2-iteration fit of frames 112..116 of `data` (the faerie's layout) into `run`.
+fn fit_clip(data: &Path, run: &Path) {
     let (code, _, err) = doma(&[
         "fit",
-        FAERIE,
+        s(data),
         "--frames",
         "112..116",
         "--iters",
         "2",
         "--quiet",
         "--out",
-        s(&run),
+        s(run),
     ]);
     assert_eq!(code, Some(0), "{err}");
-    run
 }
 
 #[test]
@@ -83,7 +88,7 @@ fn a_run_folder_has_one_writer_and_sigterm_checkpoints_like_ctrl_c() {
     refused(&["fit", "--resume", s(&run)], &[s(&run), &pid]);
     refused(
         &["fit", FAERIE, "--frames", "112..118", "--out", s(&run)],
-        &[s(&run), "already holds a run"],
+        &[s(&run), &pid, ".lock"],
     );
     // SIGTERM (schedulers, `timeout`, `docker stop`): a checkpoint and exit 143.
     std::thread::sleep(Duration::from_millis(300));
@@ -325,4 +330,50 @@ fn fit_runs_any_model_of_the_config_and_checks_its_frames() {
     let (code, _, err) = doma(&["export", s(&run), "--gltf", s(&glb)]);
     assert_eq!(code, Some(0), "{err}");
     assert!(std::fs::metadata(&glb).unwrap().len() > 0);
+}
+
+#[test]
+fn a_run_refuses_a_model_or_data_that_its_config_no_longer_describes() {
+    let dir = temp("edited");
+    let data = dir.join("clip.traj");
+    let original = doma::data::traj::read_traj(FAERIE).unwrap();
+    doma::data::traj::write_traj(&data, &original).unwrap();
+    let run = dir.join("run");
+    fit_clip(&data, &run);
+    // The run records the reference frame it used and what its data read as.
+    let config = run.join("config.json");
+    let text = std::fs::read_to_string(&config).unwrap();
+    let saved: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(saved["reference_frame"], 0, "{text}");
+    assert!(
+        saved["data_digest"]
+            .as_str()
+            .unwrap()
+            .starts_with("fnv1a64:")
+    );
+    // A hidden size edited away from model.bpk's.
+    let edited = text.replace("\"hidden\": 128", "\"hidden\": 64");
+    assert_ne!(edited, text);
+    std::fs::write(&config, &edited).unwrap();
+    refused(&["eval", s(&run)], &["model.bpk", "config.json", "shape"]);
+    std::fs::write(&config, &text).unwrap();
+    assert_eq!(doma(&["eval", s(&run)]).0, Some(0));
+    // The data edited in place: one coordinate of one frame of the clip, moved by 1 mm.
+    let (t, n) = (original.frames(), original.points());
+    let mut moved = original.positions().to_vec();
+    moved[3 * (113 * n + 5)] += 1e-3;
+    let moved = doma::data::Trajectories::new(t, n, moved).unwrap();
+    doma::data::traj::write_traj(&data, &moved).unwrap();
+    let out = dir.join("filled.npz");
+    for args in [
+        vec!["eval", s(&run)],
+        vec!["complete", s(&run), "--out", s(&out)],
+        vec!["fit", "--resume", s(&run)],
+    ] {
+        refused(&args, &["clip.traj", "replaced or edited"]);
+    }
+    assert!(!out.exists());
+    // Put back, it reads as before.
+    doma::data::traj::write_traj(&data, &original).unwrap();
+    assert_eq!(doma(&["eval", s(&run)]).0, Some(0));
 }

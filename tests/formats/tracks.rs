@@ -195,6 +195,34 @@ fn bad_tracker_files_are_refused_naming_the_file_and_the_key() {
     hidden[1] = false;
     archive(&path, &big, (&[2, 3], &hidden), None);
     assert!(read(&path, &TrackFile::default()).is_ok());
+    // A NaN in a seen frame's extrinsics is named as such, not blamed on trajs_3d.
+    let mut extrinsics = [0f32; 32];
+    for k in 0..2 {
+        for d in 0..4 {
+            extrinsics[16 * k + 5 * d] = 1.0;
+        }
+    }
+    extrinsics[16 + 7] = f32::NAN;
+    std::fs::write(
+        &path,
+        encode_npz_values(&[
+            ("trajs_3d", &[2, 3, 3], NpyValues::F16(&trajs)),
+            ("visibs", &[2, 3], NpyValues::Bool(&seen)),
+            ("valids", &[2, 3], NpyValues::Bool(&seen)),
+            ("extrinsics", &[2, 4, 4], NpyValues::F32(&extrinsics)),
+        ]),
+    )
+    .unwrap();
+    let camera = TrackFile {
+        frame: Some(CoordFrame::Camera),
+        ..TrackFile::default()
+    };
+    let err = read(&path, &camera).unwrap_err().to_string();
+    assert!(
+        err.contains("anno.npz") && err.contains("extrinsics[1, 1, 3] is NaN"),
+        "{err}"
+    );
+    assert!(!err.contains("trajs_3d"), "{err}");
 }
 
 #[test]
