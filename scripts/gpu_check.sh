@@ -15,7 +15,7 @@ mkdir -p "$OUT"
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp}"
 DOMA="${1:-}"
 if [ -z "$DOMA" ]; then
-  cargo build --release --bin doma
+  cargo build --release --features wgpu --bin doma
   DOMA="${CARGO_TARGET_DIR:-target}/release/doma"
 fi
 nvidia-smi -L > "$OUT/gpu.txt" 2>&1 || true
@@ -23,6 +23,6 @@ nvidia-smi -L > "$OUT/gpu.txt" 2>&1 || true
 "$DOMA" synthetic --motion rotation --variant affinity --reg h --backend wgpu \
   --json "$OUT/synthetic.json" 2>&1 | tee "$OUT/synthetic.log"
 if [ -z "${1:-}" ]; then
-  CI=true cargo test --release --test numerics --test fitting --test host_sync \
+  CI=true cargo test --release --features wgpu --test numerics --test fitting --test host_sync \
     2>&1 | tee "$OUT/tests.log"
 fi

@@ -6,7 +6,9 @@
 
 #![allow(deprecated)] // `Device::ndarray()` is deprecated in favour of flex, but stays selectable.
 
-use burn::tensor::{Device, DeviceKind, DeviceType};
+use burn::tensor::Device;
+#[cfg(feature = "wgpu")]
+use burn::tensor::{DeviceKind, DeviceType};
 use serde::{Deserialize, Serialize};
 
 use crate::{DomaError, Result};
@@ -30,8 +32,21 @@ impl BackendKind {
         match self {
             BackendKind::Flex => Ok(Device::flex()),
             BackendKind::Ndarray => Ok(Device::ndarray()),
+            #[cfg(not(feature = "wgpu"))]
+            BackendKind::Wgpu => Err(DomaError::BackendUnavailable {
+                backend: "wgpu".into(),
+                reason: "this build of doma has no wgpu backend: rebuild it with the `wgpu` \
+                         feature (`cargo build --release --features wgpu`; for Python, \
+                         `MATURIN_PEP517_ARGS=\"--features wgpu\" pip install ./python`)"
+                    .into(),
+            }),
+            #[cfg(feature = "wgpu")]
             BackendKind::Wgpu => {
                 if wgpu_available() {
+                    if wgpu_software_only() {
+                        static WARNED: std::sync::Once = std::sync::Once::new();
+                        WARNED.call_once(|| eprintln!("warning: {SOFTWARE_WGPU}"));
+                    }
                     Ok(Device::wgpu(DeviceKind::DefaultDevice))
                 } else {
                     Err(DomaError::BackendUnavailable {
@@ -50,9 +65,37 @@ crate::names::value_names!(BackendKind);
 
 /// Whether at least one wgpu adapter exists. Never panics: a missing Vulkan
 /// loader is reported as "no adapter".
+/// Always false in a build without the `wgpu` feature.
 pub fn wgpu_available() -> bool {
-    let probe = std::panic::catch_unwind(|| Device::enumerate(DeviceType::Wgpu).into_vec().len());
-    matches!(probe, Ok(n) if n > 0)
+    #[cfg(feature = "wgpu")]
+    {
+        let probe =
+            std::panic::catch_unwind(|| Device::enumerate(DeviceType::Wgpu).into_vec().len());
+        matches!(probe, Ok(n) if n > 0)
+    }
+    #[cfg(not(feature = "wgpu"))]
+    false
+}
+
+/// What `--backend wgpu` prints (once per process) where the only adapter is a software
+/// rasterizer.
+pub const SOFTWARE_WGPU: &str = "wgpu found no GPU here, only a software rasterizer (such as \
+    Mesa's lavapipe): it runs on the CPU, several times slower than --backend flex";
+
+/// Whether every wgpu adapter of this machine is a software rasterizer (wgpu's `Cpu`
+/// kind: lavapipe, llvmpipe, WARP). Never panics; false without the `wgpu` feature.
+pub fn wgpu_software_only() -> bool {
+    #[cfg(feature = "wgpu")]
+    {
+        let probe = std::panic::catch_unwind(|| {
+            let cpu = Device::wgpu(DeviceKind::Cpu);
+            let all = Device::enumerate(DeviceType::Wgpu).into_vec();
+            !all.is_empty() && all.iter().all(|d| *d == cpu)
+        });
+        matches!(probe, Ok(true))
+    }
+    #[cfg(not(feature = "wgpu"))]
+    false
 }
 
 /// Tunes glibc's allocator for training loops (a no-op elsewhere): keep freed memory in
@@ -126,10 +169,40 @@ mod tests {
         assert!(runs_on_cpu(&Device::flex()));
         assert!(runs_on_cpu(&Device::flex().autodiff()));
         assert!(runs_on_cpu(&Device::ndarray().autodiff()));
-        assert!(!runs_on_cpu(&Device::wgpu(DeviceKind::DefaultDevice)));
-        assert!(!runs_on_cpu(
-            &Device::wgpu(DeviceKind::DefaultDevice).autodiff()
-        ));
+        #[cfg(feature = "wgpu")]
+        {
+            assert!(!runs_on_cpu(&Device::wgpu(DeviceKind::DefaultDevice)));
+            assert!(!runs_on_cpu(
+                &Device::wgpu(DeviceKind::DefaultDevice).autodiff()
+            ));
+        }
+    }
+
+    /// Runs in a build without the feature (`cargo test --release --lib`), not in CI's.
+    #[cfg(not(feature = "wgpu"))]
+    #[test]
+    fn wgpu_in_a_build_without_it_is_refused_naming_the_feature_and_the_command() {
+        let e = BackendKind::Wgpu.device().unwrap_err().to_string();
+        assert!(
+            e.contains("`wgpu` feature") && e.contains("cargo build --release --features wgpu"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_machine_with_only_lavapipe_is_told_apart_from_one_with_a_gpu() {
+        // Without the feature there is no wgpu to ask.
+        #[cfg(not(feature = "wgpu"))]
+        assert!(!wgpu_available() && !wgpu_software_only());
+        // CI installs Mesa's lavapipe and has no GPU (.ci/run); elsewhere the answer depends
+        // on the machine, and only its consistency is checked.
+        if std::env::var_os("CI").is_some() && cfg!(feature = "wgpu") {
+            assert!(wgpu_available(), "CI installs lavapipe");
+            assert!(wgpu_software_only(), "CI's only wgpu adapter is lavapipe");
+        }
+        if !wgpu_available() {
+            assert!(!wgpu_software_only());
+        }
     }
 
     #[test]
@@ -140,7 +213,10 @@ mod tests {
         #[allow(deprecated)]
         let ndarray = Device::ndarray();
         assert!(on_worker(&ndarray, rayon::current_thread_index).is_some());
-        let wgpu = Device::wgpu(DeviceKind::DefaultDevice);
-        assert_eq!(on_worker(&wgpu, rayon::current_thread_index), None);
+        #[cfg(feature = "wgpu")]
+        {
+            let wgpu = Device::wgpu(DeviceKind::DefaultDevice);
+            assert_eq!(on_worker(&wgpu, rayon::current_thread_index), None);
+        }
     }
 }

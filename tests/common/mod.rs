@@ -110,21 +110,27 @@ pub fn f64_flex() -> Device {
 }
 
 /// The wgpu device for a test, or `None` (after printing `SKIPPED` and why) when this
-/// machine has no adapter. Under CI (`CI` set to anything but `false` or `0`), where
-/// `.ci/run` installs Mesa's lavapipe, a missing adapter fails the test instead: a broken
-/// wgpu path must not pass by skipping.
+/// build has no wgpu (the `wgpu` feature) or this machine no adapter. Under CI (`CI` set to
+/// anything but `false` or `0`), where the README's test command builds the feature and
+/// `.ci/run` installs Mesa's lavapipe, either fails the test instead: a broken wgpu path
+/// must not pass by skipping.
 pub fn wgpu_device_or_skip(test: &str) -> Option<Device> {
     use doma::backend::{BackendKind, wgpu_available};
     if wgpu_available() {
         return Some(BackendKind::Wgpu.device().expect("an adapter exists"));
     }
+    let why = if cfg!(feature = "wgpu") {
+        "no wgpu adapter on this machine (install mesa-vulkan-drivers)"
+    } else {
+        "built without the wgpu feature (cargo test --release --features wgpu)"
+    };
     let ci = std::env::var("CI").is_ok_and(|v| !matches!(v.as_str(), "" | "false" | "0"));
     assert!(
         !ci,
-        "{test}: no wgpu adapter under CI (CI is set); .ci/run installs mesa-vulkan-drivers \
-         (lavapipe), so the wgpu path is broken"
+        "{test}: {why}, under CI (CI is set): the README's test command builds the feature and \
+         .ci/run installs mesa-vulkan-drivers (lavapipe), so the wgpu path is broken"
     );
-    eprintln!("SKIPPED {test}: no wgpu adapter on this machine (install mesa-vulkan-drivers)");
+    eprintln!("SKIPPED {test}: {why}");
     None
 }
 

@@ -7,6 +7,8 @@
 mod common;
 
 mod analytic;
+// The CubeCL kernels exist with the `wgpu` feature alone.
+#[cfg(feature = "wgpu")]
 mod analytic_kernels;
 mod baselines;
 mod fields;

@@ -24,8 +24,10 @@
 mod autodiff;
 mod cpu;
 mod reference;
+#[cfg(feature = "wgpu")]
 mod wgpu;
 
+#[cfg(feature = "wgpu")]
 pub use wgpu::kernel_launches;
 
 use burn::backend::{Dispatch, backend_extension, tensor::FloatTensor};
@@ -148,7 +150,8 @@ pub trait SirenOps: burn::backend::Backend {
 /// Burn's `Dispatch` ([`fused_siren`]), and the elementwise part of its sine layers, which
 /// the tensor-primitive network calls. The activations' default bodies compose Burn
 /// primitives and are the reference; wgpu overrides them with CubeCL kernels.
-#[backend_extension(Flex, NdArray, Cube, Autodiff)]
+#[cfg_attr(feature = "wgpu", backend_extension(Flex, NdArray, Cube, Autodiff))]
+#[cfg_attr(not(feature = "wgpu"), backend_extension(Flex, NdArray, Autodiff))]
 pub trait SirenBackend: burn::backend::Backend {
     /// The whole SIREN (see [`SirenOps`] for the layout of `params` and the output).
     fn siren(
