@@ -45,12 +45,22 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static ALLOC: Counting = Counting;
 
+/// One test at a time: the counts are the whole process's, so each test of a binary with
+/// several holds this for its whole run.
+static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// The turn of the calling test (see `TURN`).
+#[allow(dead_code)]
+pub fn serial() -> std::sync::MutexGuard<'static, ()> {
+    TURN.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// Runs `f` and returns the peak of live heap bytes above those live when it started.
 pub fn extra_peak(f: impl FnOnce()) -> usize {
     let base = CURRENT.load(Ordering::SeqCst);
     PEAK.store(base, Ordering::SeqCst);
     f();
-    PEAK.load(Ordering::SeqCst) - base
+    PEAK.load(Ordering::SeqCst).saturating_sub(base)
 }
 
 pub const MB: usize = 1 << 20;
