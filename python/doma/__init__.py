@@ -24,15 +24,30 @@ from __future__ import annotations
 
 import json
 import os
+import sys
+import tempfile
+import warnings
 from dataclasses import dataclass
-from typing import Any, Optional, Sequence, Union
+from typing import Any, Callable, NamedTuple, Optional, Sequence, Union
 
 import numpy as np
 
 from . import _native
 
 __version__: str = _native.__version__
-__all__ = ["BACKENDS", "Field", "JACOBIANS", "RECIPES", "Tracks", "VARIANTS", "fit", "load", "read_tracks", "resume"]
+__all__ = [
+    "BACKENDS",
+    "Field",
+    "FitProgress",
+    "JACOBIANS",
+    "RECIPES",
+    "Tracks",
+    "VARIANTS",
+    "fit",
+    "load",
+    "read_tracks",
+    "resume",
+]
 
 PathLike = Union[str, "os.PathLike[str]"]
 Frames = Union[float, Sequence[float], np.ndarray]
@@ -87,6 +102,15 @@ def _check_size(what: str, count: int, frames: int, per_point: int) -> None:
         )
 
 
+#: The string arguments that name a choice: read in any case, as ``reg`` is.
+_CHOICE_ARGUMENTS = ("variant", "backend", "jacobian", "recipe", "robust", "h_weight", "layout", "frame")
+
+
+def _lower_choices(options: dict[str, Any]) -> dict[str, Any]:
+    """``options`` with every choice given as a string in lower case."""
+    return {k: v.lower() if k in _CHOICE_ARGUMENTS and isinstance(v, str) else v for k, v in options.items()}
+
+
 def _frames(t: Frames) -> tuple[list[float], bool]:
     """The frame times of ``t`` (a number, or a 1-D array of them) and whether it was one."""
     array = np.asarray(t)
@@ -95,6 +119,78 @@ def _frames(t: Frames) -> tuple[list[float], bool]:
     if array.ndim > 1:
         raise ValueError(f"t has shape {list(array.shape)}; give a frame index or a 1-D array of them")
     return [float(v) for v in array.reshape(-1)], array.ndim == 0
+
+
+class FitProgress(NamedTuple):
+    """What a ``progress`` callable of :func:`fit` and :func:`resume` is given after each
+    iteration."""
+
+    #: Iterations done (1 after the first).
+    iteration: int
+    #: Iterations of the schedule.
+    iterations: int
+    #: The trajectory loss (mean L1, Eq. 5, normalised units) averaged over the iteration.
+    loss: float
+    #: The EPE × 1e4 on the held-back training tracks, where the fit measured it
+    #: (``until_converged``); else None.
+    epe: Optional[float]
+    #: Seconds since the fit started.
+    seconds: float
+
+
+Progress = Union[bool, Callable[[FitProgress], Any]]
+
+
+def _progress(progress: Progress) -> tuple[bool, Optional[Callable[..., Any]]]:
+    """``(bar, each)`` for the native fit: a callable is called with a
+    :class:`FitProgress`; ``True`` draws the bar on a terminal, and elsewhere (a notebook,
+    a log, a pipe) prints a plain line every tenth of the fit to ``sys.stderr``."""
+    if callable(progress):
+        user = progress
+        return False, lambda *a: user(FitProgress(*a))
+    if not progress:
+        return False, None
+    stream = sys.stderr
+    if stream is not None and hasattr(stream, "isatty") and stream.isatty():
+        return True, None
+
+    def line(*a: Any) -> None:
+        p = FitProgress(*a)
+        if p.iteration % max(1, -(-p.iterations // 10)) == 0 or p.iteration == p.iterations:
+            print(
+                f"doma: iteration {p.iteration}/{p.iterations}  loss {p.loss:.2e}  {p.seconds:.1f} s",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    return False, line
+
+
+def _time_major(positions: np.ndarray, time_axis: Optional[int]) -> np.ndarray:
+    """``positions`` as [T, N, 3]: transposed for ``time_axis=1``; with None, refused
+    when the array looks like [N, T, 3] (neighbouring entries much closer along axis 1
+    than along axis 0, as a track's successive frames are)."""
+    if time_axis == 1:
+        return positions.transpose(1, 0, 2)
+    if time_axis not in (None, 0):
+        raise ValueError(f"time_axis must be 0 ([T, N, 3]) or 1 ([N, T, 3]), not {time_axis!r}")
+    if time_axis == 0 or positions.shape[0] < 3 or positions.shape[1] < 3:
+        return positions
+
+    def step(axis: int) -> float:
+        d = np.abs(np.diff(positions, axis=axis)).sum(-1)
+        d = d[np.isfinite(d)]
+        return float(np.median(d)) if d.size else float("nan")
+
+    along_0, along_1 = step(0), step(1)
+    if along_1 < 0.3 * along_0:
+        raise ValueError(
+            f"tracks of shape {list(positions.shape)} look like [N, T, 3]: neighbouring "
+            f"entries are {along_0 / max(along_1, 1e-30):.1f}x closer along axis 1 than along "
+            "axis 0, as a track's successive frames are. Pass time_axis=1 to read them as "
+            "[N, T, 3], or time_axis=0 to fit them as [T, N, 3]"
+        )
+    return positions
 
 
 class Field:
@@ -106,20 +202,86 @@ class Field:
 
     def __init__(self, native: _native.Field) -> None:
         self._native = native
+        self._canonical: Optional[np.ndarray] = None
 
-    def warp(self, points: Any, t: Frames) -> np.ndarray:
+    def warp(self, points: Any, t: Frames, *, from_frame: Optional[float] = None) -> np.ndarray:
         """Moves ``points`` ([M, 3]) given at the reference frame (:attr:`reference_frame`)
         to frame ``t``: ``y = A x + u`` (Eq. 4).
+
+        ``from_frame``: the frame the points are given at, when not the reference frame;
+        they are first brought back to it (:meth:`to_reference`).
 
         Returns [M, 3], or [K, M, 3] for K frames. Memory holds the input, the output and
         one chunk of 16,384 points' activations, however large M is.
         """
+        if from_frame is not None:
+            points = self.to_reference(points, from_frame)
         frames, one = _frames(t)
         _check_size("warp", _checked_array(points, "points", (None, 3)).shape[0], len(frames), 3)
         x = _float_array(points, "points", (None, 3))
         out = np.empty((len(frames), x.shape[0], 3), dtype=np.float32)
         self._native.warp_into(x, frames, out)
         return out[0] if one else out
+
+    def to_reference(
+        self, points: Any, frame: float, *, tolerance: float = 1e-4, max_steps: int = 50
+    ) -> np.ndarray:
+        """The points ``x`` of the reference frame that the field moves to ``points``
+        ([M, 3], given at ``frame``): the inverse of the warp, ``warp(x, frame) = points``.
+
+        Each point starts from its nearest track (of :attr:`canonical` moved to ``frame``),
+        shifted by its offset from it there, and is refined by damped Newton steps with the
+        field's own Jacobian (Eq. 6): a step that does not bring the point closer is halved,
+        up to 8 times. Stops when every point is within ``tolerance`` × the data's scale
+        (:attr:`normalisation`) of its target (the default is above the float32 field's
+        own rounding, about 10⁻⁶ of the scale); a point still farther after ``max_steps``
+        steps (where the motion folds space) raises ``ValueError`` naming it. Returns
+        [M, 3] float32.
+        """
+        target = _float_array(points, "points", (None, 3))
+        if frame == self.reference_frame:
+            return target.copy()
+        goal = target.astype(np.float64)
+        _, scale = self.normalisation
+        canonical = self.canonical.astype(np.float64)
+        moved = self.warp(canonical, frame).astype(np.float64)
+        x = np.empty_like(goal)
+        rows = max(1, 4_000_000 // max(1, len(moved)))
+        for a in range(0, len(goal), rows):
+            near = ((goal[a : a + rows, None, :] - moved[None]) ** 2).sum(-1).argmin(1)
+            x[a : a + rows] = canonical[near] + goal[a : a + rows] - moved[near]
+
+        def miss(at: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            r = self.warp(at, frame).astype(np.float64) - goal[rows]
+            return r, np.linalg.norm(r, axis=1)
+
+        everyone = np.arange(len(goal))
+        residual, error = miss(x, everyone)
+        for _ in range(max_steps):
+            pending = np.flatnonzero(error > tolerance * scale)
+            if pending.size == 0:
+                break
+            j = self.jacobian(x[pending], frame).astype(np.float64)
+            step = (np.linalg.pinv(j) @ residual[pending][..., None])[..., 0]
+            length = 1.0
+            for _ in range(8):
+                trial = x[pending] - length * step
+                r, e = miss(trial, pending)
+                better = e < error[pending]
+                kept = pending[better]
+                x[kept], residual[kept], error[kept] = trial[better], r[better], e[better]
+                pending, step = pending[~better], step[~better]
+                if pending.size == 0:
+                    break
+                length /= 2
+        far = np.flatnonzero(error > tolerance * scale)
+        if far.size:
+            raise ValueError(
+                f"to_reference: {far.size} of {len(goal)} points (the first is point {far[0]}) "
+                f"have no point of the reference frame that the field moves to them at frame "
+                f"{frame} within {tolerance} x the scale, after {max_steps} Newton steps"
+            )
+        return x.astype(np.float32)
 
     def jacobian(self, points: Any, t: Frames) -> np.ndarray:
         """The Jacobian ``∂y/∂x`` of the warp at ``points`` ([M, 3]) and frame ``t``.
@@ -154,14 +316,41 @@ class Field:
         )
 
     @property
+    def canonical(self) -> np.ndarray:
+        """[N, 3] float32, in the data's units: each fitted track's point at the
+        reference frame, the ``points`` that :meth:`warp` moves along it (where the
+        track is not seen there, placed by the fit)."""
+        # Read from the run's data once: to_reference asks for it on every call.
+        if self._canonical is None:
+            self._canonical = np.frombuffer(self._native.canonical, dtype=np.float32).reshape(-1, 3)
+        return self._canonical.copy()
+
+    @property
     def reference_frame(self) -> int:
         """The frame of the clip whose positions ``warp`` takes as ``points``: the one with
         the most observed tracks, unless the fit named one (``reference_frame=``). Points
         given at another frame must first be brought to it."""
         return self._native.reference_frame
 
-    def evaluate(self, data: Optional[PathLike] = None) -> dict:
-        """The metrics of ``doma eval``: on the run's held-out points, or on ``data``."""
+    def evaluate(self, data: Union[None, PathLike, "Tracks"] = None) -> dict:
+        """The metrics of ``doma eval``: on the run's held-out points, or on every
+        observed entry of ``data`` (a file of the same tracks and frames, or a
+        :class:`Tracks`, e.g. the truth of entries a tracker missed).
+
+        ``epe_x1e4`` is the mean L1 end-point error × 10⁴ in the run's normalised units
+        (see :attr:`report`)."""
+        if isinstance(data, Tracks):
+            positions = _float_array(data.tracks, "data.tracks", (None, None, 3))
+            observed = np.asarray(data.observed, dtype=np.bool_)
+            if observed.shape != positions.shape[:2]:
+                raise ValueError(
+                    f"data.observed has shape {list(observed.shape)}, but data.tracks of shape "
+                    f"{list(positions.shape)} need {list(positions.shape[:2])}"
+                )
+            with tempfile.TemporaryDirectory(prefix="doma-eval-") as d:
+                path = os.path.join(d, "tracks.npz")
+                np.savez(path, tracks=np.where(observed[..., None], positions, 0), observed=observed)
+                return json.loads(self._native.evaluate(path, True))
         return json.loads(self._native.evaluate(None if data is None else os.fspath(data)))
 
     def save(self, run_dir: PathLike) -> None:
@@ -175,18 +364,30 @@ class Field:
         return None if d is None else os.fspath(d)
 
     @property
-    def frames(self) -> int:
-        """The frames of the fitted clip."""
+    def n_frames(self) -> int:
+        """The number of frames of the fitted clip."""
         return self._native.frames
 
     @property
-    def tracks(self) -> int:
-        """The tracks of the fitted data (training and held-out)."""
+    def n_tracks(self) -> int:
+        """The number of tracks of the fitted data (training and held-out)."""
         return self._native.tracks
 
     @property
+    def frames(self) -> int:
+        """Deprecated: :attr:`n_frames` (a count, where :attr:`Tracks.tracks` is an array)."""
+        warnings.warn("Field.frames is Field.n_frames", DeprecationWarning, stacklevel=2)
+        return self.n_frames
+
+    @property
+    def tracks(self) -> int:
+        """Deprecated: :attr:`n_tracks` (a count, where :attr:`Tracks.tracks` is an array)."""
+        warnings.warn("Field.tracks is Field.n_tracks", DeprecationWarning, stacklevel=2)
+        return self.n_tracks
+
+    @property
     def model(self) -> str:
-        """The model's name in the paper, e.g. ``DOMA-Affinity``."""
+        """The model's name in the paper's tables: ``Affinity``, ``SE(3)``, ``DPF``, ..."""
         return self._native.model
 
     @property
@@ -219,7 +420,7 @@ class Field:
 
     def __repr__(self) -> str:
         where = self.run_dir or "a temporary folder"
-        return f"<doma.Field {self.model} on {self.backend}, {self.tracks} tracks × {self.frames} frames, in {where}>"
+        return f"<doma.Field {self.model} on {self.backend}, {self.n_tracks} tracks × {self.n_frames} frames, in {where}>"
 
 
 def fit(
@@ -227,9 +428,10 @@ def fit(
     observed: Any = None,
     *,
     reg: Optional[str] = None,
-    progress: bool = True,
+    progress: Progress = True,
     out: Optional[PathLike] = None,
     overwrite: bool = False,
+    time_axis: Optional[int] = None,
     **options: Any,
 ) -> Field:
     """Fits a motion field to ``tracks``, as ``doma fit`` does.
@@ -239,8 +441,12 @@ def fit(
     type that the command line and batch manifests use; None leaves the library's default.
 
     Args:
-        tracks: [T, N, 3] positions (any float dtype). Entries that ``observed`` marks
+        tracks: [T, N, 3] positions (any float dtype; a NumPy array, or anything with
+            ``__array__``, such as a CPU PyTorch tensor). Entries that ``observed`` marks
             False are never read (NaN is fine there).
+        time_axis: 0 for [T, N, 3], 1 for [N, T, 3] (a common tracker layout). Without
+            it, an array that looks like [N, T, 3] (its entries much closer along axis 1
+            than along axis 0) is refused rather than fitted the wrong way round.
         observed: optional [T, N] bool mask of the entries a tracker saw.
         variant: one of ``VARIANTS``: ``trans``, ``se3``, ``scaled-se3``, ``affinity`` (the
             DOMA variants; default) or ``dpf``.
@@ -273,7 +479,10 @@ def fit(
             report the EPE on them (``report["held_out_observations"]``).
         robust: ``"huber[:delta]"`` or ``"charbonnier[:eps]"``, a robust trajectory loss.
         checkpoint_every: iterations between checkpoints (default 50).
-        progress: show a progress bar on stderr.
+        progress: True: a bar on a terminal, else (a notebook, a log) a line every tenth
+            of the fit on ``sys.stderr``; False: nothing; or a callable, called after every
+            iteration with a :class:`FitProgress` (an exception it raises stops the fit
+            as Ctrl-C does, with the checkpoint saved, and is raised).
         out: the run folder to write (it must not hold a run); default a temporary one,
             removed with the field (:meth:`Field.save` keeps it). The folder is locked
             before anything in it is touched: a second fit into it is refused, and a
@@ -288,10 +497,13 @@ def fit(
         OSError: another fit holds ``out``. KeyboardInterrupt: Ctrl-C; the
         checkpoint is saved (see :func:`resume`).
     """
-    positions = _float_array(tracks, "tracks", (None, None, 3))
+    positions = _time_major(_checked_array(tracks, "tracks", (None, None, 3)), time_axis)
+    positions = np.ascontiguousarray(positions, dtype=np.float32)
     mask = None
     if observed is not None:
         mask_array = np.asarray(observed)
+        if time_axis == 1 and mask_array.ndim == 2:
+            mask_array = mask_array.T
         if mask_array.dtype != np.bool_:
             raise ValueError(f"observed must be a bool array, not {mask_array.dtype}")
         if mask_array.shape != positions.shape[:2]:
@@ -306,25 +518,30 @@ def fit(
         raise ValueError(f"reg {reg!r} is not None or 'h' (the smoothness loss L_H)")
     if reg == "h" and options.get("h_weight") is None:
         options["h_weight"] = 0.1
+    options = _lower_choices(options)
+    bar, each = _progress(progress)
     native = _native.fit(
         positions,
         mask,
         out=None if out is None else os.fspath(out),
-        progress=bool(progress),
+        progress=bar,
+        each=each,
         overwrite=bool(overwrite),
         **options,
     )
     return Field(native)
 
 
-def resume(run_dir: PathLike, *, progress: bool = True) -> Field:
-    """Continues the interrupted fit in ``run_dir`` (from Python or ``doma fit``) to its end."""
-    return Field(_native.resume(os.fspath(run_dir), bool(progress)))
+def resume(run_dir: PathLike, *, progress: Progress = True) -> Field:
+    """Continues the interrupted fit in ``run_dir`` (from Python or ``doma fit``) to its
+    end; ``progress`` as in :func:`fit`."""
+    bar, each = _progress(progress)
+    return Field(_native.resume(os.fspath(run_dir), bar, each))
 
 
 def load(run_dir: PathLike, *, backend: Optional[str] = None) -> Field:
     """Opens a fitted run folder (``doma fit``'s, or ``fit(out=...)``'s) on its backend or ``backend``."""
-    return Field(_native.load(os.fspath(run_dir), backend))
+    return Field(_native.load(os.fspath(run_dir), backend.lower() if isinstance(backend, str) else backend))
 
 
 @dataclass(frozen=True)
@@ -363,8 +580,9 @@ def read_tracks(
     probability in [0, 1] observed from ``visibility_threshold`` (default 0.5); any other
     value (a code such as 2 or -1, NaN) is refused, naming the entry.
     """
+    choices = _lower_choices({"layout": layout, "frame": frame})
     positions, (t, n), observed, faces, weights = _native.read_tracks(
-        os.fspath(path), layout, frame, bool(count_hidden), confidence, visibility_threshold
+        os.fspath(path), choices["layout"], choices["frame"], bool(count_hidden), confidence, visibility_threshold
     )
     return Tracks(
         tracks=np.frombuffer(positions, dtype=np.float32).reshape(t, n, 3),

@@ -16,7 +16,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use crate::arrays::{contiguous, to_bytearray};
-use crate::errors::IntoPy;
+use crate::errors::{IntoPy, guarded};
 
 /// Rows sent through the field at once by `warp` ([`doma::warp::WARP_CHUNK`]), and by
 /// `jacobian`, whose tangents are three times the values.
@@ -203,22 +203,24 @@ impl Field {
         times: Vec<f64>,
         out: PyBuffer<f32>,
     ) -> PyResult<()> {
-        let (center, scale) = (self.center, self.scale);
-        self.over_chunks(
-            py,
-            &points,
-            &times,
-            &out,
-            3,
-            doma::warp::WARP_CHUNK,
-            |field, x, t, out| {
-                let y = doma::readback::to_vec::<f32, 2, _>(field.warp(x, t))?;
-                for (i, (o, v)) in out.iter_mut().zip(y).enumerate() {
-                    *o = v * scale + center[i % 3];
-                }
-                Ok(())
-            },
-        )
+        guarded("Field.warp", self.run_dir().as_deref(), || {
+            let (center, scale) = (self.center, self.scale);
+            self.over_chunks(
+                py,
+                &points,
+                &times,
+                &out,
+                3,
+                doma::warp::WARP_CHUNK,
+                |field, x, t, out| {
+                    let y = doma::readback::to_vec::<f32, 2, _>(field.warp(x, t))?;
+                    for (i, (o, v)) in out.iter_mut().zip(y).enumerate() {
+                        *o = v * scale + center[i % 3];
+                    }
+                    Ok(())
+                },
+            )
+        })
     }
 
     /// The Jacobians `∂y/∂x` of the warp at `points` ([M, 3]) and each frame of `times` into
@@ -232,47 +234,61 @@ impl Field {
         times: Vec<f64>,
         out: PyBuffer<f32>,
     ) -> PyResult<()> {
-        self.over_chunks(
-            py,
-            &points,
-            &times,
-            &out,
-            9,
-            JACOBIAN_CHUNK,
-            |field, x, t, out| {
-                let analytic = Analytic;
-                let method: &dyn JacobianMethod = if field.accepts(&analytic) {
-                    &analytic
-                } else {
-                    &Autodiff
-                };
-                let warped = field.warp_dual(x, t, method).warped;
-                let tangent = warped.tangent.ok_or_else(|| {
-                    DomaError::InvalidData("the warp carried no spatial tangents".into())
-                })?;
-                // [3 (x_j), n, 3 (y_i)] → [n, 3 (y_i), 3 (x_j)].
-                let j = doma::readback::to_vec::<f32, 3, _>(tangent.permute([1, 2, 0]))?;
-                out.copy_from_slice(&j);
-                Ok(())
-            },
-        )
+        guarded("Field.jacobian", self.run_dir().as_deref(), || {
+            self.over_chunks(
+                py,
+                &points,
+                &times,
+                &out,
+                9,
+                JACOBIAN_CHUNK,
+                |field, x, t, out| {
+                    let analytic = Analytic;
+                    let method: &dyn JacobianMethod = if field.accepts(&analytic) {
+                        &analytic
+                    } else {
+                        &Autodiff
+                    };
+                    let warped = field.warp_dual(x, t, method).warped;
+                    let tangent = warped.tangent.ok_or_else(|| {
+                        DomaError::InvalidData("the warp carried no spatial tangents".into())
+                    })?;
+                    // [3 (x_j), n, 3 (y_i)] → [n, 3 (y_i), 3 (x_j)].
+                    let j = doma::readback::to_vec::<f32, 3, _>(tangent.permute([1, 2, 0]))?;
+                    out.copy_from_slice(&j);
+                    Ok(())
+                },
+            )
+        })
     }
 
     /// The metrics of the run as `doma eval` computes them, as JSON: on the held-out points
     /// of its own data, or on `data` (another file of the same tracks).
-    #[pyo3(signature = (data=None))]
-    fn evaluate(&self, py: Python<'_>, data: Option<PathBuf>) -> PyResult<String> {
-        let report = py
-            .detach(|| doma::run::eval_run(&self.run, data.as_deref(), &self.device))
-            .py()?;
-        serde_json::to_string(&report).map_err(|e| PyValueError::new_err(e.to_string()))
+    /// With `masked`, `data` is a masked `.npz` written from a `Tracks` (not read as the
+    /// run read its own data).
+    #[pyo3(signature = (data=None, masked=false))]
+    fn evaluate(&self, py: Python<'_>, data: Option<PathBuf>, masked: bool) -> PyResult<String> {
+        guarded("Field.evaluate", data.as_deref(), || {
+            let file = masked.then(|| doma::data::layout::TrackFile {
+                layout: Some(doma::data::layout::Layout::Masked),
+                ..Default::default()
+            });
+            let report = py
+                .detach(|| {
+                    doma::run::eval_run_as(&self.run, data.as_deref(), file.as_ref(), &self.device)
+                })
+                .py()?;
+            serde_json::to_string(&report).map_err(|e| PyValueError::new_err(e.to_string()))
+        })
     }
 
     /// Copies the run into the new folder `dir` (it must not hold a run), so that the
     /// command line and `doma.load` open it: its files, and the data file when it lives in
     /// the run (a fit from NumPy), with `config.json` written last and pointed at the copy.
     fn save(&self, dir: PathBuf) -> PyResult<()> {
-        save_run(&self.run, &self.config, &dir).py()
+        guarded("Field.save", Some(&dir), || {
+            save_run(&self.run, &self.config, &dir).py()
+        })
     }
 
     /// Every track at every frame of the clip, as `doma complete` writes it: `(tracks bytes
@@ -288,16 +304,37 @@ impl Field {
         Bound<'py, pyo3::types::PyByteArray>,
         Option<Vec<usize>>,
     )> {
-        let done = py
-            .detach(|| doma::run::complete_tracks(&self.run, &self.device))
-            .py()?;
-        let observed: Vec<u8> = done.observed.iter().map(|&o| o as u8).collect();
-        Ok((
-            to_bytearray(py, &done.tracks),
-            (done.frames, done.points),
-            to_bytearray(py, &observed),
-            done.kept,
-        ))
+        guarded("Field.complete", self.run_dir().as_deref(), || {
+            let done = py
+                .detach(|| doma::run::complete_tracks(&self.run, &self.device))
+                .py()?;
+            let observed: Vec<u8> = done.observed.iter().map(|&o| o as u8).collect();
+            Ok((
+                to_bytearray(py, &done.tracks),
+                (done.frames, done.points),
+                to_bytearray(py, &observed),
+                done.kept,
+            ))
+        })
+    }
+
+    /// The canonical positions `[N, 3]` (f32 bytes) in the data's units: each track's
+    /// point at the reference frame, as the fit placed it (learned, where it learned
+    /// them).
+    #[getter]
+    fn canonical<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyByteArray>> {
+        guarded("Field.canonical", self.run_dir().as_deref(), || {
+            let data = py.detach(|| self.run.load_data(&self.config)).py()?;
+            let (center, scale) = (self.center, self.scale);
+            let placed: Vec<f32> = data
+                .trajectories
+                .canonical()
+                .iter()
+                .enumerate()
+                .map(|(i, v)| v * scale + center[i % 3])
+                .collect();
+            Ok(to_bytearray(py, &placed))
+        })
     }
 
     /// The frame of the clip whose positions are the field's input `x`: the one with the

@@ -10,6 +10,7 @@ use doma::backend::BackendKind;
 use doma::data::layout::Layout;
 use doma::run::{FitOutcome, NewFit, RunDir, RunLock, fit_run, fit_run_locked};
 use doma::train::select::WeightSearch;
+use doma::train::{IterationRecord, Progress};
 use doma_formats::npy::NpyValues;
 use pyo3::buffer::PyBuffer;
 use pyo3::exceptions::{PyFileExistsError, PyTypeError, PyValueError};
@@ -18,7 +19,7 @@ use pyo3::types::PyDict;
 
 use crate::arrays::contiguous;
 use crate::convert::{Wrap, run_spec};
-use crate::errors::{self, IntoPy};
+use crate::errors::{self, IntoPy, guarded};
 use crate::field::{DataShape, Field};
 use crate::interrupt;
 
@@ -39,159 +40,168 @@ const FILE_OPTIONS: [&str; 6] = [
 /// `None`: every entry observed) into the run folder `out` (a new temporary folder when
 /// `None`, removed with the field), as `doma fit` would with the same options: `options`
 /// are [`doma::run::RunSpec`]'s fields by name (`variant`, `iters`, `h_weight`, …).
+/// `each`, if given, is called after every iteration with `(iteration, iterations, loss,
+/// validation EPE or None, seconds)` in place of the bar; an exception it raises stops the
+/// fit as Ctrl-C does (checkpoint saved) and is raised.
 #[pyfunction]
-#[pyo3(signature = (tracks, observed=None, *, out=None, progress=true, overwrite=false, **options))]
+#[pyo3(signature = (tracks, observed=None, *, out=None, progress=true, each=None, overwrite=false, **options))]
+// The keywords of the Python call, one parameter each, as PyO3 maps them.
+#[allow(clippy::too_many_arguments)]
 pub fn fit(
     py: Python<'_>,
     tracks: PyBuffer<f32>,
     observed: Option<PyBuffer<u8>>,
     out: Option<PathBuf>,
     progress: bool,
+    each: Option<Py<PyAny>>,
     overwrite: bool,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Field> {
-    if let Some(given) = options {
-        for key in FILE_OPTIONS {
-            if given.contains(key)? {
-                return Err(PyTypeError::new_err(format!(
-                    "fit() does not take '{key}': the tracks are the arrays given (read a \
-                     file with doma.read_tracks)"
-                )));
+    let named = out.clone();
+    guarded("fit", named.as_deref(), || {
+        if let Some(given) = options {
+            for key in FILE_OPTIONS {
+                if given.contains(key)? {
+                    return Err(PyTypeError::new_err(format!(
+                        "fit() does not take '{key}': the tracks are the arrays given (read a \
+                         file with doma.read_tracks)"
+                    )));
+                }
             }
         }
-    }
-    let mut spec = run_spec(options)?;
-    let (dims, positions) = contiguous(&tracks, "tracks", &[None, None, Some(3)], false)?;
-    let (t, n) = (dims[0], dims[1]);
-    // SAFETY: the caller holds both buffers for this call.
-    let positions = unsafe { positions.slice() };
-    let mask = match &observed {
-        Some(o) => {
-            let (_, mask) = contiguous(o, "observed", &[Some(t), Some(n)], false)?;
-            // SAFETY: as above.
-            Some(
-                unsafe { mask.slice() }
-                    .iter()
-                    .map(|&b| b != 0)
-                    .collect::<Vec<bool>>(),
-            )
+        let mut spec = run_spec(options)?;
+        let (dims, positions) = contiguous(&tracks, "tracks", &[None, None, Some(3)], false)?;
+        let (t, n) = (dims[0], dims[1]);
+        // SAFETY: the caller holds both buffers for this call.
+        let positions = unsafe { positions.slice() };
+        let mask = match &observed {
+            Some(o) => {
+                let (_, mask) = contiguous(o, "observed", &[Some(t), Some(n)], false)?;
+                // SAFETY: as above.
+                Some(
+                    unsafe { mask.slice() }
+                        .iter()
+                        .map(|&b| b != 0)
+                        .collect::<Vec<bool>>(),
+                )
+            }
+            None => None,
+        };
+        check_tracks(t, n, positions, mask.as_deref())?;
+        let (dir, temporary) = match out {
+            Some(dir) => (dir, false),
+            None => (temporary_dir().py()?, true),
+        };
+        let run = RunDir::new(&dir);
+        if run.config().exists() {
+            return Err(errors::to_py(DomaError::RunExists(dir)));
         }
-        None => None,
-    };
-    check_tracks(t, n, positions, mask.as_deref())?;
-    let (dir, temporary) = match out {
-        Some(dir) => (dir, false),
-        None => (temporary_dir().py()?, true),
-    };
-    let run = RunDir::new(&dir);
-    if run.config().exists() {
-        return Err(errors::to_py(DomaError::RunExists(dir)));
-    }
-    let made = !dir.exists();
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| DomaError::io(&dir, e))
-        .py()?;
-    let lock_file = dir.join(".lock");
-    let had_lock_file = lock_file.exists();
-    // The lock before anything in the folder is read, written or deleted: a second caller
-    // is refused here, and touches nothing of the first one's.
-    let lock = match RunLock::acquire(&dir) {
-        Ok(lock) => lock,
-        Err(e) => {
+        let made = !dir.exists();
+        std::fs::create_dir_all(&dir)
+            .map_err(|e| DomaError::io(&dir, e))
+            .py()?;
+        let lock_file = dir.join(".lock");
+        let had_lock_file = lock_file.exists();
+        // The lock before anything in the folder is read, written or deleted: a second caller
+        // is refused here, and touches nothing of the first one's.
+        let lock = match RunLock::acquire(&dir) {
+            Ok(lock) => lock,
+            Err(e) => {
+                if made {
+                    // Empty unless the other caller is in it; then it stays.
+                    let _ = std::fs::remove_dir(&dir);
+                }
+                return Err(errors::to_py(e));
+            }
+        };
+        let data = dir.join(DATA_FILE);
+        // A data file that `overwrite` lets this call replace is set aside until the fit has
+        // started, so that a refused call puts it back.
+        let replaced = dir.join(".tracks.npz.replaced");
+        let had_data = data.exists();
+        // What this call made, undone under the lock if the fit does not start.
+        let undo = |wrote_data: bool| {
+            if run.config().exists() {
+                let _ = std::fs::remove_file(&replaced);
+                return;
+            }
+            if wrote_data {
+                let _ = std::fs::remove_file(&data);
+            }
+            if had_data {
+                let _ = std::fs::rename(&replaced, &data);
+            }
+            if !had_lock_file {
+                let _ = std::fs::remove_file(&lock_file);
+            }
             if made {
-                // Empty unless the other caller is in it; then it stays.
                 let _ = std::fs::remove_dir(&dir);
             }
-            return Err(errors::to_py(e));
-        }
-    };
-    let data = dir.join(DATA_FILE);
-    // A data file that `overwrite` lets this call replace is set aside until the fit has
-    // started, so that a refused call puts it back.
-    let replaced = dir.join(".tracks.npz.replaced");
-    let had_data = data.exists();
-    // What this call made, undone under the lock if the fit does not start.
-    let undo = |wrote_data: bool| {
+        };
         if run.config().exists() {
-            let _ = std::fs::remove_file(&replaced);
-            return;
+            return Err(errors::to_py(DomaError::RunExists(dir.clone())));
         }
-        if wrote_data {
-            let _ = std::fs::remove_file(&data);
+        // The files a fit writes beside `config.json`: the run's own, its data and its plots.
+        let written = crate::field::RUN_FILES.iter().chain(&[DATA_FILE, "plots"]);
+        if !overwrite && let Some(file) = written.map(|f| dir.join(f)).find(|f| f.exists()) {
+            undo(false);
+            return Err(PyFileExistsError::new_err(format!(
+                "{}: the folder is not a doma run but holds {}, which a fit writes; choose \
+                 another `out`, or pass overwrite=True to replace it",
+                dir.display(),
+                file.display()
+            )));
         }
-        if had_data {
-            let _ = std::fs::rename(&replaced, &data);
+        if had_data && let Err(e) = std::fs::rename(&data, &replaced) {
+            undo(false);
+            return Err(errors::to_py(DomaError::io(&data, e)));
         }
-        if !had_lock_file {
-            let _ = std::fs::remove_file(&lock_file);
-        }
-        if made {
-            let _ = std::fs::remove_dir(&dir);
-        }
-    };
-    if run.config().exists() {
-        return Err(errors::to_py(DomaError::RunExists(dir.clone())));
-    }
-    // The files a fit writes beside `config.json`: the run's own, its data and its plots.
-    let written = crate::field::RUN_FILES.iter().chain(&[DATA_FILE, "plots"]);
-    if !overwrite && let Some(file) = written.map(|f| dir.join(f)).find(|f| f.exists()) {
-        undo(false);
-        return Err(PyFileExistsError::new_err(format!(
-            "{}: the folder is not a doma run but holds {}, which a fit writes; choose \
-             another `out`, or pass overwrite=True to replace it",
-            dir.display(),
-            file.display()
-        )));
-    }
-    if had_data && let Err(e) = std::fs::rename(&data, &replaced) {
-        undo(false);
-        return Err(errors::to_py(DomaError::io(&data, e)));
-    }
-    // The data file is written once and read once, by `prepare`; the fit runs on what it
-    // read.
-    let prepared = (|| -> Result<NewFit> {
-        let (s3, s2) = ([t, n, 3], [t, n]);
-        let mut members = vec![("tracks", &s3[..], NpyValues::F32(positions))];
-        if let Some(mask) = &mask {
-            members.push(("observed", &s2[..], NpyValues::Bool(mask)));
-        }
-        doma::io::write_atomic(&data, &doma_formats::npz::encode_npz_values(&members))?;
-        spec.data = Some(data.clone());
-        spec.layout = Some(if mask.is_some() {
-            Layout::Masked
-        } else {
-            Layout::Plain
-        });
-        spec.prepare(&WeightSearch::default(), |p| {
-            if progress {
-                eprintln!(
-                    "weight {:e}: validation EPE {:.2}e-4",
-                    p.weight, p.validation_epe_x1e4
-                );
+        // The data file is written once and read once, by `prepare`; the fit runs on what it
+        // read.
+        let prepared = (|| -> Result<NewFit> {
+            let (s3, s2) = ([t, n, 3], [t, n]);
+            let mut members = vec![("tracks", &s3[..], NpyValues::F32(positions))];
+            if let Some(mask) = &mask {
+                members.push(("observed", &s2[..], NpyValues::Bool(mask)));
             }
-        })
-    })();
-    let new = match prepared {
-        Ok(new) => new,
-        Err(e) => {
-            undo(true);
-            return Err(errors::to_py(e));
+            doma::io::write_atomic(&data, &doma_formats::npz::encode_npz_values(&members))?;
+            spec.data = Some(data.clone());
+            spec.layout = Some(if mask.is_some() {
+                Layout::Masked
+            } else {
+                Layout::Plain
+            });
+            spec.prepare(&WeightSearch::default(), |p| {
+                if progress {
+                    eprintln!(
+                        "weight {:e}: validation EPE {:.2}e-4",
+                        p.weight, p.validation_epe_x1e4
+                    );
+                }
+            })
+        })();
+        let new = match prepared {
+            Ok(new) => new,
+            Err(e) => {
+                undo(true);
+                return Err(errors::to_py(e));
+            }
+        };
+        let shape = DataShape::of(&new.sequence);
+        let result = run_fit(py, &run, Some((new, lock)), progress, each);
+        if result.is_err() {
+            // The lock went with the fit: undo only what is still ours.
+            if let Ok(_again) = RunLock::acquire(&dir) {
+                undo(true);
+            }
+            if temporary {
+                let _ = std::fs::remove_dir_all(&dir);
+            }
         }
-    };
-    let shape = DataShape::of(&new.sequence);
-    let result = run_fit(py, &run, Some((new, lock)), progress);
-    if result.is_err() {
-        // The lock went with the fit: undo only what is still ours.
-        if let Ok(_again) = RunLock::acquire(&dir) {
-            undo(true);
-        }
-        if temporary {
-            let _ = std::fs::remove_dir_all(&dir);
-        }
-    }
-    let device = result?;
-    let _ = std::fs::remove_file(&replaced);
-    Field::fitted(&dir, temporary, device, shape).py()
+        let device = result?;
+        let _ = std::fs::remove_file(&replaced);
+        Field::fitted(&dir, temporary, device, shape).py()
+    })
 }
 
 /// Refuses tracks that no fit can read, naming the entry: an observed coordinate that is
@@ -228,17 +238,43 @@ fn run_fit(
     run: &RunDir,
     new: Option<(NewFit, RunLock)>,
     progress: bool,
+    each: Option<Py<PyAny>>,
 ) -> PyResult<burn::tensor::Device> {
     let backend = match &new {
         Some((n, _)) => n.config.backend,
         None => run.load_config().py()?.backend,
     };
     let device = backend.device().py()?;
-    let (outcome, raised) = interrupt::run_interruptible(py, |flag| match new {
-        Some((new, lock)) => fit_run_locked(run, new, lock, &device, flag, None, progress),
-        None => fit_run(run, None, &device, flag, None, progress),
+    // The callable's own exception, which stops the fit as Ctrl-C does.
+    let failed = std::sync::Mutex::new(None::<PyErr>);
+    let (outcome, raised) = interrupt::run_interruptible(py, |flag| {
+        let shown: Progress = match &each {
+            Some(each) => Progress::Each(Box::new(|record: &IterationRecord, total: usize| {
+                Python::attach(|py| {
+                    let args = (
+                        record.iteration + 1,
+                        total,
+                        record.trajectory_loss,
+                        record.validation_epe,
+                        record.seconds,
+                    );
+                    if let Err(e) = each.call1(py, args) {
+                        let mut slot = failed.lock().unwrap_or_else(|e| e.into_inner());
+                        slot.get_or_insert(e);
+                        flag.store(true, Ordering::SeqCst);
+                    }
+                });
+                Ok(())
+            })),
+            None => progress.into(),
+        };
+        match new {
+            Some((new, lock)) => fit_run_locked(run, new, lock, &device, flag, None, shown),
+            None => fit_run(run, None, &device, flag, None, shown),
+        }
     });
-    match (outcome.py()?, raised) {
+    let failed = failed.into_inner().unwrap_or_else(|e| e.into_inner());
+    match (outcome.py()?, raised.or(failed)) {
         (FitOutcome::Finished(_), None) => Ok(device),
         (FitOutcome::Interrupted { iterations_done }, raised) => {
             let error = raised.unwrap_or_else(|| {
@@ -280,11 +316,18 @@ fn temporary_dir() -> Result<PathBuf> {
 /// Continues the interrupted fit in `run_dir` from its checkpoint, on the backend it was
 /// started on.
 #[pyfunction]
-#[pyo3(signature = (run_dir, progress))]
-pub fn resume(py: Python<'_>, run_dir: PathBuf, progress: bool) -> PyResult<Field> {
-    let run = RunDir::new(&run_dir);
-    let device = run_fit(py, &run, None, progress)?;
-    Field::open(&run_dir, false, device).py()
+#[pyo3(signature = (run_dir, progress, each=None))]
+pub fn resume(
+    py: Python<'_>,
+    run_dir: PathBuf,
+    progress: bool,
+    each: Option<Py<PyAny>>,
+) -> PyResult<Field> {
+    guarded("resume", Some(&run_dir), || {
+        let run = RunDir::new(&run_dir);
+        let device = run_fit(py, &run, None, progress, each)?;
+        Field::open(&run_dir, false, device).py()
+    })
 }
 
 /// Opens the fitted run in `run_dir` (written by `doma fit` or by `doma.fit(out=...)`), on
@@ -296,11 +339,13 @@ pub fn load(
     run_dir: PathBuf,
     backend: Option<Wrap<BackendKind>>,
 ) -> PyResult<Field> {
-    let run = RunDir::new(&run_dir);
-    let kind = match backend {
-        Some(Wrap(kind)) => kind,
-        None => run.load_config().py()?.backend,
-    };
-    let device = kind.device().py()?;
-    py.detach(|| Field::open(&run_dir, false, device)).py()
+    guarded("load", Some(&run_dir), || {
+        let run = RunDir::new(&run_dir);
+        let kind = match backend {
+            Some(Wrap(kind)) => kind,
+            None => run.load_config().py()?.backend,
+        };
+        let device = kind.device().py()?;
+        py.detach(|| Field::open(&run_dir, false, device)).py()
+    })
 }

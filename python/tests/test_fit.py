@@ -16,7 +16,7 @@ import doma
 def test_a_short_fit_moves_points_and_reports_the_held_out_error(fitted, clip):
     report = fitted.report
     assert report["iterations"] == 30 and np.isfinite(report["epe_x1e4"])
-    assert (fitted.frames, fitted.tracks, fitted.backend) == (20, 366, "flex")
+    assert (fitted.n_frames, fitted.n_tracks, fitted.backend) == (20, 366, "flex")
     moved = fitted.warp(clip[0], 19)
     assert moved.shape == (366, 3) and moved.dtype == np.float32
     # Closer to where the points went than to where they were.
@@ -139,7 +139,7 @@ def test_a_refused_fit_leaves_every_file_of_the_folder_as_it_was(clip, tmp_path)
         doma.fit(clip, iters=2, progress=False, out=folder, overwrite=True, reference_frame=50)
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
     field = doma.fit(clip, iters=2, progress=False, out=folder, overwrite=True)
-    assert field.frames == 20 and (folder / "notes.txt").read_text() == "kept"
+    assert field.n_frames == 20 and (folder / "notes.txt").read_text() == "kept"
     assert not (folder / ".tracks.npz.replaced").exists()
     # A refused fit in a folder it made leaves no folder.
     with pytest.raises(ValueError):
@@ -222,7 +222,7 @@ def test_the_doma_command_of_the_package_is_the_binary_s(cli, fitted):
     theirs = subprocess.run([cli, "info", run], capture_output=True, text=True)
     assert (ours.returncode, ours.stdout) == (theirs.returncode, theirs.stdout) == (0, theirs.stdout)
     # Errors and bad flags exit as the binary's do, with its message.
-    for args in (["info", "/nonexistent/run"], ["fit", "--iters", "0"], ["--version"]):
+    for args in (["info", "/nonexistent/run"], ["fit", "--iters", "0"], ["--help"], ["fit", "--help"], ["--version"]):
         ours = subprocess.run([command, *args], capture_output=True, text=True)
         theirs = subprocess.run([cli, *args], capture_output=True, text=True)
         assert (ours.returncode, ours.stdout, ours.stderr) == (theirs.returncode, theirs.stdout, theirs.stderr), args

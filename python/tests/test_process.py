@@ -89,19 +89,29 @@ def test_a_warp_of_two_million_points_holds_no_copy_of_them(tmp_path, fitted):
     assert growth < output + given // 2, (growth, output, given)
 
 
-def test_the_example_fits_and_plots_without_a_display(tmp_path):
+def run_example(name, out):
+    """Runs python/examples/NAME.py into `out` at 20 iterations without a display; its
+    stdout, once it wrote NAME.png."""
     from conftest import ROOT
 
-    example = ROOT / "python" / "examples" / "fit_and_plot.py"
     env = {**os.environ, "MPLBACKEND": "Agg"}
     env.pop("DISPLAY", None)
     done = subprocess.run(
-        [sys.executable, example, tmp_path, "--iters", "20"], env=env, capture_output=True, text=True
+        [sys.executable, ROOT / "python" / "examples" / f"{name}.py", out, "--iters", "20"],
+        env=env, capture_output=True, text=True,
     )
     assert done.returncode == 0, done.stderr
-    png = tmp_path / "fit_and_plot.png"
-    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert "EPE" in done.stdout
+    assert (out / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    return done.stdout
+
+
+def test_the_example_fits_and_plots_without_a_display(tmp_path):
+    assert "EPE" in run_example("fit_and_plot", tmp_path)
+
+
+def test_the_gap_filling_example_runs_and_reports_millimetres(tmp_path):
+    out = run_example("fill_gaps", tmp_path)
+    assert "mm, linear" in out and "reference frame" in out, out
 
 
 def test_two_processes_fitting_into_one_folder_one_refused_the_other_whole(tmp_path):
@@ -139,3 +149,23 @@ def test_two_processes_fitting_into_one_folder_one_refused_the_other_whole(tmp_p
         clip = doma.read_tracks(data).tracks[112:132]
         expected = clip[::-1] if won[0] == 1 else clip
         assert np.array_equal(doma.read_tracks(out / "tracks.npz").tracks, expected)
+
+
+def test_pip_without_a_rust_toolchain_fails_at_once_saying_what_to_install(tmp_path):
+    import time
+
+    from conftest import ROOT
+
+    # Only the interpreter's own folder on PATH: pip and maturin, no cargo or rustc.
+    env = {**os.environ, "PATH": os.path.dirname(sys.executable)}
+    env.pop("CARGO", None)
+    start = time.monotonic()
+    done = subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--no-build-isolation", "--no-deps", "--target", tmp_path / "t",
+         ROOT / "python"],
+        env=env, capture_output=True, text=True, timeout=300,
+    )
+    assert done.returncode != 0
+    assert "Rust >= 1.95" in done.stderr + done.stdout and "rustup" in done.stderr + done.stdout, done.stderr
+    assert time.monotonic() - start < 120
+    assert not (tmp_path / "t" / "doma").exists()
