@@ -34,12 +34,31 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
     let device = args.device.backend.device()?;
     let c = complete_run(&RunDir::new(&args.run), &args.out, args.layout, &device)?;
     eprintln!(
-        "wrote {}: {} tracks × {} frames, {} observed entries kept, {} filled by the field",
+        "wrote {}: {} tracks × {} frames, {} observed entries kept, {} filled",
         args.out.display(),
         c.tracks,
         c.frames,
         c.observed,
         c.filled
     );
+    let b = &c.blend;
+    for (k, name) in ["short", "long"].iter().enumerate() {
+        let w = if k == 0 { &b.short } else { &b.long };
+        eprintln!(
+            "  {name} gaps ({} validation entries{}): field with carried residual {:.2}, \
+             spline {:.2}, neighbours {:.2}, low rank {:.2}, linear {:.2}",
+            b.validated[k],
+            if b.cross_fitted[k] {
+                ""
+            } else {
+                "; the blend did not beat the field's fill"
+            },
+            w.carried,
+            w.spline,
+            w.neighbours,
+            w.low_rank,
+            w.linear
+        );
+    }
     Ok(())
 }

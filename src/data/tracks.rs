@@ -385,28 +385,125 @@ pub fn hold_out_spans(
     spans: std::ops::RangeInclusive<usize>,
     seed: u64,
 ) -> std::result::Result<Vec<(usize, usize)>, String> {
-    if !(fraction > 0.0 && fraction < 1.0) {
-        return Err(format!(
-            "a held-out fraction of {fraction} is not strictly between 0 and 1"
-        ));
-    }
+    check_fraction(fraction)?;
     let (shortest, longest) = (*spans.start(), *spans.end());
     if shortest == 0 || shortest > longest {
         return Err(format!(
             "spans of {shortest} to {longest} frames: the lengths must be at least 1 and in order"
         ));
     }
-    let (t, n) = (tracks.frames, tracks.points);
-    let target = (fraction * tracks.observed_count() as f64).round() as usize;
-    let mut observed = tracks.observed.clone();
+    let t = tracks.frames;
+    hold_out_drawn(
+        t,
+        tracks.points,
+        &tracks.observed,
+        fraction,
+        [shortest, longest],
+        seed,
+        |rng| rng.random_range(shortest..=longest.min(t - 2)),
+    )
+}
+
+/// The length of every interior gap of `observed` `[T, N]` (a run of unobserved frames
+/// with an observation on each side), one entry per gap.
+pub fn gap_lengths(t: usize, n: usize, observed: &[bool]) -> Vec<usize> {
+    let mut lengths = Vec::new();
+    for i in 0..n {
+        let mut last = None;
+        for k in 0..t {
+            if !observed[k * n + i] {
+                continue;
+            }
+            if let Some(a) = last
+                && k > a + 1
+            {
+                lengths.push(k - a - 1);
+            }
+            last = Some(k);
+        }
+    }
+    lengths
+}
+
+/// A seeded choice of about `fraction` of the observed entries of `observed` `[T, N]` to
+/// hide for validating a gap fill: spans inside the tracks' observations, their lengths
+/// drawn from the tracks' own interior gaps (one draw per gap, so the spans are as long as
+/// the gaps to fill), or from [`DEFAULT_SPANS`] when there is no interior gap. Refuses
+/// what [`hold_out_spans`] refuses.
+pub fn validation_spans(
+    t: usize,
+    n: usize,
+    observed: &[bool],
+    fraction: f64,
+    seed: u64,
+) -> std::result::Result<Vec<(usize, usize)>, String> {
+    let mut lengths: Vec<usize> = gap_lengths(t, n, observed)
+        .into_iter()
+        .filter(|&l| l + 2 <= t)
+        .collect();
+    if lengths.is_empty() {
+        lengths = DEFAULT_SPANS.filter(|&l| l + 2 <= t).collect();
+    }
+    hold_out_lengths(t, n, observed, fraction, &lengths, seed)
+}
+
+/// [`hold_out_spans`] on a bare mask `observed` `[T, N]` (frame-major), each span's length
+/// drawn from `lengths` (each at least 1 and at most `T − 2`), uniformly: a list of the
+/// data's own gap lengths gives spans distributed as its gaps are.
+fn hold_out_lengths(
+    t: usize,
+    n: usize,
+    observed: &[bool],
+    fraction: f64,
+    lengths: &[usize],
+    seed: u64,
+) -> std::result::Result<Vec<(usize, usize)>, String> {
+    let (Some(&shortest), Some(&longest)) = (lengths.iter().min(), lengths.iter().max()) else {
+        return Err("no span lengths to draw from".into());
+    };
+    if shortest == 0 || longest + 2 > t {
+        return Err(format!(
+            "spans of {shortest} to {longest} frames do not fit inside {t} frames"
+        ));
+    }
+    hold_out_drawn(t, n, observed, fraction, [shortest, longest], seed, |rng| {
+        lengths[rng.random_range(0..lengths.len())]
+    })
+}
+
+fn check_fraction(fraction: f64) -> std::result::Result<(), String> {
+    if fraction > 0.0 && fraction < 1.0 {
+        Ok(())
+    } else {
+        Err(format!(
+            "a held-out fraction of {fraction} is not strictly between 0 and 1"
+        ))
+    }
+}
+
+/// The draw of [`hold_out_spans`] and [`hold_out_lengths`]: `length` draws each span's
+/// length, `[shortest, longest]` bound it (for the checks and the message).
+fn hold_out_drawn(
+    t: usize,
+    n: usize,
+    observed: &[bool],
+    fraction: f64,
+    [shortest, longest]: [usize; 2],
+    seed: u64,
+    mut length: impl FnMut(&mut ChaCha8Rng) -> usize,
+) -> std::result::Result<Vec<(usize, usize)>, String> {
+    debug_assert_eq!(observed.len(), t * n);
+    check_fraction(fraction)?;
+    let observed_count = observed.iter().filter(|&&o| o).count();
+    let target = (fraction * observed_count as f64).round() as usize;
+    let mut observed = observed.to_vec();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut hidden = Vec::with_capacity(target);
     let mut tries = 0usize;
     let cannot = |hid: usize| {
         format!(
-            "cannot hide {fraction} of the {} observations in spans of {shortest} to {longest} \
-             frames inside the tracks' observations (hid {hid} of {target})",
-            tracks.observed_count()
+            "cannot hide {fraction} of the {observed_count} observations in spans of {shortest} \
+             to {longest} frames inside the tracks' observations (hid {hid} of {target})"
         )
     };
     while hidden.len() < target {
@@ -416,7 +513,7 @@ pub fn hold_out_spans(
         }
         let i = rng.random_range(0..n);
         // A frame before and one after the span.
-        let len = rng.random_range(shortest..=longest.min(t - 2));
+        let len = length(&mut rng);
         let start = rng.random_range(1..=t - 1 - len);
         let seen = |k: usize| observed[k * n + i];
         if !(0..start).any(seen) || !(start + len..t).any(seen) {

@@ -9,9 +9,11 @@
 //! The field's fill ([`carry_residuals`]) is the field's prediction plus each track's own
 //! residual carried across the gap: the field knows how the track's neighbourhood moves, the
 //! residual keeps the track's own offset from it, so the fill meets the observations on both
-//! sides of a gap (docs/design.md §7, doma's fill).
+//! sides of a gap. doma's fill ([`blend`], what `doma complete` writes) blends it with the
+//! baselines by weights validated on the data's own observations (docs/design.md §7).
 
 pub mod baselines;
+pub mod blend;
 
 /// The runs of a track's observed frames: for each frame, the nearest observed frame at or
 /// before it and at or after it (`None` past the ends).

@@ -10,12 +10,12 @@ use super::{RunConfig, RunDir, field_everywhere};
 use crate::data::c3d::{C3d, c3d_tracks, read_c3d, write_c3d};
 use crate::data::layout::Layout;
 use crate::data::sequence::read_tracks;
-use crate::gaps::carry_residuals;
+use crate::gaps::blend::{Blend, blended_fill};
 use crate::io::write_atomic;
 use crate::{DomaError, Result};
 
 /// What [`complete_run`] wrote.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Completion {
     /// Frames.
     pub frames: usize,
@@ -23,16 +23,18 @@ pub struct Completion {
     pub tracks: usize,
     /// Entries the input observed (written as they were).
     pub observed: usize,
-    /// Entries the field filled.
+    /// Entries filled.
     pub filled: usize,
+    /// The weights of the fill ([`crate::gaps::blend`]).
+    pub blend: Blend,
 }
 
 /// Writes every track of the run in `run` at every frame of its clip into `out`, in the
 /// input's frame, units and track order: an observed entry as the input holds it, every
-/// other one filled by the fitted field from the track's canonical position plus the
-/// track's own residual carried across the gap ([`crate::gaps::carry_residuals`]), so
-/// that a fill meets the observations around it. The observations held out of the fit
-/// count as observed: they are the input's.
+/// other one filled by doma's fill ([`crate::gaps::blend`]): the fitted field from the
+/// track's canonical position plus the track's own residual carried across the gap, blended
+/// with the baselines by weights validated on this data. The observations held out of the
+/// fit count as observed: they are the input's.
 ///
 /// A `.npz` holds `tracks` (`f32 [T, N, 3]`) and `observed` (`bool [T, N]`, the input's
 /// mask), plus `kept` (`i64 [N]`, the input's index of each track) when the fit dropped
@@ -114,6 +116,7 @@ pub fn complete_run(
         tracks: n,
         observed,
         filled: t * n - observed,
+        blend: done.blend,
     })
 }
 
@@ -133,11 +136,12 @@ pub struct CompletedTracks {
     pub kept: Option<Vec<usize>>,
     /// The input's frame of each of the clip's frames.
     pub source_frames: Vec<usize>,
+    /// The weights of the fill ([`crate::gaps::blend`]).
+    pub blend: Blend,
 }
 
 /// The completion that [`complete_run`] writes, in memory: every track of the run in `run`
-/// at every frame of its clip, gaps filled by the field plus the track's carried residual
-/// ([`crate::gaps::carry_residuals`]).
+/// at every frame of its clip, gaps filled by doma's fill ([`crate::gaps::blend`]).
 pub fn complete_tracks(run: &RunDir, device: &Device) -> Result<CompletedTracks> {
     let config = run.load_config()?;
     complete_with(run, &config, None, device)
@@ -193,7 +197,7 @@ fn complete_with(
         .map(|(e, &v)| (v - c[e % 3]) / s)
         .collect();
     let predicted = field_everywhere(&field, data, device)?;
-    let filled = carry_residuals(t, n, &normalised, seen, &predicted);
+    let (filled, blend) = blended_fill(t, n, &normalised, seen, &predicted, config.fit.seed);
     // Observed entries exactly as the input holds them; filled ones back in its units.
     let tracks: Vec<f32> = input
         .positions()
@@ -214,6 +218,7 @@ fn complete_with(
         observed: seen.to_vec(),
         kept: sequence.kept.clone(),
         source_frames: frame_range.step_by(stride).collect(),
+        blend,
     })
 }
 

@@ -11,6 +11,7 @@ use crate::data::mesh::as_points;
 use crate::data::sequence::{LoadOptions, Sequence, load_sequence_with};
 use crate::field::MotionField;
 use crate::gaps::baselines::Marked;
+use crate::gaps::blend::blended_fill;
 use crate::gaps::carry_residuals;
 use crate::io::load_json;
 use crate::metrics::{EPE_SCALE, field_epe_per_frame, mean_over_frames};
@@ -76,9 +77,10 @@ pub fn gap_report(
         return Ok(None);
     }
     let (t, n) = (given.frames(), given.points());
+    let positions = given.positions();
     let all_seen = vec![true; t * n];
     let observed = given.observed().unwrap_or(&all_seen);
-    let marked = Marked::new(t, n, given.positions(), observed);
+    let marked = Marked::new(t, n, positions, observed);
     let predicted = field_everywhere(field, &train, device)?;
     let at = |filled: &[f32]| -> Vec<[f32; 3]> {
         entries
@@ -89,16 +91,12 @@ pub fn gap_report(
             })
             .collect()
     };
-    let doma = at(&carry_residuals(
-        t,
-        n,
-        given.positions(),
-        observed,
-        &predicted,
-    ));
+    let (filled, blend) = blended_fill(t, n, positions, observed, &predicted, config.fit.seed);
+    let doma = at(&filled);
     let methods = [
         doma,
         at(&predicted),
+        at(&carry_residuals(t, n, positions, observed, &predicted)),
         at(&marked.linear()),
         at(&marked.spline()),
         marked.neighbours(&entries),
@@ -118,10 +116,11 @@ pub fn gap_report(
         GapErrors {
             doma: e[0],
             field: e[1],
-            linear: e[2],
-            spline: e[3],
-            neighbours: e[4],
-            low_rank: e[5],
+            carried: Some(e[2]),
+            linear: e[3],
+            spline: e[4],
+            neighbours: e[5],
+            low_rank: e[6],
         }
     };
     let l1 = |a: &[f32; 3], b: &[f32; 3]| {
@@ -137,6 +136,7 @@ pub fn gap_report(
     };
     Ok(Some(GapReport {
         entries: entries.len(),
+        blend: Some(blend),
         epe_x1e4: errors(&l1),
         distance: errors(&euclid),
     }))

@@ -294,14 +294,19 @@ pub struct Report {
 }
 
 /// Gap filling (`--holdout-observations`): on the observations of the fitted tracks that
-/// the fit did not see, the error of doma's fill ([`crate::gaps::carry_residuals`]: the
-/// field plus each track's residual carried across the gap), of the field alone, and of the
+/// the fit did not see, the error of doma's fill ([`crate::gaps::blend`]: the field plus
+/// each track's residual carried across the gap, blended with the baselines by validated
+/// weights), of the field alone, and of the
 /// baselines ([`crate::gaps::baselines::Marked`]) on the same entries from the same
 /// observations.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct GapReport {
     /// The hidden observations of the fitted tracks.
     pub entries: usize,
+    /// The weights of doma's fill, learned on observations of the rest (absent in reports
+    /// written before the blend).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub blend: Option<crate::gaps::blend::Blend>,
     /// The EPE × 10⁴ (the L1 distance summed over x, y, z, averaged over the entries, in
     /// the normalised coordinates of the fit).
     pub epe_x1e4: GapErrors,
@@ -313,10 +318,14 @@ pub struct GapReport {
 /// One error per gap filler, on the same entries.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 pub struct GapErrors {
-    /// doma's fill: the field plus the carried residual (what `doma complete` writes).
+    /// doma's fill (what `doma complete` writes, [`crate::gaps::blend`]).
     pub doma: f64,
     /// The fitted field alone, from each track's canonical position.
     pub field: f64,
+    /// The field's carried fill alone ([`crate::gaps::carry_residuals`]), one of the
+    /// fillers doma's fill blends (absent in reports written before the blend).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub carried: Option<f64>,
     /// Each track's linear interpolation.
     pub linear: f64,
     /// Each track's natural cubic spline.
