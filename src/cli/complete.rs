@@ -44,20 +44,20 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
     let b = &c.blend;
     for (k, name) in ["short", "long"].iter().enumerate() {
         let w = if k == 0 { &b.short } else { &b.long };
-        eprintln!(
-            "  {name} gaps ({} validation entries{}): field with carried residual {:.2}, \
-             spline {:.2}, neighbours {:.2}, low rank {:.2}, linear {:.2}",
-            b.validated[k],
-            if b.cross_fitted[k] {
-                ""
+        let count = b.validated[k];
+        if count == 0 || !b.cross_fitted[k] {
+            let why = if count == 0 {
+                "nothing to validate".to_string()
             } else {
-                "; the blend did not beat the field's fill"
-            },
-            w.carried,
-            w.spline,
-            w.neighbours,
-            w.low_rank,
-            w.linear
+                format!("no blend beat it on {count} validation entries")
+            };
+            eprintln!("  {name} gaps: the field with the carried residual ({why})");
+            continue;
+        }
+        eprintln!(
+            "  {name} gaps (weights from {count} validation entries): field with carried \
+             residual {:.2}, spline {:.2}, neighbours {:.2}, low rank {:.2}, linear {:.2}",
+            w.carried, w.spline, w.neighbours, w.low_rank, w.linear
         );
     }
     Ok(())
