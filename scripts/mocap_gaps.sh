@@ -34,18 +34,20 @@ done
 python3 - "$seeds" <<'PY'
 import json, sys
 seeds = sys.argv[1].split()
-cols = ["doma", "field", "linear", "spline", "neighbours", "low_rank"]
+cols = ["doma", "carried", "field", "linear", "spline", "neighbours", "low_rank"]
+base = ["linear", "spline", "neighbours", "low_rank"]
 fmt = lambda v: f"{v:.1f}" if v >= 10 else f"{v:.2f}"
-print("| recording | gaps | hidden | " + " | ".join(cols) + " | doma / best baseline | per seed |")
-print("|---" * (5 + len(cols)) + "|")
+print("| recording | gaps | hidden | " + " | ".join(cols) + " | doma / best baseline | per seed | blend used (short, long) |")
+print("|---" * (6 + len(cols)) + "|")
 for name in ["85_12", "Qualisys", "right_knee", "codamotion_gaitwands_20150204", "Walking_Hybrid_1_5"]:
     for span, label in [("2-8", "short"), ("10-30", "long")]:
         gs = [json.load(open(f"results/mocap/{name}_{span}_{s}.json"))["held_out_observations"] for s in seeds]
         mm = [{c: 1000 * g["distance"][c] for c in cols} for g in gs]
         mean = {c: sum(m[c] for m in mm) / len(mm) for c in cols}
-        best = min(mean[c] for c in ["linear", "spline", "neighbours", "low_rank"])
-        per = [m["doma"] / min(m[c] for c in ["linear", "spline", "neighbours", "low_rank"]) for m in mm]
+        best = min(mean[c] for c in base)
+        per = [m["doma"] / min(m[c] for c in base) for m in mm]
+        used = "; ".join(f"{sum(g['blend']['cross_fitted'][k] for g in gs)}/{len(gs)}" for k in range(2))
         n = sum(g["entries"] for g in gs) // len(gs)
         print(f"| `{name}` | {label} | {n} | " + " | ".join(fmt(mean[c]) for c in cols)
-              + f" | {mean['doma'] / best:.2f} | " + ", ".join(f"{p:.2f}" for p in per) + " |")
+              + f" | {mean['doma'] / best:.2f} | " + ", ".join(f"{p:.2f}" for p in per) + f" | {used} |")
 PY
