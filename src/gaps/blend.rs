@@ -17,6 +17,9 @@
 //! the answer; that favours the carried fill. The field alone is not blended for that
 //! reason: judged on entries it was fitted to, it looks far better than inside a gap.
 
+// Index loops over 5 × 5 matrices and KKT systems read as the algebra they implement.
+#![allow(clippy::needless_range_loop)]
+
 use super::baselines::Marked;
 use super::{SPLINE_CARRY_FRAMES, borders, carry_residuals};
 use crate::data::tracks::validation_spans;
