@@ -34,8 +34,22 @@ pub const VALIDATION_FOLDS: usize = 3;
 /// The fillers blended, in the order of [`Weights`].
 pub const FILLERS: [&str; M] = ["carried", "spline", "neighbours", "low_rank", "linear"];
 
-/// The number of fillers.
-const M: usize = 5;
+/// Each filler's index in [`FILLERS`] and in [`FillsAt::fillers`].
+pub mod at {
+    /// The field with the carried residual.
+    pub const CARRIED: usize = 0;
+    /// The spline.
+    pub const SPLINE: usize = 1;
+    /// The neighbours' motion (computed per entry, not per array).
+    pub const NEIGHBOURS: usize = 2;
+    /// The low-rank fill.
+    pub const LOW_RANK: usize = 3;
+    /// The linear fill.
+    pub const LINEAR: usize = 4;
+}
+
+/// The number of fillers ([`FILLERS`]).
+pub const M: usize = 5;
 
 /// The weight of each filler, non-negative, summing to 1.
 #[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq)]
@@ -127,17 +141,65 @@ pub fn blended_fill(
     }
     let candidates = Candidates::new(t, n, positions, observed, predicted, &entries);
     for (row, &(k, i, long)) in entries.iter().enumerate() {
-        let w = if long { blend.long } else { blend.short }.as_array();
-        let p = candidates.at(row);
         let e = 3 * (k * n + i);
-        for c in 0..3 {
-            out[e + c] = (0..M)
-                .filter(|&m| w[m] > 0.0)
-                .map(|m| w[m] * p[m][c] as f64)
-                .sum::<f64>() as f32;
-        }
+        out[e..e + 3].copy_from_slice(&blend.combine(long, &candidates.at(row)));
     }
     (out, blend)
+}
+
+/// doma's fill and every filler's value at `entries` `(frame, point)`, gaps of `observed`:
+/// what [`blended_fill`] gives there, without filling the other gaps. For measuring a fill
+/// on held-out entries beside its parts.
+pub struct FillsAt {
+    /// The weights, as [`blended_fill`] learns them.
+    pub blend: Blend,
+    /// doma's fill at each entry.
+    pub doma: Vec<[f32; 3]>,
+    /// Each filler's value at each entry, in the order of [`FILLERS`].
+    pub fillers: Vec<[[f32; 3]; M]>,
+}
+
+/// [`FillsAt`] of the same arguments as [`blended_fill`] and the entries to measure.
+pub fn fills_at(
+    frames: usize,
+    points: usize,
+    positions: &[f32],
+    observed: &[bool],
+    predicted: &[f32],
+    seed: u64,
+    entries: &[(usize, usize)],
+) -> FillsAt {
+    let (t, n) = (frames, points);
+    let classes = gap_classes(t, n, observed);
+    let blend = learn(t, n, positions, observed, predicted, seed);
+    let entries: Vec<(usize, usize, bool)> = entries
+        .iter()
+        .map(|&(k, i)| (k, i, classes[k * n + i] == Some(true)))
+        .collect();
+    let candidates = Candidates::new(t, n, positions, observed, predicted, &entries);
+    let doma = entries
+        .iter()
+        .enumerate()
+        .map(|(row, &(_, _, long))| blend.combine(long, &candidates.at(row)))
+        .collect();
+    FillsAt {
+        blend,
+        doma,
+        fillers: candidates.values,
+    }
+}
+
+impl Blend {
+    /// The blend of one entry's filler values `p` by the weights of its class.
+    fn combine(&self, long: bool, p: &[[f32; 3]; M]) -> [f32; 3] {
+        let w = if long { self.long } else { self.short }.as_array();
+        std::array::from_fn(|c| {
+            (0..M)
+                .filter(|&m| w[m] > 0.0)
+                .map(|m| w[m] * p[m][c] as f64)
+                .sum::<f64>() as f32
+        })
+    }
 }
 
 /// For each entry `[T, N]`: `None` if observed or of a track never observed, else whether
@@ -373,9 +435,6 @@ fn solve(mut a: Vec<Vec<f64>>) -> Option<Vec<f64>> {
     Some((0..m).map(|r| a[r][m] / a[r][r]).collect())
 }
 
-/// The index of the neighbours' motion in [`FILLERS`]: computed per entry, not per array.
-const NEIGHBOURS_AT: usize = 2;
-
 /// Every filler's value at a list of entries, filled from the observations in `observed`.
 struct Candidates {
     /// Per entry, the fillers' points in the order of [`FILLERS`].
@@ -407,7 +466,7 @@ impl Candidates {
             .map(|(&(k, i, _), nb)| {
                 let e = 3 * (k * n + i);
                 std::array::from_fn(|m| {
-                    if m == NEIGHBOURS_AT {
+                    if m == at::NEIGHBOURS {
                         nb
                     } else {
                         [whole[m][e], whole[m][e + 1], whole[m][e + 2]]

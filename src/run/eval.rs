@@ -10,9 +10,7 @@ use crate::data::layout::TrackFile;
 use crate::data::mesh::as_points;
 use crate::data::sequence::{LoadOptions, Sequence, load_sequence_with};
 use crate::field::MotionField;
-use crate::gaps::baselines::Marked;
-use crate::gaps::blend::blended_fill;
-use crate::gaps::carry_residuals;
+use crate::gaps::blend::{self, fills_at};
 use crate::io::load_json;
 use crate::metrics::{EPE_SCALE, field_epe_per_frame, mean_over_frames};
 use crate::train::IterationRecord;
@@ -80,7 +78,6 @@ pub fn gap_report(
     let positions = given.positions();
     let all_seen = vec![true; t * n];
     let observed = given.observed().unwrap_or(&all_seen);
-    let marked = Marked::new(t, n, positions, observed);
     let predicted = field_everywhere(field, &train, device)?;
     let at = |filled: &[f32]| -> Vec<[f32; 3]> {
         entries
@@ -91,17 +88,27 @@ pub fn gap_report(
             })
             .collect()
     };
-    let (filled, blend) = blended_fill(t, n, positions, observed, &predicted, config.fit.seed);
-    let doma = at(&filled);
+    // doma's fill and its fillers (the carried fill and the baselines) at the same entries.
+    let fills = fills_at(
+        t,
+        n,
+        positions,
+        observed,
+        &predicted,
+        config.fit.seed,
+        &entries,
+    );
+    let filler = |m: usize| -> Vec<[f32; 3]> { fills.fillers.iter().map(|p| p[m]).collect() };
     let methods = [
-        doma,
+        fills.doma.clone(),
         at(&predicted),
-        at(&carry_residuals(t, n, positions, observed, &predicted)),
-        at(&marked.linear()),
-        at(&marked.spline()),
-        marked.neighbours(&entries),
-        at(&marked.low_rank()),
+        filler(blend::at::CARRIED),
+        filler(blend::at::LINEAR),
+        filler(blend::at::SPLINE),
+        filler(blend::at::NEIGHBOURS),
+        filler(blend::at::LOW_RANK),
     ];
+    let blend = fills.blend;
     let errors = |metric: &dyn Fn(&[f32; 3], &[f32; 3]) -> f64| {
         let e: Vec<f64> = methods
             .iter()
