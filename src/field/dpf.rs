@@ -67,7 +67,9 @@ impl DpfConfig {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let nets = (0..self.frames)
             .map(|_| {
-                let layers = SirenInitializer::new(omega).init(&siren, &mut rng);
+                let layers = SirenInitializer::new(omega)
+                    .with_scale(self.shape.scale())
+                    .init(&siren, &mut rng);
                 Siren::from_weights(&layers, omega, device)
             })
             .collect();

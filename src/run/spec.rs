@@ -107,6 +107,12 @@ pub struct RunSpec {
     #[arg(long, value_name = "LR", value_parser = positive)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub learning_rate: Option<f64>,
+    /// The initialisation's weight scale α: every SIREN weight but the output layer's is
+    /// drawn α times wider (default 1, the authors' initialisation; docs/speed.md, "Time
+    /// to accuracy").
+    #[arg(long, value_name = "ALPHA", value_parser = positive)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub init_scale: Option<f64>,
     /// The weight of the smoothness loss L_H (Eq. 13; 0 = off; default 0, or 0.1 for tracks
     /// with gaps), or `auto`: chosen by validation on held-out training points before the
     /// fit (the grid goes into config.json and the plots).
@@ -412,6 +418,18 @@ impl RunSpec {
                 fit.model = ModelConfig::Dpf(DpfConfig::new(frames()?).with_shape(shape));
             }
             None => {}
+        }
+        if let Some(a) = self.init_scale {
+            match &mut fit.model {
+                ModelConfig::Doma(c) => c.shape.init_scale = Some(a),
+                ModelConfig::Dpf(c) => c.shape.init_scale = Some(a),
+                other => {
+                    return Err(DomaError::InvalidConfig(format!(
+                        "init_scale: the {} model has no SIREN to scale",
+                        other.name()
+                    )));
+                }
+            }
         }
         // After the model (whose variant sets the `L_H` sampling), before the flags.
         let mut fit = RecipeChoice {

@@ -226,6 +226,30 @@ fn a_run_spec_applies_the_recipe_after_the_variant_and_before_the_flags() {
 }
 
 #[test]
+fn init_scale_reaches_the_siren_of_a_doma_or_dpf_fit_and_defaults_to_the_authors() {
+    let fit = |json: &str| {
+        serde_json::from_str::<RunSpec>(json)
+            .unwrap()
+            .fit_config(|| Ok(10))
+    };
+    let shape = |c: &FitConfig| match &c.model {
+        doma::field::model::ModelConfig::Doma(d) => d.shape.clone(),
+        doma::field::model::ModelConfig::Dpf(d) => d.shape.clone(),
+        other => panic!("{other:?}"),
+    };
+    assert_eq!(shape(&fit(r#"{}"#).unwrap()).init_scale, None);
+    for json in [
+        r#"{"model": "se3", "init_scale": 1.5}"#,
+        r#"{"model": "dpf", "init_scale": 1.5}"#,
+    ] {
+        assert_eq!(shape(&fit(json).unwrap()).init_scale, Some(1.5), "{json}");
+    }
+    // Refused where the value cannot be a scale (JSON and Python reach here unparsed).
+    let e = fit(r#"{"init_scale": -2}"#).and_then(|c| c.validate());
+    assert!(e.unwrap_err().to_string().contains("initialisation scale"));
+}
+
+#[test]
 fn a_recipe_file_overlays_the_config_and_refuses_a_field_no_config_has() {
     let dir = common::scratch("doma-recipe-file");
     let base = FitConfig::doma(DomaFieldConfig::new(Variant::Affinity));

@@ -65,6 +65,53 @@ fn every_layer_follows_the_reference_distributions() {
 }
 
 #[test]
+fn a_weight_scale_widens_the_sine_layers_and_leaves_the_output_layer() {
+    let config = SirenConfig::new(12).with_hidden(256);
+    let draw = |scale: f64| {
+        SirenInitializer::new(30.0)
+            .with_scale(scale)
+            .init(&config, &mut ChaCha8Rng::seed_from_u64(7))
+    };
+    let (plain, scaled) = (draw(1.0), draw(2.5));
+    // The same stream, so every sine weight is 2.5 times the authors' (to rounding), and
+    // the output layer and every bias are the authors' draws exactly.
+    for (p, s) in plain[..3].iter().zip(&scaled[..3]) {
+        for (a, b) in p.weight.iter().zip(&s.weight) {
+            // Rounding of `low + (high − low)·u` is relative to the bound, not to the value.
+            assert!((b - 2.5 * a).abs() <= 1e-14, "{a} {b}");
+        }
+        assert_eq!(p.bias, s.bias);
+    }
+    assert_eq!(plain[3], scaled[3]);
+    check_uniform(&scaled[0].weight, 2.5 * 0.25, "scaled first weight");
+    // A scale of 1 is the authors' initialisation bit for bit, through the config too.
+    assert_eq!(
+        plain,
+        SirenInitializer::new(30.0).init(&config, &mut ChaCha8Rng::seed_from_u64(7))
+    );
+    let field = |scale: f64| {
+        DomaFieldConfig::new(Variant::Affinity)
+            .with_init_scale(scale)
+            .init(3, &burn::tensor::Device::flex())
+            .siren
+            .to_weights()
+    };
+    assert_eq!(
+        field(1.0),
+        DomaFieldConfig::new(Variant::Affinity)
+            .init(3, &burn::tensor::Device::flex())
+            .siren
+            .to_weights()
+    );
+    assert_ne!(field(1.0), field(1.5));
+    // A scale that is not a positive number is refused.
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let c = DomaFieldConfig::new(Variant::Affinity).with_init_scale(bad);
+        assert!(c.shape.validate().is_err(), "{bad}");
+    }
+}
+
+#[test]
 fn the_same_seed_gives_the_same_weights() {
     let config = SirenConfig::new(3).with_hidden(16);
     let init = SirenInitializer::new(30.0);
