@@ -461,6 +461,8 @@ def fit(
             tracks with gaps).
         learning_rate: Adam's base learning rate (default 1e-4, the authors'; it wins over
             a recipe's).
+        init_scale: the initialisation's weight scale: every SIREN weight but the output
+            layer's drawn this many times wider (default 1, the authors').
         recipe: ``"paper"`` (the paper's protocol, the default) or ``"fast"`` (1.5 times
             the learning rate with a warm-up and a cosine decay, 256 training points and 64
             L_H samples per step); the other options override it.
