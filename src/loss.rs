@@ -129,6 +129,20 @@ pub fn trajectory_loss(
     }
 }
 
+/// The temporal smoothness loss `L_T`, the time analogue of `L_H` (not in the paper; docs/design.md
+/// §3): the mean over points of `‖(y(x, t−Δ) − 2 y(x, t) + y(x, t+Δ)) / Δ²‖²`, the squared
+/// norm of a central second difference of the warped positions one frame `Δ` apart (`Δ` in
+/// normalised time, so that the weight does not depend on the frame count). A cubic spline
+/// minimises the integral of the same quantity; penalising it keeps a sparse field from
+/// oscillating inside a track's gap. `before`, `at`, `after` are `[N, 3]`.
+pub fn acceleration(before: Tensor<2>, at: Tensor<2>, after: Tensor<2>, delta: f64) -> Tensor<1> {
+    (before - at.mul_scalar(2.0) + after)
+        .div_scalar(delta * delta)
+        .square()
+        .sum_dim(1)
+        .mean()
+}
+
 /// How the smoothness loss `L_H` treats each Jacobian entry (docs/reference.md §4.2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]

@@ -463,6 +463,8 @@ def fit(
             a recipe's).
         init_scale: the initialisation's weight scale: every SIREN weight but the output
             layer's drawn this many times wider (default 1, the authors').
+        t_weight: the weight of the temporal smoothness loss L_T, the squared acceleration
+            of the fitted tracks' paths (default 0: off).
         recipe: ``"paper"`` (the paper's protocol, the default) or ``"fast"`` (1.5 times
             the learning rate with a warm-up and a cosine decay, 256 training points and 64
             L_H samples per step); the other options override it.

@@ -119,6 +119,12 @@ pub struct RunSpec {
     #[arg(long, value_name = "W", allow_negative_numbers = true)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub h_weight: Option<Weight>,
+    /// The weight of the temporal smoothness loss L_T (the squared acceleration of the
+    /// fitted tracks' warped positions, every frame, seen or not; not in the paper; default
+    /// 0 = off).
+    #[arg(long, value_name = "W", value_parser = non_negative)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub t_weight: Option<f64>,
     /// Seed of the weights, the split and the frame order.
     #[arg(long)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -236,6 +242,14 @@ fn positive(s: &str) -> std::result::Result<f64, String> {
     match s.parse::<f64>() {
         Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
         _ => Err(format!("`{s}` is not a finite number above 0")),
+    }
+}
+
+/// A finite number of at least 0.
+fn non_negative(s: &str) -> std::result::Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("`{s}` is not a finite number of at least 0")),
     }
 }
 
@@ -448,6 +462,9 @@ impl RunSpec {
         }
         if let Some(Weight::Fixed(w)) = self.h_weight {
             fit.loss.smoothness_weight = w;
+        }
+        if self.t_weight.is_some() {
+            fit.loss.temporal_weight = self.t_weight;
         }
         if let Some(s) = self.seed {
             fit.seed = s;

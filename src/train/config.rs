@@ -66,6 +66,9 @@ pub struct LossConfig {
     /// The per-coordinate penalty of the trajectory loss: a robust one for tracks with
     /// outliers (`None`: the paper's L1; a config without the field reads as `None`).
     pub data_penalty: Option<DataPenalty>,
+    /// The weight `w_T` of the temporal smoothness loss `L_T` ([`crate::loss::acceleration`];
+    /// not in the paper; `None` or 0: off).
+    pub temporal_weight: Option<f64>,
 }
 
 impl LossConfig {
@@ -74,8 +77,14 @@ impl LossConfig {
         check_weights(&[
             ("smoothness weight", self.smoothness_weight),
             ("elasticity weight", self.elasticity_weight),
+            ("temporal weight", self.temporal_weight()),
         ])?;
         self.penalty().validate().map_err(DomaError::InvalidConfig)
+    }
+
+    /// The weight `w_T` of `L_T` (0 unless one is set).
+    pub fn temporal_weight(&self) -> f64 {
+        self.temporal_weight.unwrap_or(0.0)
     }
 
     /// The trajectory loss's penalty ([`DataPenalty::L1`] unless one is set).

@@ -22,6 +22,9 @@ use crate::field::{MotionField, WarpOutput};
 use crate::jacobian::JacobianMethod;
 use crate::loss;
 
+/// The most tracks that carry `L_T` in a step; a fresh random subset of them beyond it.
+pub const TEMPORAL_POINTS: usize = 1024;
+
 /// The trajectory fit of a [`FitConfig`] on training trajectories.
 pub struct TrajectoryObjective<'a> {
     /// The fitted tracks: all the training tracks, or those not held back.
@@ -158,6 +161,52 @@ impl<'a> TrajectoryObjective<'a> {
         Some((term, warped))
     }
 
+    /// `L_T` at frame `k`, unweighted ([`loss::acceleration`]): at every fitted track's
+    /// canonical position (at most [`TEMPORAL_POINTS`] of them, drawn afresh), observed in
+    /// frame `k` or not, for it is inside a track's gaps that the field needs the prior.
+    /// The three times are centred on `k`, moved inwards at the first and last frames.
+    fn temporal_term<M: MotionField>(
+        &self,
+        field: &M,
+        k: usize,
+        rng: &mut ChaCha8Rng,
+    ) -> Option<Tensor<1>> {
+        let frames = self.data.frames();
+        if frames < 3 {
+            return None;
+        }
+        let centre = k.clamp(1, frames - 2);
+        let delta = self.data.time(centre + 1) - self.data.time(centre);
+        let x0 = match &self.learned {
+            None => self.x0.clone(),
+            Some(l) => l.positions(self.x0.clone()),
+        };
+        let n = self.data.points();
+        let x0 = if n > TEMPORAL_POINTS {
+            let rows = super::rows::step_rows(n, TEMPORAL_POINTS, rng);
+            let rows = Tensor::<1, burn::tensor::Int>::from_data(
+                TensorData::new(rows, [TEMPORAL_POINTS]),
+                &self.ad,
+            );
+            x0.select(0, rows)
+        } else {
+            x0
+        };
+        let method = self.method.as_ref();
+        let at = |j: usize| {
+            field
+                .warp_values(x0.clone(), self.data.time(j), method)
+                .warped
+                .value
+        };
+        Some(loss::acceleration(
+            at(centre - 1),
+            at(centre),
+            at(centre + 1),
+            delta,
+        ))
+    }
+
     /// `L_H` (Eq. 13) at time `t`, unweighted: on the step's own samples, or on the
     /// training points of the data term's warp `fitted`.
     fn smoothness_term<M: MotionField>(
@@ -206,6 +255,16 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
             total = Some(match total {
                 Some(d) => d + h,
                 None => h,
+            });
+        }
+        let w_t = self.loss.temporal_weight();
+        if w_t > 0.0
+            && let Some(l) = self.temporal_term(field, k, rng)
+        {
+            let l = l.mul_scalar(w_t);
+            total = Some(match total {
+                Some(d) => d + l,
+                None => l,
             });
         }
         if w_e > 0.0

@@ -79,6 +79,35 @@ fn the_smoothness_term_is_added_to_the_loss() {
 }
 
 #[test]
+fn the_temporal_term_is_added_to_the_loss_where_there_are_three_frames() {
+    let _g = backward_lock();
+    let (train, _) = small_data();
+    let device = Device::flex();
+    let mut c = config(Variant::Affinity, 2);
+    c.loss.temporal_weight = Some(0.01);
+    let t = fit(&c, &train, &device).unwrap();
+    for r in &t.history {
+        assert!(r.total_loss > r.trajectory_loss, "{r:?}");
+        assert!(r.total_loss.is_finite());
+    }
+    // With two frames there is no second difference: the term is left out.
+    let two = train.select_frames(0..2, 1).unwrap();
+    let r = fit(&c, &two, &device).unwrap();
+    assert_eq!(r.history[0].total_loss, r.history[0].trajectory_loss);
+    // A weight of 0 is the fit without it, bit for bit.
+    c.loss.temporal_weight = Some(0.0);
+    let zero = fit(&c, &train, &device).unwrap();
+    c.loss.temporal_weight = None;
+    let none = fit(&c, &train, &device).unwrap();
+    let losses = |h: &[doma::train::IterationRecord]| -> Vec<(f64, f64)> {
+        h.iter()
+            .map(|r| (r.trajectory_loss, r.total_loss))
+            .collect()
+    };
+    assert_eq!(losses(&zero.history), losses(&none.history));
+}
+
+#[test]
 fn the_same_seed_gives_the_same_fit() {
     let _g = backward_lock();
     let (train, test) = small_data();

@@ -43,6 +43,35 @@ fn trajectory_l1_is_the_mean_over_coordinates() {
 }
 
 #[test]
+fn the_temporal_loss_is_the_mean_squared_second_difference_over_delta_squared() {
+    let d = Device::flex();
+    // Point i follows y = (a_i t², b_i t, 0) with a = (1, 2), b = (5, −3), sampled at
+    // t = 0.3 ∓ 0.1: the second difference is (2 a_i Δ², 0, 0) (the linear part cancels),
+    // so ‖·/Δ²‖² = 4 a_i², and the mean over the two points is (4 + 16) / 2 = 10.
+    let (a, b, delta) = ([1.0, 2.0], [5.0, -3.0], 0.1);
+    let at = |t: f64| {
+        let v = (0..2).flat_map(|i| [a[i] * t * t, b[i] * t, 0.0]).collect();
+        tensor2(v, [2, 3], &d)
+    };
+    let got = scalar(loss::acceleration(
+        at(0.3 - delta),
+        at(0.3),
+        at(0.3 + delta),
+        delta,
+    ));
+    assert!((got - 10.0).abs() < 1e-3, "{got}");
+    // A motion linear in time has none.
+    let linear = |t: f64| tensor2(vec![t, 2.0 * t, -t], [1, 3], &d);
+    let none = scalar(loss::acceleration(
+        linear(0.0),
+        linear(0.5),
+        linear(1.0),
+        0.5,
+    ));
+    assert!(none.abs() < 1e-6, "{none}");
+}
+
+#[test]
 fn smoothness_in_both_forms() {
     let d = Device::flex();
     // [3, P = 2, O = 2]: entries 0.1, 0.2, ..., 1.2.
