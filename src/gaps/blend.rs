@@ -139,12 +139,32 @@ pub fn blended_fill(
     if entries.is_empty() {
         return (out, blend);
     }
-    let candidates = Candidates::new(t, n, positions, observed, predicted, &entries);
-    for (row, &(k, i, long)) in entries.iter().enumerate() {
+    let (fills, _) = blend_at(t, n, positions, observed, predicted, &blend, &entries);
+    for (&(k, i, _), v) in entries.iter().zip(fills) {
         let e = 3 * (k * n + i);
-        out[e..e + 3].copy_from_slice(&blend.combine(long, &candidates.at(row)));
+        out[e..e + 3].copy_from_slice(&v);
     }
     (out, blend)
+}
+
+/// The blend of every filler at `entries` `(frame, point, long)` by `blend`'s weights for
+/// each entry's class, and the fillers' values there.
+fn blend_at(
+    t: usize,
+    n: usize,
+    positions: &[f32],
+    observed: &[bool],
+    predicted: &[f32],
+    blend: &Blend,
+    entries: &[(usize, usize, bool)],
+) -> (Vec<[f32; 3]>, Candidates) {
+    let candidates = Candidates::new(t, n, positions, observed, predicted, entries);
+    let fills = entries
+        .iter()
+        .enumerate()
+        .map(|(row, &(_, _, long))| blend.combine(long, &candidates.at(row)))
+        .collect();
+    (fills, candidates)
 }
 
 /// doma's fill and every filler's value at `entries` `(frame, point)`, gaps of `observed`:
@@ -176,12 +196,7 @@ pub fn fills_at(
         .iter()
         .map(|&(k, i)| (k, i, classes[k * n + i] == Some(true)))
         .collect();
-    let candidates = Candidates::new(t, n, positions, observed, predicted, &entries);
-    let doma = entries
-        .iter()
-        .enumerate()
-        .map(|(row, &(_, _, long))| blend.combine(long, &candidates.at(row)))
-        .collect();
+    let (doma, candidates) = blend_at(t, n, positions, observed, predicted, &blend, &entries);
     FillsAt {
         blend,
         doma,
