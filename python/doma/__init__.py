@@ -302,8 +302,8 @@ class Field:
 
         Returns a :class:`Tracks` in the input's units, frame and track order: ``tracks``
         [T, N, 3] float32 (an observed entry as the input holds it, every other filled by
-        doma's fill: the field plus the track's own residual carried across the gap,
-        blended with the spline, neighbours', low-rank and linear fills by weights learned
+        doma's fill: the field corrected by its nearest tracks' residuals at that frame
+        and by the track's own residual carried across the gap, blended with the spline, neighbours', low-rank and linear fills by weights learned
         on this data's own observations, as ``doma complete`` prints them), ``observed`` the
         input's mask, and ``kept`` the input's index of each track when the fit dropped
         tracks never observed (else None).

@@ -51,12 +51,11 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
             } else {
                 format!("no blend beat it on {count} validation entries")
             };
-            eprintln!("  {name} gaps: the field with the carried residual ({why})");
+            eprintln!("  {name} gaps: the field's fill ({why})");
             continue;
         }
         eprintln!(
-            "  {name} gaps (weights from {count} validation entries): field with carried \
-             residual {:.2}, spline {:.2}, neighbours {:.2}, low rank {:.2}, linear {:.2}",
+            "  {name} gaps (weights from {count} validation entries): field's fill {:.2}, spline {:.2}, neighbours {:.2}, low rank {:.2}, linear {:.2}",
             w.carried, w.spline, w.neighbours, w.low_rank, w.linear
         );
     }

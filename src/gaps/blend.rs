@@ -1,4 +1,4 @@
-//! doma's gap fill: the field's carried-residual fill ([`carry_residuals`]) blended with
+//! doma's gap fill: the field's fill ([`transfer_residuals`]) blended with
 //! the baselines ([`Marked`]), each weighted by how well it fills gaps in this very data.
 //!
 //! No filler wins everywhere. On sparse markers the field's fill beats every baseline in
@@ -21,7 +21,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::baselines::Marked;
-use super::{SPLINE_CARRY_FRAMES, borders, carry_residuals};
+use super::{FieldPrediction, SPLINE_CARRY_FRAMES, borders, transfer_residuals};
 use crate::data::tracks::validation_spans;
 use serde::{Deserialize, Serialize};
 
@@ -54,7 +54,8 @@ pub const M: usize = 5;
 /// The weight of each filler, non-negative, summing to 1.
 #[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq)]
 pub struct Weights {
-    /// The field with the carried residual ([`carry_residuals`]).
+    /// The field's fill: the field corrected by its neighbours' and the track's own
+    /// residuals ([`transfer_residuals`]).
     pub carried: f64,
     /// Each track's natural cubic spline.
     pub spline: f64,
@@ -113,7 +114,7 @@ pub struct Blend {
 }
 
 /// doma's fill of every unobserved entry of `positions` (`[T, N, 3]`, `observed` `[T, N]`)
-/// from the field's prediction `predicted` (`[T, N, 3]`): each gap filled by the blend of
+/// from the field's prediction `field`: each gap filled by the blend of
 /// [`FILLERS`] whose weights did best on validation spans drawn with `seed` (module docs).
 /// Observed entries are returned as observed; a track never observed is left as it is.
 pub fn blended_fill(
@@ -121,25 +122,25 @@ pub fn blended_fill(
     points: usize,
     positions: &[f32],
     observed: &[bool],
-    predicted: &[f32],
+    field: &FieldPrediction,
     seed: u64,
 ) -> (Vec<f32>, Blend) {
     let (t, n) = (frames, points);
     let classes = gap_classes(t, n, observed);
-    let blend = learn(t, n, positions, observed, predicted, seed);
+    let blend = learn(t, n, positions, observed, field, seed);
     // The entries to fill: every gap of a track observed somewhere.
     let entries: Vec<(usize, usize, bool)> = (0..t)
         .flat_map(|k| (0..n).map(move |i| (k, i)))
         .filter_map(|(k, i)| classes[k * n + i].map(|long| (k, i, long)))
         .collect();
     if blend.short == Weights::CARRIED && blend.long == Weights::CARRIED {
-        return (carry_residuals(t, n, positions, observed, predicted), blend);
+        return (transfer_residuals(t, n, positions, observed, field), blend);
     }
     let mut out = positions.to_vec();
     if entries.is_empty() {
         return (out, blend);
     }
-    let (fills, _) = blend_at(t, n, positions, observed, predicted, &blend, &entries);
+    let (fills, _) = blend_at(t, n, positions, observed, field, &blend, &entries);
     for (&(k, i, _), v) in entries.iter().zip(fills) {
         let e = 3 * (k * n + i);
         out[e..e + 3].copy_from_slice(&v);
@@ -154,11 +155,11 @@ fn blend_at(
     n: usize,
     positions: &[f32],
     observed: &[bool],
-    predicted: &[f32],
+    field: &FieldPrediction,
     blend: &Blend,
     entries: &[(usize, usize, bool)],
 ) -> (Vec<[f32; 3]>, Candidates) {
-    let candidates = Candidates::new(t, n, positions, observed, predicted, entries);
+    let candidates = Candidates::new(t, n, positions, observed, field, entries);
     let fills = entries
         .iter()
         .enumerate()
@@ -185,18 +186,18 @@ pub fn fills_at(
     points: usize,
     positions: &[f32],
     observed: &[bool],
-    predicted: &[f32],
+    field: &FieldPrediction,
     seed: u64,
     entries: &[(usize, usize)],
 ) -> FillsAt {
     let (t, n) = (frames, points);
     let classes = gap_classes(t, n, observed);
-    let blend = learn(t, n, positions, observed, predicted, seed);
+    let blend = learn(t, n, positions, observed, field, seed);
     let entries: Vec<(usize, usize, bool)> = entries
         .iter()
         .map(|&(k, i)| (k, i, classes[k * n + i] == Some(true)))
         .collect();
-    let (doma, candidates) = blend_at(t, n, positions, observed, predicted, &blend, &entries);
+    let (doma, candidates) = blend_at(t, n, positions, observed, field, &blend, &entries);
     FillsAt {
         blend,
         doma,
@@ -248,7 +249,7 @@ fn learn(
     n: usize,
     positions: &[f32],
     observed: &[bool],
-    predicted: &[f32],
+    field: &FieldPrediction,
     seed: u64,
 ) -> Blend {
     let carried_only = Blend {
@@ -284,7 +285,7 @@ fn learn(
             n,
             positions,
             &left,
-            predicted,
+            field,
             &entries,
             &mut gram,
             &mut counts,
@@ -357,12 +358,12 @@ fn accumulate(
     n: usize,
     positions: &[f32],
     left: &[bool],
-    predicted: &[f32],
+    field: &FieldPrediction,
     entries: &[(usize, usize, bool)],
     gram: &mut [[[f64; M]; M]; 2],
     counts: &mut [usize; 2],
 ) {
-    let candidates = Candidates::new(t, n, positions, left, predicted, entries);
+    let candidates = Candidates::new(t, n, positions, left, field, entries);
     for (row, &(k, i, long)) in entries.iter().enumerate() {
         let p = candidates.at(row);
         let e = 3 * (k * n + i);
@@ -462,12 +463,12 @@ impl Candidates {
         n: usize,
         positions: &[f32],
         observed: &[bool],
-        predicted: &[f32],
+        field: &FieldPrediction,
         entries: &[(usize, usize, bool)],
     ) -> Self {
         let marked = Marked::new(t, n, positions, observed);
         let whole = [
-            carry_residuals(t, n, positions, observed, predicted),
+            transfer_residuals(t, n, positions, observed, field),
             marked.spline(),
             Vec::new(),
             marked.low_rank(),
@@ -557,10 +558,12 @@ mod tests {
             observed[i] = true;
             observed[(t - 1) * n + i] = true;
         }
-        let (filled, blend) = blended_fill(t, n, &truth, &observed, &predicted, 3);
+        let canonical: Vec<f32> = (0..3 * n).map(|v| v as f32).collect();
+        let field = FieldPrediction::new(n, &predicted, &canonical, &observed);
+        let (filled, blend) = blended_fill(t, n, &truth, &observed, &field, 3);
         assert_eq!(blend.short, Weights::CARRIED);
         assert_eq!(blend.validated, [0, 0]);
-        assert_eq!(filled, carry_residuals(t, n, &truth, &observed, &predicted));
+        assert_eq!(filled, transfer_residuals(t, n, &truth, &observed, &field));
     }
 
     #[test]
@@ -586,8 +589,9 @@ mod tests {
     fn a_jittering_translation_with_a_wrong_field_is_filled_by_the_neighbours() {
         // 20 tracks of a grid that translates by an irregular jump every frame (a camera
         // shake: no spline follows it), over 30 frames; each track has a gap of 4 frames.
-        // The "field" is garbage (zeros), so its fill is the spline's: the blend must move
-        // its weight to the neighbours' motion, which is exact here.
+        // The "field" is garbage (zeros) and lends no track a neighbour's residual, so its
+        // fill is the spline's: the blend must move its weight to the neighbours' motion,
+        // which is exact here.
         let (t, n) = (30usize, 20usize);
         let jump = |k: usize| {
             let k = k as f32;
@@ -613,7 +617,11 @@ mod tests {
             }
         }
         let predicted = vec![0f32; 3 * t * n];
-        let (filled, blend) = blended_fill(t, n, &truth, &observed, &predicted, 7);
+        let field = FieldPrediction {
+            predicted: &predicted,
+            neighbours: vec![Vec::new(); n],
+        };
+        let (filled, blend) = blended_fill(t, n, &truth, &observed, &field, 7);
         assert!(blend.validated[0] > 0 && blend.cross_fitted[0], "{blend:?}");
         assert!(blend.short.neighbours > 0.95, "{blend:?}");
         let total: f64 = blend.short.as_array().iter().sum();
@@ -655,7 +663,8 @@ mod tests {
                 observed[(k + i) * n + i] = false;
             }
         }
-        let (filled, blend) = blended_fill(t, n, &truth, &observed, &truth, 1);
+        let field = FieldPrediction::new(n, &truth, &truth[..3 * n], &observed);
+        let (filled, blend) = blended_fill(t, n, &truth, &observed, &field, 1);
         assert_eq!(blend.short, Weights::CARRIED, "{blend:?}");
         for (a, b) in filled.iter().zip(&truth) {
             assert!((a - b).abs() < 1e-5);
@@ -667,7 +676,8 @@ mod tests {
         let (t, n) = (4usize, 2usize);
         let positions: Vec<f32> = (0..3 * t * n).map(|v| v as f32).collect();
         let observed = vec![true; t * n];
-        let (filled, blend) = blended_fill(t, n, &positions, &observed, &positions, 0);
+        let field = FieldPrediction::new(n, &positions, &positions[..3 * n], &observed);
+        let (filled, blend) = blended_fill(t, n, &positions, &observed, &field, 0);
         assert_eq!(filled, positions);
         assert_eq!(blend.validated, [0, 0]);
     }

@@ -6,14 +6,19 @@
 //! a track that is observed somewhere filled (a track never observed is left as it is). Only
 //! observed entries are read, so what an unobserved entry holds (NaN, zeros) never matters.
 //!
-//! The field's fill ([`carry_residuals`]) is the field's prediction plus each track's own
-//! residual carried across the gap: the field knows how the track's neighbourhood moves, the
-//! residual keeps the track's own offset from it, so the fill meets the observations on both
-//! sides of a gap. doma's fill ([`blend`], what `doma complete` writes) blends it with the
-//! baselines by weights validated on the data's own observations (docs/design.md §7).
+//! The field's fill ([`transfer_residuals`]) is the field's prediction corrected twice: by
+//! the residual (observation − prediction) of the track's nearest tracks at that very frame,
+//! and by the track's own remaining residual carried across the gap ([`carry_residuals`]).
+//! The field knows how the track's neighbourhood moves; its error is shared by nearby tracks
+//! at a frame, and what is left of it is the track's own offset, so the fill meets the
+//! observations on both sides of a gap. doma's fill ([`blend`], what `doma complete` writes)
+//! blends it with the baselines by weights validated on the data's own observations
+//! (docs/design.md §7).
 
 pub mod baselines;
 pub mod blend;
+
+use crate::knn::PointTree;
 
 /// The runs of a track's observed frames: for each frame, the nearest observed frame at or
 /// before it and at or after it (`None` past the ends).
@@ -89,6 +94,109 @@ pub fn carry_residuals(
         }
     }
     out
+}
+
+/// How many tracks, nearest by canonical position, lend a track their residual in
+/// [`transfer_residuals`]. Chosen among 1, 2, 3, 4 and 8 on five marker recordings
+/// (docs/results.md, real markers): every choice beat the residual carried alone in all ten
+/// file and gap-length pairs, 1 won where a marker's nearest one rides the same bone and 4
+/// or more where a marker is far from its neighbours; 2 was within 10 % of the best
+/// everywhere.
+pub const RESIDUAL_NEIGHBOURS: usize = 2;
+
+/// The fitted field's prediction of a set of tracks, with what its fill needs besides: each
+/// track's nearest tracks by canonical position.
+pub struct FieldPrediction<'a> {
+    /// The field at every frame and track, `[T, N, 3]`.
+    pub predicted: &'a [f32],
+    /// For each track, the [`RESIDUAL_NEIGHBOURS`] other tracks nearest to it in the
+    /// canonical frame, among those observed somewhere, closest first.
+    pub neighbours: Vec<Vec<usize>>,
+}
+
+impl<'a> FieldPrediction<'a> {
+    /// `predicted` (`[T, N, 3]`) and the neighbours by `canonical` (`[N, 3]`, the positions
+    /// the field was evaluated from) among the tracks observed somewhere in `observed`
+    /// (`[T, N]`). A track whose canonical position is not finite has no neighbour and lends
+    /// none.
+    pub fn new(points: usize, predicted: &'a [f32], canonical: &[f32], observed: &[bool]) -> Self {
+        let n = points;
+        debug_assert_eq!(canonical.len(), 3 * n);
+        let frames = observed.len().checked_div(n).unwrap_or(0);
+        let at = |i: usize| [canonical[3 * i], canonical[3 * i + 1], canonical[3 * i + 2]];
+        let finite = |i: usize| at(i).iter().all(|v| v.is_finite());
+        let lenders: Vec<usize> = (0..n)
+            .filter(|&i| finite(i) && (0..frames).any(|k| observed[k * n + i]))
+            .collect();
+        let cloud: Vec<[f32; 3]> = lenders.iter().map(|&i| at(i)).collect();
+        let neighbours = match PointTree::new(&cloud) {
+            Ok(tree) if !cloud.is_empty() => (0..n)
+                .map(|i| {
+                    if !finite(i) {
+                        return Vec::new();
+                    }
+                    let want = (RESIDUAL_NEIGHBOURS + 1).min(cloud.len());
+                    tree.nearest_k(&at(i), want)
+                        .into_iter()
+                        .map(|r| lenders[r])
+                        .filter(|&j| j != i)
+                        .take(RESIDUAL_NEIGHBOURS)
+                        .collect()
+                })
+                .collect(),
+            _ => vec![Vec::new(); n],
+        };
+        FieldPrediction {
+            predicted,
+            neighbours,
+        }
+    }
+}
+
+/// The field's gap fill: in every gap of a track, the field's prediction plus the mean
+/// residual (observation − prediction) of the track's [`FieldPrediction::neighbours`] at
+/// that frame (carried across their own gaps by [`carry_residuals`] where they are not seen
+/// either), plus the track's own residual from that corrected prediction carried across the
+/// gap by [`carry_residuals`]. Observed entries are returned as observed; a track never
+/// observed is left as it is; a track with no neighbour observed anywhere gets the
+/// residual carried alone.
+///
+/// Why: a field fitted to a few tens of markers errs by tens of millimetres, but its error
+/// at a frame is shared by nearby markers (a limb it tracks late, a turn it smooths), so the
+/// neighbours' residual at the gap's own frames corrects what the track's residual, known
+/// only at the gap's borders, cannot (docs/design.md §7).
+pub fn transfer_residuals(
+    frames: usize,
+    points: usize,
+    positions: &[f32],
+    observed: &[bool],
+    field: &FieldPrediction,
+) -> Vec<f32> {
+    let (t, n) = (frames, points);
+    let predicted = field.predicted;
+    let carried = carry_residuals(t, n, positions, observed, predicted);
+    let seen: Vec<bool> = (0..n)
+        .map(|i| (0..t).any(|k| observed[k * n + i]))
+        .collect();
+    let mut guide = predicted.to_vec();
+    for (i, near) in field.neighbours.iter().enumerate() {
+        let lenders: Vec<usize> = near.iter().copied().filter(|&j| seen[j]).collect();
+        if lenders.is_empty() {
+            continue;
+        }
+        for k in 0..t {
+            for c in 0..3 {
+                let e = |j: usize| 3 * (k * n + j) + c;
+                let residual: f64 = lenders
+                    .iter()
+                    .map(|&j| (carried[e(j)] - predicted[e(j)]) as f64)
+                    .sum::<f64>()
+                    / lenders.len() as f64;
+                guide[e(i)] = (predicted[e(i)] as f64 + residual) as f32;
+            }
+        }
+    }
+    carry_residuals(t, n, positions, observed, &guide)
 }
 
 #[cfg(test)]
@@ -204,5 +312,112 @@ mod tests {
         assert_eq!(&filled[0..3], &[0.0, 0.0, 0.0]);
         assert_eq!(&filled[12..15], &[2.0, 2.0, 2.0]);
         assert!(filled[3].is_nan() && filled[17].is_nan());
+    }
+
+    #[test]
+    fn the_neighbours_residual_is_added_before_the_track_s_own_is_carried() {
+        // Three tracks, three frames, a field predicting 0 everywhere. Track 0 is unseen at
+        // frame 1; tracks 1 and 2 are seen everywhere, at x = (0, 2, 0) and (0, 4, 0). By
+        // hand: the guide for track 0 is their mean, (0, 3, 0); track 0's residual from it
+        // is 1 at frame 0 and 3 at frame 2, carried to 2 at frame 1 (the spline through two
+        // points is the line); the fill is 3 + 2 = 5. The residual carried alone gives 2.
+        let (t, n) = (3, 3);
+        let x = [[1.0, 0.0, 0.0], [f32::NAN, 2.0, 4.0], [3.0, 0.0, 0.0]];
+        let positions: Vec<f32> = (0..t)
+            .flat_map(|k| (0..n).flat_map(move |i| [x[k][i], 0.0, 0.0]))
+            .collect();
+        let observed = [true, true, true, false, true, true, true, true, true];
+        let predicted = vec![0f32; 3 * t * n];
+        let canonical = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 2.0, 0.0, 0.0];
+        let field = FieldPrediction::new(n, &predicted, &canonical, &observed);
+        assert_eq!(field.neighbours[0], vec![1, 2]);
+        let filled = transfer_residuals(t, n, &positions, &observed, &field);
+        assert_eq!(&filled[9..12], &[5.0, 0.0, 0.0]);
+        let alone = carry_residuals(t, n, &positions, &observed, &predicted);
+        assert_eq!(&alone[9..12], &[2.0, 0.0, 0.0]);
+        // Observed entries as given.
+        for (e, (a, b)) in filled.iter().zip(&positions).enumerate() {
+            if observed[e / 3] {
+                assert_eq!(a, b);
+            }
+        }
+    }
+
+    #[test]
+    fn a_field_error_shared_by_the_neighbours_is_corrected_inside_the_gap() {
+        // A rigid row of 6 tracks moving along x; the field lags them by a jittering offset
+        // that no interpolation across a gap can follow, the same for every track (a limb it
+        // tracks late). Track 2's gap of 5 frames is filled exactly with the neighbours'
+        // residual, and not by the residual carried alone.
+        let (t, n) = (30, 6);
+        let lag = |k: usize| 0.3 * ((k * k) as f32 * 1.3).sin();
+        let truth: Vec<f32> = (0..t)
+            .flat_map(|k| (0..n).flat_map(move |i| [i as f32 + 0.1 * k as f32, 0.5, 0.0]))
+            .collect();
+        let predicted: Vec<f32> = truth
+            .iter()
+            .enumerate()
+            .map(|(e, &v)| if e % 3 == 0 { v - lag(e / (3 * n)) } else { v })
+            .collect();
+        let mut observed = vec![true; t * n];
+        for k in 10..15 {
+            observed[k * n + 2] = false;
+        }
+        let canonical = &truth[..3 * n];
+        let field = FieldPrediction::new(n, &predicted, canonical, &observed);
+        let filled = transfer_residuals(t, n, &truth, &observed, &field);
+        let alone = carry_residuals(t, n, &truth, &observed, &predicted);
+        let worst = |fill: &[f32]| {
+            (10..15)
+                .map(|k| (fill[3 * (k * n + 2)] - truth[3 * (k * n + 2)]).abs())
+                .fold(0f32, f32::max)
+        };
+        assert!(worst(&filled) < 1e-5, "{}", worst(&filled));
+        assert!(worst(&alone) > 0.1, "{}", worst(&alone));
+    }
+
+    #[test]
+    fn neighbours_are_the_nearest_other_tracks_seen_somewhere_with_a_finite_position() {
+        // Five tracks on a line at 0, 0.9, 2, 3, 10; track 1 never seen, track 3 at NaN.
+        let (t, n) = (2, 5);
+        let canonical = [
+            0.0,
+            0.0,
+            0.0,
+            0.9,
+            0.0,
+            0.0,
+            2.0,
+            0.0,
+            0.0,
+            f32::NAN,
+            0.0,
+            0.0,
+            10.0,
+            0.0,
+            0.0,
+        ];
+        let mut observed = vec![true; t * n];
+        observed[1] = false;
+        observed[n + 1] = false;
+        let predicted = vec![0f32; 3 * t * n];
+        let field = FieldPrediction::new(n, &predicted, &canonical, &observed);
+        assert_eq!(field.neighbours[0], vec![2, 4]);
+        assert_eq!(field.neighbours[1], vec![0, 2]);
+        assert_eq!(field.neighbours[2], vec![0, 4]);
+        assert!(field.neighbours[3].is_empty());
+        assert_eq!(field.neighbours[4], vec![2, 0]);
+        // With no neighbour the fill is the residual carried alone.
+        let alone = FieldPrediction {
+            predicted: &predicted,
+            neighbours: vec![Vec::new(); n],
+        };
+        let positions: Vec<f32> = (0..3 * t * n).map(|v| v as f32).collect();
+        let mut gappy = observed.clone();
+        gappy[n] = false;
+        assert_eq!(
+            transfer_residuals(t, n, &positions, &gappy, &alone),
+            carry_residuals(t, n, &positions, &gappy, &predicted)
+        );
     }
 }

@@ -10,6 +10,7 @@ use crate::data::layout::TrackFile;
 use crate::data::mesh::as_points;
 use crate::data::sequence::{LoadOptions, Sequence, load_sequence_with};
 use crate::field::MotionField;
+use crate::gaps::FieldPrediction;
 use crate::gaps::blend::{self, fills_at};
 use crate::io::load_json;
 use crate::metrics::{EPE_SCALE, field_epe_per_frame, mean_over_frames};
@@ -88,13 +89,14 @@ pub fn gap_report(
             })
             .collect()
     };
-    // doma's fill and its fillers (the carried fill and the baselines) at the same entries.
+    // doma's fill and its fillers (the field's fill and the baselines) at the same entries.
+    let field_fill = FieldPrediction::new(n, &predicted, train.canonical(), observed);
     let fills = fills_at(
         t,
         n,
         positions,
         observed,
-        &predicted,
+        &field_fill,
         config.fit.seed,
         &entries,
     );

@@ -322,7 +322,7 @@ pub struct GapErrors {
     pub doma: f64,
     /// The fitted field alone, from each track's canonical position.
     pub field: f64,
-    /// The field's carried fill alone ([`crate::gaps::carry_residuals`]), one of the
+    /// The field's fill alone ([`crate::gaps::transfer_residuals`]), one of the
     /// fillers doma's fill blends (absent in reports written before the blend).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub carried: Option<f64>,
