@@ -97,11 +97,12 @@ pub fn carry_residuals(
 }
 
 /// How many tracks, nearest by canonical position, lend a track their residual in
-/// [`transfer_residuals`]. Chosen among 1, 2, 3, 4 and 8 on five marker recordings
+/// [`transfer_residuals`]. Chosen among 1–4 on five marker recordings, seed 0
 /// (docs/results.md, real markers): every choice beat the residual carried alone in all ten
-/// file and gap-length pairs, 1 won where a marker's nearest one rides the same bone and 4
-/// or more where a marker is far from its neighbours; 2 was within 10 % of the best
-/// everywhere.
+/// file and gap-length pairs, and 2 was within 11 % of the best everywhere. The same lenders
+/// at every frame, their residual carried where they are unseen too: lenders chosen frame by
+/// frame among those seen there were worse on the markers (nearby markers' residuals differ
+/// by offsets, which a change of lenders adds as jumps).
 pub const RESIDUAL_NEIGHBOURS: usize = 2;
 
 /// The fitted field's prediction of a set of tracks, with what its fill needs besides: each
