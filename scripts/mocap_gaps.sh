@@ -34,7 +34,7 @@ done
 python3 - "$seeds" <<'PY'
 import json, sys
 seeds = sys.argv[1].split()
-cols = ["doma", "carried", "field", "linear", "spline", "neighbours", "low_rank"]
+cols = ["doma", "carried", "framewise", "field", "linear", "spline", "neighbours", "low_rank"]
 base = ["linear", "spline", "neighbours", "low_rank"]
 fmt = lambda v: f"{v:.1f}" if v >= 10 else f"{v:.2f}"
 print("| recording | gaps | hidden | " + " | ".join(cols) + " | doma / best baseline | per seed | blend used (short, long) |")

@@ -55,8 +55,10 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
             continue;
         }
         eprintln!(
-            "  {name} gaps (weights from {count} validation entries): field's fill {:.2}, spline {:.2}, neighbours {:.2}, low rank {:.2}, linear {:.2}",
-            w.carried, w.spline, w.neighbours, w.low_rank, w.linear
+            "  {name} gaps (weights from {count} validation entries): field's fill {:.2}, \
+             with lenders frame by frame {:.2}, spline {:.2}, neighbours {:.2}, low rank {:.2}, \
+             linear {:.2}",
+            w.carried, w.framewise, w.spline, w.neighbours, w.low_rank, w.linear
         );
     }
     Ok(())

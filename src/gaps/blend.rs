@@ -1,5 +1,6 @@
-//! doma's gap fill: the field's fill ([`transfer_residuals`]) blended with
-//! the baselines ([`Marked`]), each weighted by how well it fills gaps in this very data.
+//! doma's gap fill: the field's fill ([`transfer_residuals`], with fixed lenders and with
+//! lenders chosen frame by frame) blended with the baselines ([`Marked`]), each weighted by
+//! how well it fills gaps in this very data.
 //!
 //! No filler wins everywhere. On sparse markers the field's fill beats every baseline in
 //! most cases, but a cubic spline wins short gaps of a fast, densely sampled motion; on
@@ -17,11 +18,11 @@
 //! the answer; that favours the carried fill. The field alone is not blended for that
 //! reason: judged on entries it was fitted to, it looks far better than inside a gap.
 
-// Index loops over 5 × 5 matrices and KKT systems read as the algebra they implement.
+// Index loops over 6 × 6 matrices and KKT systems read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
 use super::baselines::Marked;
-use super::{FieldPrediction, SPLINE_CARRY_FRAMES, borders, transfer_residuals};
+use super::{FieldPrediction, Lending, SPLINE_CARRY_FRAMES, borders, transfer_residuals};
 use crate::data::tracks::validation_spans;
 use serde::{Deserialize, Serialize};
 
@@ -32,7 +33,14 @@ pub const VALIDATION_FRACTION: f64 = 0.1;
 pub const VALIDATION_FOLDS: usize = 3;
 
 /// The fillers blended, in the order of [`Weights`].
-pub const FILLERS: [&str; M] = ["carried", "spline", "neighbours", "low_rank", "linear"];
+pub const FILLERS: [&str; M] = [
+    "carried",
+    "spline",
+    "neighbours",
+    "low_rank",
+    "linear",
+    "framewise",
+];
 
 /// Each filler's index in [`FILLERS`] and in [`FillsAt::fillers`].
 pub mod at {
@@ -46,10 +54,12 @@ pub mod at {
     pub const LOW_RANK: usize = 3;
     /// The linear fill.
     pub const LINEAR: usize = 4;
+    /// The field's fill with lenders chosen frame by frame.
+    pub const FRAMEWISE: usize = 5;
 }
 
 /// The number of fillers ([`FILLERS`]).
-pub const M: usize = 5;
+pub const M: usize = 6;
 
 /// The weight of each filler, non-negative, summing to 1.
 #[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq)]
@@ -65,6 +75,10 @@ pub struct Weights {
     pub low_rank: f64,
     /// Each track's linear interpolation.
     pub linear: f64,
+    /// The field's fill with its lenders chosen frame by frame among the tracks seen there
+    /// ([`Lending::FrameByFrame`]; absent, so 0, in reports written before it).
+    #[serde(default)]
+    pub framewise: f64,
 }
 
 impl Weights {
@@ -75,6 +89,7 @@ impl Weights {
         neighbours: 0.0,
         low_rank: 0.0,
         linear: 0.0,
+        framewise: 0.0,
     };
 
     fn from_array(w: [f64; M]) -> Self {
@@ -84,6 +99,7 @@ impl Weights {
             neighbours: w[2],
             low_rank: w[3],
             linear: w[4],
+            framewise: w[5],
         }
     }
 
@@ -94,6 +110,7 @@ impl Weights {
             self.neighbours,
             self.low_rank,
             self.linear,
+            self.framewise,
         ]
     }
 }
@@ -134,7 +151,10 @@ pub fn blended_fill(
         .filter_map(|(k, i)| classes[k * n + i].map(|long| (k, i, long)))
         .collect();
     if blend.short == Weights::CARRIED && blend.long == Weights::CARRIED {
-        return (transfer_residuals(t, n, positions, observed, field), blend);
+        return (
+            transfer_residuals(t, n, positions, observed, field, Lending::Fixed),
+            blend,
+        );
     }
     let mut out = positions.to_vec();
     if entries.is_empty() {
@@ -385,7 +405,7 @@ fn accumulate(
 }
 
 /// The weights `w ≥ 0`, `Σ w = 1` that minimise `wᵀ E w`, for `E` the Gram matrix of the
-/// fillers' errors: the exact minimum over every support (2⁵ − 1 of them), each solved
+/// fillers' errors: the exact minimum over every support (2⁶ − 1 of them), each solved
 /// with its equality constraint by the KKT system `[E_S 1; 1ᵀ 0] [w; λ] = [0; 1]`.
 pub(crate) fn simplex_least_squares(e: &[[f64; M]; M]) -> [f64; M] {
     let mut best = ([0f64; M], f64::INFINITY);
@@ -468,11 +488,12 @@ impl Candidates {
     ) -> Self {
         let marked = Marked::new(t, n, positions, observed);
         let whole = [
-            transfer_residuals(t, n, positions, observed, field),
+            transfer_residuals(t, n, positions, observed, field, Lending::Fixed),
             marked.spline(),
             Vec::new(),
             marked.low_rank(),
             marked.linear(),
+            transfer_residuals(t, n, positions, observed, field, Lending::FrameByFrame),
         ];
         let pairs: Vec<(usize, usize)> = entries.iter().map(|&(k, i, _)| (k, i)).collect();
         let neighbours = marked.neighbours(&pairs);
@@ -505,7 +526,7 @@ mod tests {
     #[test]
     fn the_simplex_minimum_matches_hand_solved_cases() {
         // Independent errors of variances 1, 4 and 100: the weights are the inverse
-        // variances, normalised: (1, 1/4, 1/100, 1/100, 1/100) / 1.28.
+        // variances, normalised: (1, 1/4, 1/100, 1/100, 1/100, 1/100) / 1.29.
         let mut e = [[0f64; M]; M];
         e[0][0] = 1.0;
         e[1][1] = 4.0;
@@ -513,7 +534,7 @@ mod tests {
             e[m][m] = 100.0;
         }
         let w = simplex_least_squares(&e);
-        let want = [1.0, 0.25, 0.01, 0.01, 0.01].map(|v| v / 1.28);
+        let want = [1.0, 0.25, 0.01, 0.01, 0.01, 0.01].map(|v| v / 1.29);
         for m in 0..M {
             assert!((w[m] - want[m]).abs() < 1e-12, "{w:?}");
         }
@@ -527,7 +548,7 @@ mod tests {
             e[l][3] = 0.0;
         }
         let w = simplex_least_squares(&e);
-        assert_eq!(w, [0.0, 0.0, 0.0, 1.0, 0.0]);
+        assert_eq!(w, [0.0, 0.0, 0.0, 1.0, 0.0, 0.0]);
         // Perfectly anti-correlated errors cancel: (1, −1) → (0.5, 0.5) with zero error,
         // which a negative weight elsewhere cannot improve on.
         let mut e = [[0f64; M]; M];
@@ -563,7 +584,10 @@ mod tests {
         let (filled, blend) = blended_fill(t, n, &truth, &observed, &field, 3);
         assert_eq!(blend.short, Weights::CARRIED);
         assert_eq!(blend.validated, [0, 0]);
-        assert_eq!(filled, transfer_residuals(t, n, &truth, &observed, &field));
+        assert_eq!(
+            filled,
+            transfer_residuals(t, n, &truth, &observed, &field, Lending::Fixed)
+        );
     }
 
     #[test]

@@ -105,12 +105,30 @@ pub fn carry_residuals(
 /// by offsets, which a change of lenders adds as jumps).
 pub const RESIDUAL_NEIGHBOURS: usize = 2;
 
+/// How many of a track's nearest tracks (by canonical position) may lend it their residual
+/// when the lenders are chosen frame by frame ([`Lending::FrameByFrame`]).
+pub const RESIDUAL_CANDIDATES: usize = 8;
+
+/// Which tracks lend a track their residual in [`transfer_residuals`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Lending {
+    /// The [`RESIDUAL_NEIGHBOURS`] nearest, at every frame: their observation where they
+    /// are seen, their own residual carried across their gap where they are not. Smooth
+    /// across a gap; what sparse markers need.
+    Fixed,
+    /// At each frame, the [`RESIDUAL_NEIGHBOURS`] nearest of the [`RESIDUAL_CANDIDATES`]
+    /// nearest that are seen there (the nearest, carried, where none is). Where nearby tracks
+    /// are occluded together (the far side of a surface), the fixed lenders are unseen
+    /// exactly where the track is, and their carried residual is no better than its own.
+    FrameByFrame,
+}
+
 /// The fitted field's prediction of a set of tracks, with what its fill needs besides: each
 /// track's nearest tracks by canonical position.
 pub struct FieldPrediction<'a> {
     /// The field at every frame and track, `[T, N, 3]`.
     pub predicted: &'a [f32],
-    /// For each track, the [`RESIDUAL_NEIGHBOURS`] other tracks nearest to it in the
+    /// For each track, the [`RESIDUAL_CANDIDATES`] other tracks nearest to it in the
     /// canonical frame, among those observed somewhere, closest first.
     pub neighbours: Vec<Vec<usize>>,
 }
@@ -136,12 +154,12 @@ impl<'a> FieldPrediction<'a> {
                     if !finite(i) {
                         return Vec::new();
                     }
-                    let want = (RESIDUAL_NEIGHBOURS + 1).min(cloud.len());
+                    let want = (RESIDUAL_CANDIDATES + 1).min(cloud.len());
                     tree.nearest_k(&at(i), want)
                         .into_iter()
                         .map(|r| lenders[r])
                         .filter(|&j| j != i)
-                        .take(RESIDUAL_NEIGHBOURS)
+                        .take(RESIDUAL_CANDIDATES)
                         .collect()
                 })
                 .collect(),
@@ -155,10 +173,10 @@ impl<'a> FieldPrediction<'a> {
 }
 
 /// The field's gap fill: in every gap of a track, the field's prediction plus the mean
-/// residual (observation − prediction) of the track's [`FieldPrediction::neighbours`] at
-/// that frame (carried across their own gaps by [`carry_residuals`] where they are not seen
-/// either), plus the track's own residual from that corrected prediction carried across the
-/// gap by [`carry_residuals`]. Observed entries are returned as observed; a track never
+/// residual (observation − prediction) at that frame of the tracks that `lending` picks
+/// among the track's [`FieldPrediction::neighbours`] (carried across their own gaps by
+/// [`carry_residuals`] where they are not seen either), plus the track's own residual from
+/// that corrected prediction carried across the gap by [`carry_residuals`]. Observed entries are returned as observed; a track never
 /// observed is left as it is; a track with no neighbour observed anywhere gets the
 /// residual carried alone.
 ///
@@ -172,6 +190,7 @@ pub fn transfer_residuals(
     positions: &[f32],
     observed: &[bool],
     field: &FieldPrediction,
+    lending: Lending,
 ) -> Vec<f32> {
     let (t, n) = (frames, points);
     let predicted = field.predicted;
@@ -181,11 +200,22 @@ pub fn transfer_residuals(
         .collect();
     let mut guide = predicted.to_vec();
     for (i, near) in field.neighbours.iter().enumerate() {
-        let lenders: Vec<usize> = near.iter().copied().filter(|&j| seen[j]).collect();
-        if lenders.is_empty() {
+        let near: Vec<usize> = near.iter().copied().filter(|&j| seen[j]).collect();
+        if near.is_empty() {
             continue;
         }
+        let fixed: Vec<usize> = near.iter().copied().take(RESIDUAL_NEIGHBOURS).collect();
         for k in 0..t {
+            let now: Vec<usize> = match lending {
+                Lending::Fixed => Vec::new(),
+                Lending::FrameByFrame => near
+                    .iter()
+                    .copied()
+                    .filter(|&j| observed[k * n + j])
+                    .take(RESIDUAL_NEIGHBOURS)
+                    .collect(),
+            };
+            let lenders = if now.is_empty() { &fixed } else { &now };
             for c in 0..3 {
                 let e = |j: usize| 3 * (k * n + j) + c;
                 let residual: f64 = lenders
@@ -332,7 +362,7 @@ mod tests {
         let canonical = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 2.0, 0.0, 0.0];
         let field = FieldPrediction::new(n, &predicted, &canonical, &observed);
         assert_eq!(field.neighbours[0], vec![1, 2]);
-        let filled = transfer_residuals(t, n, &positions, &observed, &field);
+        let filled = transfer_residuals(t, n, &positions, &observed, &field, Lending::Fixed);
         assert_eq!(&filled[9..12], &[5.0, 0.0, 0.0]);
         let alone = carry_residuals(t, n, &positions, &observed, &predicted);
         assert_eq!(&alone[9..12], &[2.0, 0.0, 0.0]);
@@ -351,22 +381,14 @@ mod tests {
         // tracks late). Track 2's gap of 5 frames is filled exactly with the neighbours'
         // residual, and not by the residual carried alone.
         let (t, n) = (30, 6);
-        let lag = |k: usize| 0.3 * ((k * k) as f32 * 1.3).sin();
-        let truth: Vec<f32> = (0..t)
-            .flat_map(|k| (0..n).flat_map(move |i| [i as f32 + 0.1 * k as f32, 0.5, 0.0]))
-            .collect();
-        let predicted: Vec<f32> = truth
-            .iter()
-            .enumerate()
-            .map(|(e, &v)| if e % 3 == 0 { v - lag(e / (3 * n)) } else { v })
-            .collect();
+        let (truth, predicted) = lagging_row(t, n);
         let mut observed = vec![true; t * n];
         for k in 10..15 {
             observed[k * n + 2] = false;
         }
         let canonical = &truth[..3 * n];
         let field = FieldPrediction::new(n, &predicted, canonical, &observed);
-        let filled = transfer_residuals(t, n, &truth, &observed, &field);
+        let filled = transfer_residuals(t, n, &truth, &observed, &field, Lending::Fixed);
         let alone = carry_residuals(t, n, &truth, &observed, &predicted);
         let worst = |fill: &[f32]| {
             (10..15)
@@ -404,7 +426,7 @@ mod tests {
         let predicted = vec![0f32; 3 * t * n];
         let field = FieldPrediction::new(n, &predicted, &canonical, &observed);
         assert_eq!(field.neighbours[0], vec![2, 4]);
-        assert_eq!(field.neighbours[1], vec![0, 2]);
+        assert_eq!(field.neighbours[1], vec![0, 2, 4]);
         assert_eq!(field.neighbours[2], vec![0, 4]);
         assert!(field.neighbours[3].is_empty());
         assert_eq!(field.neighbours[4], vec![2, 0]);
@@ -417,8 +439,51 @@ mod tests {
         let mut gappy = observed.clone();
         gappy[n] = false;
         assert_eq!(
-            transfer_residuals(t, n, &positions, &gappy, &alone),
+            transfer_residuals(t, n, &positions, &gappy, &alone, Lending::Fixed),
             carry_residuals(t, n, &positions, &gappy, &predicted)
         );
+    }
+
+    #[test]
+    fn frame_by_frame_lenders_are_the_nearest_seen_at_that_frame() {
+        // A row of 6 tracks that the field lags by a jittering offset, the same for all.
+        // Track 0 and its two nearest (1, 2) are unseen together at frames 10..15 (the far
+        // side of a surface): the fixed lenders' residual is carried there and misses the
+        // jitter; lenders chosen frame by frame are tracks 3 and 4, seen, and the fill is
+        // exact.
+        let (t, n) = (30, 6);
+        let (truth, predicted) = lagging_row(t, n);
+        let mut observed = vec![true; t * n];
+        for k in 10..15 {
+            for i in 0..3 {
+                observed[k * n + i] = false;
+            }
+        }
+        let field = FieldPrediction::new(n, &predicted, &truth[..3 * n], &observed);
+        assert_eq!(field.neighbours[0], vec![1, 2, 3, 4, 5]);
+        let worst = |fill: &[f32]| {
+            (10..15)
+                .map(|k| (fill[3 * k * n] - truth[3 * k * n]).abs())
+                .fold(0f32, f32::max)
+        };
+        let framewise = transfer_residuals(t, n, &truth, &observed, &field, Lending::FrameByFrame);
+        let fixed = transfer_residuals(t, n, &truth, &observed, &field, Lending::Fixed);
+        assert!(worst(&framewise) < 1e-5, "{}", worst(&framewise));
+        assert!(worst(&fixed) > 0.1, "{}", worst(&fixed));
+    }
+
+    /// A row of `n` tracks moving along x over `t` frames, and a field that lags them by
+    /// a jittering offset in x, the same for every track: `(truth, predicted)`.
+    fn lagging_row(t: usize, n: usize) -> (Vec<f32>, Vec<f32>) {
+        let lag = |k: usize| 0.3 * ((k * k) as f32 * 1.3).sin();
+        let truth: Vec<f32> = (0..t)
+            .flat_map(|k| (0..n).flat_map(move |i| [i as f32 + 0.1 * k as f32, 0.5, 0.0]))
+            .collect();
+        let predicted = truth
+            .iter()
+            .enumerate()
+            .map(|(e, &v)| if e % 3 == 0 { v - lag(e / (3 * n)) } else { v })
+            .collect();
+        (truth, predicted)
     }
 }

@@ -109,6 +109,7 @@ pub fn gap_report(
         filler(blend::at::SPLINE),
         filler(blend::at::NEIGHBOURS),
         filler(blend::at::LOW_RANK),
+        filler(blend::at::FRAMEWISE),
     ];
     let blend = fills.blend;
     let errors = |metric: &dyn Fn(&[f32; 3], &[f32; 3]) -> f64| {
@@ -130,6 +131,7 @@ pub fn gap_report(
             spline: e[4],
             neighbours: e[5],
             low_rank: e[6],
+            framewise: Some(e[7]),
         }
     };
     let l1 = |a: &[f32; 3], b: &[f32; 3]| {

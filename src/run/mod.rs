@@ -326,6 +326,11 @@ pub struct GapErrors {
     /// fillers doma's fill blends (absent in reports written before the blend).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub carried: Option<f64>,
+    /// The field's fill with lenders chosen frame by frame
+    /// ([`crate::gaps::Lending::FrameByFrame`]), the other field's fill doma's fill blends
+    /// (absent in reports written before it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub framewise: Option<f64>,
     /// Each track's linear interpolation.
     pub linear: f64,
     /// Each track's natural cubic spline.

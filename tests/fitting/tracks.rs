@@ -144,7 +144,14 @@ fn held_out_observations_are_reported_beside_every_baseline_and_eval_repeats_the
     let blend = gaps.blend.expect("the fill's weights");
     assert!(blend.validated.iter().sum::<usize>() > 0, "{blend:?}");
     for w in [blend.short, blend.long] {
-        let all = [w.carried, w.spline, w.neighbours, w.low_rank, w.linear];
+        let all = [
+            w.carried,
+            w.spline,
+            w.neighbours,
+            w.low_rank,
+            w.linear,
+            w.framewise,
+        ];
         assert!(all.iter().all(|&v| v >= 0.0), "{blend:?}");
         assert!((all.iter().sum::<f64>() - 1.0).abs() < 1e-9, "{blend:?}");
     }
