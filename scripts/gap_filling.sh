@@ -20,7 +20,7 @@ for name in cdp_male_wave md2_faerie; do
 done
 python3 - <<'PY'
 import json
-cols = ["doma", "carried", "field", "linear", "spline", "neighbours", "low_rank"]
+cols = ["doma", "carried", "framewise", "field", "linear", "spline", "neighbours", "low_rank"]
 print("| sequence | layout | hidden observations | " + " | ".join(cols) + " |")
 print("|---" * (3 + len(cols)) + "|")
 for name in ["cdp_male_wave", "md2_faerie"]:
