@@ -15,14 +15,17 @@
 //! is not used. The real gaps are then filled from every observation (docs/design.md §7).
 //!
 //! The field was fitted to the validation entries, so its fill is judged where it has seen
-//! the answer; that favours the carried fill. The field alone is not blended for that
+//! the answer; that favours the field's fills. The field alone is not blended for that
 //! reason: judged on entries it was fitted to, it looks far better than inside a gap.
 
 // Index loops over 6 × 6 matrices and KKT systems read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
 use super::baselines::Marked;
-use super::{FieldPrediction, Lending, SPLINE_CARRY_FRAMES, borders, transfer_residuals};
+use super::{
+    FieldPrediction, Lending, SPLINE_CARRY_FRAMES, borders, carry_residuals, transfer_carried,
+    transfer_residuals,
+};
 use crate::data::tracks::validation_spans;
 use serde::{Deserialize, Serialize};
 
@@ -487,13 +490,15 @@ impl Candidates {
         entries: &[(usize, usize, bool)],
     ) -> Self {
         let marked = Marked::new(t, n, positions, observed);
+        let carried = carry_residuals(t, n, positions, observed, field.predicted);
+        let lent = |lending| transfer_carried(t, n, positions, observed, field, &carried, lending);
         let whole = [
-            transfer_residuals(t, n, positions, observed, field, Lending::Fixed),
+            lent(Lending::Fixed),
             marked.spline(),
             Vec::new(),
             marked.low_rank(),
             marked.linear(),
-            transfer_residuals(t, n, positions, observed, field, Lending::FrameByFrame),
+            lent(Lending::FrameByFrame),
         ];
         let pairs: Vec<(usize, usize)> = entries.iter().map(|&(k, i, _)| (k, i)).collect();
         let neighbours = marked.neighbours(&pairs);

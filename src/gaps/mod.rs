@@ -176,9 +176,9 @@ impl<'a> FieldPrediction<'a> {
 /// residual (observation − prediction) at that frame of the tracks that `lending` picks
 /// among the track's [`FieldPrediction::neighbours`] (carried across their own gaps by
 /// [`carry_residuals`] where they are not seen either), plus the track's own residual from
-/// that corrected prediction carried across the gap by [`carry_residuals`]. Observed entries are returned as observed; a track never
-/// observed is left as it is; a track with no neighbour observed anywhere gets the
-/// residual carried alone.
+/// that corrected prediction carried across the gap by [`carry_residuals`]. Observed
+/// entries are returned as observed; a track never observed is left as it is; a track with
+/// no neighbour observed anywhere gets the residual carried alone.
 ///
 /// Why: a field fitted to a few tens of markers errs by tens of millimetres, but its error
 /// at a frame is shared by nearby markers (a limb it tracks late, a turn it smooths), so the
@@ -192,30 +192,47 @@ pub fn transfer_residuals(
     field: &FieldPrediction,
     lending: Lending,
 ) -> Vec<f32> {
+    let carried = carry_residuals(frames, points, positions, observed, field.predicted);
+    transfer_carried(
+        frames, points, positions, observed, field, &carried, lending,
+    )
+}
+
+/// [`transfer_residuals`] from `carried`, the [`carry_residuals`] of the same arguments,
+/// so that both kinds of [`Lending`] share it.
+pub(crate) fn transfer_carried(
+    frames: usize,
+    points: usize,
+    positions: &[f32],
+    observed: &[bool],
+    field: &FieldPrediction,
+    carried: &[f32],
+    lending: Lending,
+) -> Vec<f32> {
     let (t, n) = (frames, points);
     let predicted = field.predicted;
-    let carried = carry_residuals(t, n, positions, observed, predicted);
     let seen: Vec<bool> = (0..n)
         .map(|i| (0..t).any(|k| observed[k * n + i]))
         .collect();
     let mut guide = predicted.to_vec();
+    let mut now = Vec::with_capacity(RESIDUAL_NEIGHBOURS);
     for (i, near) in field.neighbours.iter().enumerate() {
         let near: Vec<usize> = near.iter().copied().filter(|&j| seen[j]).collect();
         if near.is_empty() {
             continue;
         }
-        let fixed: Vec<usize> = near.iter().copied().take(RESIDUAL_NEIGHBOURS).collect();
+        let fixed = &near[..near.len().min(RESIDUAL_NEIGHBOURS)];
         for k in 0..t {
-            let now: Vec<usize> = match lending {
-                Lending::Fixed => Vec::new(),
-                Lending::FrameByFrame => near
-                    .iter()
-                    .copied()
-                    .filter(|&j| observed[k * n + j])
-                    .take(RESIDUAL_NEIGHBOURS)
-                    .collect(),
-            };
-            let lenders = if now.is_empty() { &fixed } else { &now };
+            now.clear();
+            if lending == Lending::FrameByFrame {
+                now.extend(
+                    near.iter()
+                        .copied()
+                        .filter(|&j| observed[k * n + j])
+                        .take(RESIDUAL_NEIGHBOURS),
+                );
+            }
+            let lenders = if now.is_empty() { fixed } else { &now[..] };
             for c in 0..3 {
                 let e = |j: usize| 3 * (k * n + j) + c;
                 let residual: f64 = lenders
