@@ -41,6 +41,7 @@ __all__ = [
     "FitProgress",
     "JACOBIANS",
     "RECIPES",
+    "SizeError",
     "Tracks",
     "VARIANTS",
     "fit",
@@ -88,17 +89,26 @@ def _memory_bytes() -> Optional[int]:
         return None
 
 
+class SizeError(ValueError, MemoryError):
+    """A call whose arrays would not fit in this machine's memory, refused before anything
+    is allocated. Both a ``ValueError`` (the arguments' shapes ask for it) and a
+    ``MemoryError`` (what it guards against)."""
+
+
 def _check_size(what: str, count: int, frames: int, per_point: int) -> None:
     """Refuses, before anything is allocated, a call whose float32 input and output
-    (``count`` points, ``per_point`` outputs each at ``frames`` frames) exceed the
-    machine's memory: a stride-0 view of 10⁹ points would otherwise be copied first."""
-    need = 4 * count * (3 + frames * per_point)
+    (``count`` points, ``per_point`` outputs each at ``frames`` frames) and frame times
+    exceed the machine's memory: a stride-0 view of 10⁹ points or frame times costs
+    nothing until it is copied."""
+    # Each frame time is held as a Python float in a list (32 bytes) and twice as an f64
+    # on the Rust side.
+    need = 4 * count * (3 + frames * per_point) + 48 * frames
     have = _memory_bytes()
     if have is not None and need > have:
-        raise MemoryError(
+        raise SizeError(
             f"{what} of {count} points at {frames} frame(s) needs {need / 2**30:.1f} GiB of "
-            f"float32 input and output, more than this machine's {have / 2**30:.1f} GiB: "
-            "call it on chunks of the points"
+            f"float32 input and output and frame times, more than this machine's "
+            f"{have / 2**30:.1f} GiB: call it on chunks of the points or of the frames"
         )
 
 
@@ -111,14 +121,21 @@ def _lower_choices(options: dict[str, Any]) -> dict[str, Any]:
     return {k: v.lower() if k in _CHOICE_ARGUMENTS and isinstance(v, str) else v for k, v in options.items()}
 
 
-def _frames(t: Frames) -> tuple[list[float], bool]:
-    """The frame times of ``t`` (a number, or a 1-D array of them) and whether it was one."""
+def _frames(t: Frames) -> tuple[np.ndarray, bool]:
+    """The frame times of ``t`` (a number, or a 1-D array of them), flat and not copied,
+    and whether it was one number. Sized with :func:`_check_size` before :func:`_times`
+    turns them into a list."""
     array = np.asarray(t)
     if array.dtype.kind not in "iuf":
         raise ValueError(f"t must be a frame index or an array of them, not {array.dtype}")
     if array.ndim > 1:
         raise ValueError(f"t has shape {list(array.shape)}; give a frame index or a 1-D array of them")
-    return [float(v) for v in array.reshape(-1)], array.ndim == 0
+    return array.reshape(-1), array.ndim == 0
+
+
+def _times(frames: np.ndarray) -> list[float]:
+    """The frame times as the list the native calls take."""
+    return [float(v) for v in frames]
 
 
 class FitProgress(NamedTuple):
@@ -217,10 +234,10 @@ class Field:
         if from_frame is not None:
             points = self.to_reference(points, from_frame)
         frames, one = _frames(t)
-        _check_size("warp", _checked_array(points, "points", (None, 3)).shape[0], len(frames), 3)
+        _check_size("warp", _checked_array(points, "points", (None, 3)).shape[0], frames.size, 3)
         x = _float_array(points, "points", (None, 3))
-        out = np.empty((len(frames), x.shape[0], 3), dtype=np.float32)
-        self._native.warp_into(x, frames, out)
+        out = np.empty((frames.size, x.shape[0], 3), dtype=np.float32)
+        self._native.warp_into(x, _times(frames), out)
         return out[0] if one else out
 
     def to_reference(
@@ -238,7 +255,14 @@ class Field:
         steps (where the motion folds space) raises ``ValueError`` naming it. Returns
         [M, 3] float32.
         """
+        frames, one = _frames(frame)
+        if not one:
+            raise ValueError(f"frame must be one frame index, not an array of shape {list(np.shape(frame))}")
+        # The Newton loop holds about 40 numbers a point (the target and the iterate in
+        # float64, residuals, errors, a warp and a Jacobian of the pending points).
+        _check_size("to_reference", _checked_array(points, "points", (None, 3)).shape[0], 1, 40)
         target = _float_array(points, "points", (None, 3))
+        frame = frames[0].item()
         if frame == self.reference_frame:
             return target.copy()
         goal = target.astype(np.float64)
@@ -290,10 +314,10 @@ class Field:
         deformation gradient, ``A`` plus the terms of A's and u's variation (Eq. 6).
         """
         frames, one = _frames(t)
-        _check_size("jacobian", _checked_array(points, "points", (None, 3)).shape[0], len(frames), 9)
+        _check_size("jacobian", _checked_array(points, "points", (None, 3)).shape[0], frames.size, 9)
         x = _float_array(points, "points", (None, 3))
-        out = np.empty((len(frames), x.shape[0], 3, 3), dtype=np.float32)
-        self._native.jacobian_into(x, frames, out)
+        out = np.empty((frames.size, x.shape[0], 3, 3), dtype=np.float32)
+        self._native.jacobian_into(x, _times(frames), out)
         return out[0] if one else out
 
     def complete(self) -> "Tracks":

@@ -144,3 +144,28 @@ def test_a_warp_larger_than_memory_is_refused_before_it_is_copied(fitted):
         fitted.warp(huge, 0)
     with pytest.raises(MemoryError, match="jacobian of 100000000000 points"):
         fitted.jacobian(huge, [0, 1])
+
+
+def test_frame_times_larger_than_memory_are_refused_before_they_are_listed(fitted):
+    # A stride-0 view: 10^9 frame times in 8 bytes, 48 GB once listed and sent to Rust.
+    times = np.lib.stride_tricks.as_strided(np.zeros(1), (10**9,), (0,))
+    point = np.zeros((1, 3), np.float32)
+    for name, call in (("warp", fitted.warp), ("jacobian", fitted.jacobian)):
+        with pytest.raises(ValueError, match=rf"{name} of 1 points at 1000000000 frame\(s\) needs \d+\.\d GiB"):
+            call(point, times)
+    huge = np.lib.stride_tricks.as_strided(np.zeros(3, np.float32), (10**11, 3), (0, 4))
+    with pytest.raises(doma.SizeError, match="to_reference of 100000000000 points at 1 frame"):
+        fitted.to_reference(huge, 3)
+    with pytest.raises(ValueError, match="one frame index"):
+        fitted.to_reference(point, [3, 4])
+
+
+def test_a_reference_frame_where_no_track_is_seen_is_refused_and_leaves_no_folder(clip, tmp_path):
+    observed = np.ones(clip.shape[:2], bool)
+    observed[5] = False
+    with pytest.raises(ValueError, match="reference frame 5: no track is observed there"):
+        doma.fit(clip, observed, reference_frame=5, iters=1, progress=False, out=tmp_path / "run")
+    assert not (tmp_path / "run").exists()
+    # Frame 5 is never the default reference: the fit goes on from the most observed frame.
+    field = doma.fit(clip, observed, iters=1, progress=False)
+    assert field.reference_frame != 5

@@ -63,14 +63,20 @@ def test_ctrl_c_stops_a_fit_with_its_checkpoint_and_no_lock(tmp_path):
     assert out.strip().endswith("iterations 400"), out
 
 
-def test_a_warp_of_two_million_points_holds_no_copy_of_them(tmp_path, fitted):
-    measure = python(
-        """
+#: A child's reader of its own memory figures (VmRSS, VmHWM), in bytes.
+STATUS = """
         import sys, numpy as np, doma
         def status(key):
             for line in open("/proc/self/status"):
                 if line.startswith(key):
                     return int(line.split()[1]) * 1024
+"""
+
+
+def test_a_warp_of_two_million_points_holds_no_copy_of_them(tmp_path, fitted):
+    measure = python(
+        STATUS
+        + """
         field = doma.load(sys.argv[1])
         x = (np.random.default_rng(0).normal(size=(2_000_000, 3)) * 10).astype(np.float32)
         field.warp(x[:20_000], 0)  # the first chunk's buffers and the thread pool
@@ -87,6 +93,34 @@ def test_a_warp_of_two_million_points_holds_no_copy_of_them(tmp_path, fitted):
     growth, output, given = map(int, out.split())
     # The output, plus one chunk's activations (reused), and no copy of the input.
     assert growth < output + given // 2, (growth, output, given)
+
+
+def test_refusing_a_call_larger_than_memory_costs_under_100_mb(fitted):
+    measure = python(
+        STATUS
+        + """
+        field = doma.load(sys.argv[1])
+        point = np.zeros((1, 3), np.float32)
+        field.warp(point, 0)  # the first call's buffers and the thread pool
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        base = status("VmRSS:")
+        times = np.lib.stride_tricks.as_strided(np.zeros(1), (10**9,), (0,))
+        huge = np.lib.stride_tricks.as_strided(np.zeros(3, np.float32), (10**11, 3), (0, 4))
+        for call in (lambda: field.warp(point, times), lambda: field.jacobian(point, times),
+                     lambda: field.warp(huge, 0), lambda: field.to_reference(huge, 3)):
+            try:
+                call()
+                sys.exit("not refused")
+            except doma.SizeError:
+                pass
+        print(status("VmHWM:") - base)
+        """,
+        fitted.run_dir,
+    )
+    out, err = measure.communicate(timeout=300)
+    assert measure.returncode == 0, err
+    assert int(out) < 100 * 2**20, out
 
 
 def run_example(name, out):

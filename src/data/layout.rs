@@ -294,7 +294,7 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
                 i / 16
             )));
         }
-        to_camera(&mut positions, &e, n);
+        to_camera(&mut positions, &e, &observed, n).map_err(malformed)?;
     }
     let tracks = Tracks::new(t, n, positions, observed).map_err(|reason| {
         let hint = if half && reason.contains("inf") {
@@ -313,15 +313,50 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
 }
 
 /// Applies frame `k`'s world-to-camera matrix (`extrinsics[k]`, `[4, 4]` row-major) to
-/// its `n` points: `p_cam = R p + t`.
-fn to_camera(positions: &mut [f32], extrinsics: &[f32], n: usize) {
+/// its `n` points: `p_cam = R p + t`. Refuses an observed point that the matrix takes past
+/// the `f32` range (finite entries can overflow), naming the entry that did: the stored
+/// point is finite, so the tracks are not to blame.
+fn to_camera(
+    positions: &mut [f32],
+    extrinsics: &[f32],
+    observed: &[bool],
+    n: usize,
+) -> std::result::Result<(), String> {
     for (k, frame) in positions.chunks_exact_mut(3 * n).enumerate() {
         let e = &extrinsics[16 * k..16 * (k + 1)];
-        for p in frame.chunks_exact_mut(3) {
-            let q: [f32; 3] = std::array::from_fn(|r| {
-                e[4 * r] * p[0] + e[4 * r + 1] * p[1] + e[4 * r + 2] * p[2] + e[4 * r + 3]
-            });
+        for (i, p) in frame.chunks_exact_mut(3).enumerate() {
+            let term = |r: usize, c: usize| {
+                if c < 3 {
+                    e[4 * r + c] * p[c]
+                } else {
+                    e[4 * r + 3]
+                }
+            };
+            let q: [f32; 3] =
+                std::array::from_fn(|r| term(r, 0) + term(r, 1) + term(r, 2) + term(r, 3));
+            if observed[k * n + i]
+                && p.iter().all(|v| v.is_finite())
+                && let Some(r) = (0..3).find(|&r| !q[r].is_finite())
+            {
+                // The entry whose term overflowed, else (a sum past the range) the largest.
+                let c = (0..4)
+                    .find(|&c| !term(r, c).is_finite())
+                    .unwrap_or_else(|| {
+                        (0..4)
+                            .max_by(|&a, &b| term(r, a).abs().total_cmp(&term(r, b).abs()))
+                            .unwrap_or(0)
+                    });
+                return Err(format!(
+                    "extrinsics[{k}, {r}, {c}] = {:e} takes observed point {i} of frame {k} \
+                     ({:?}, finite) to {:?} in the camera frame, past the float32 range: \
+                     the world-to-camera matrix is not a camera pose",
+                    e[4 * r + c],
+                    [p[0], p[1], p[2]],
+                    q
+                ));
+            }
             p.copy_from_slice(&q);
         }
     }
+    Ok(())
 }

@@ -242,7 +242,7 @@ impl Tracks {
     /// [`Self::most_observed_frame`]) as the module says, the unobserved entries
     /// [`interpolate`]d. Complete tracks with reference 0 give exactly the complete
     /// [`Trajectories`]. Refuses a track that is never observed, with the count and the
-    /// first, and a reference frame past the end.
+    /// first, a reference frame past the end, and one where no track is observed.
     pub fn into_trajectories(self, reference: Option<usize>) -> Result<Trajectories> {
         let never = self.never_observed();
         if let Some(&first) = never.first() {
@@ -258,6 +258,22 @@ impl Tracks {
             return Err(DomaError::InvalidConfig(format!(
                 "reference frame {r} is past the last of the {} frames",
                 self.frames
+            )));
+        }
+        // The canonical positions are the reference frame's observations: with none there,
+        // every track would be placed from other frames and L_H would have no point to
+        // sample, so such a frame is refused rather than fitted.
+        if !self.observed[r * self.points..(r + 1) * self.points].contains(&true) {
+            let best = self.most_observed_frame();
+            let seen = self.observed[best * self.points..(best + 1) * self.points]
+                .iter()
+                .filter(|&&o| o)
+                .count();
+            return Err(DomaError::InvalidConfig(format!(
+                "reference frame {r}: no track is observed there, and the canonical positions \
+                 are read in the reference frame; choose a frame where tracks are seen (frame \
+                 {best}, the default, sees {seen} of the {})",
+                self.points
             )));
         }
         let mut filled = self.positions;
@@ -577,6 +593,22 @@ mod tests {
         // By default the reference is frame 1, where all three are seen.
         let data = tracks.into_trajectories(None).unwrap();
         assert_eq!((data.reference(), data.canonical()), (1, &positions[9..18]));
+    }
+
+    #[test]
+    fn a_reference_frame_where_no_track_is_seen_is_refused_naming_it() {
+        let mut observed = vec![true; 9];
+        observed[3..6].fill(false);
+        let tracks = Tracks::new(3, 3, linear(3, 3), observed).unwrap();
+        let err = tracks.clone().into_trajectories(Some(1)).unwrap_err();
+        assert!(matches!(err, DomaError::InvalidConfig(_)), "{err:?}");
+        let err = err.to_string();
+        assert!(
+            err.contains("reference frame 1: no track is observed there")
+                && err.contains("frame 0, the default, sees 3 of the 3"),
+            "{err}"
+        );
+        assert_eq!(tracks.into_trajectories(Some(2)).unwrap().reference(), 2);
     }
 
     #[test]

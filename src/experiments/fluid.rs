@@ -153,6 +153,13 @@ pub fn run(
             "clips need at least 2 frames and a step of at least 1".into(),
         ));
     }
+    // Every network's size first: a job that cannot run fits nothing.
+    for &model in &job.models {
+        for &hidden in &job.widths {
+            let shape = SirenShape::new().with_hidden(hidden);
+            FitConfig::new(model.config(job.clip_len, shape)).validate()?;
+        }
+    }
     let starts = job.clip_starts()?;
     let mut records = Vec::new();
     for start in starts {

@@ -168,6 +168,12 @@ fn split_pixels(n: usize, seed: u64) -> (Vec<usize>, Vec<usize>) {
 
 /// Runs the job; `on_run` after each fit.
 pub fn run(job: &Image2dJob, mut on_run: impl FnMut(&Image2dRecord)) -> Result<Vec<Image2dRecord>> {
+    // Every network's size first: nothing is drawn or written for a job that cannot run.
+    for &variant in &job.variants {
+        for &hidden in &job.widths {
+            FitConfig::doma(DomaFieldConfig::new(variant).with_hidden(hidden)).validate()?;
+        }
+    }
     let device = job.backend.device()?;
     let pixels = grid(job.resolution);
     let (train_idx, test_idx) = split_pixels(pixels.len(), job.seed);

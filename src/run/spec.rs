@@ -175,7 +175,8 @@ pub struct RunSpec {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub count_hidden: Option<bool>,
     /// The frame whose positions are the field's input x (default: the frame with the most
-    /// observed points), counted within the clip.
+    /// observed points), counted within the clip; a frame where no track is observed is
+    /// refused.
     #[arg(long, value_name = "K")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reference_frame: Option<usize>,

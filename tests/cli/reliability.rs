@@ -128,6 +128,10 @@ fn oversized_models_are_refused_before_anything_is_allocated_or_written() {
         &["synthetic", "--hidden", "200000", "--iters", "1"],
         &["parameters"],
     );
+    refused(
+        &["mesh-alignment", "--n-hidden", "1000000000", "--iters", "1"],
+        &["parameters is over the limit"],
+    );
     let dir = temp("huge");
     let config = dir.join("fit.json");
     for model in [
@@ -142,6 +146,36 @@ fn oversized_models_are_refused_before_anything_is_allocated_or_written() {
         );
         assert!(!out.exists(), "a refused fit left {}", out.display());
     }
+}
+
+#[test]
+fn a_reference_frame_where_nothing_is_seen_is_refused_before_the_fit() {
+    // A PointOdyssey annotation whose frame 5 has no visible point.
+    let mut view = common::faerie_tracker_view(112..124).0;
+    let n = view.truth.points();
+    view.visible[5 * n..6 * n].fill(false);
+    let dir = temp("emptyref");
+    let (anno, run) = (dir.join("anno.npz"), dir.join("run"));
+    view.write(&anno, doma::data::layout::Layout::PointOdyssey)
+        .unwrap();
+    let args = [
+        "fit",
+        s(&anno),
+        "--reference-frame",
+        "5",
+        "--iters",
+        "1",
+        "--drop-unobserved",
+        "--out",
+        s(&run),
+    ];
+    refused(&args, &["reference frame 5: no track is observed there"]);
+    assert!(!run.exists(), "a refused fit left {}", run.display());
+    // Frame 6 sees tracks: the same fit goes on from there.
+    let mut args = args;
+    args[3] = "6";
+    let (code, _, err) = doma(&args);
+    assert_eq!(code, Some(0), "{err}");
 }
 
 #[test]

@@ -196,23 +196,27 @@ fn bad_tracker_files_are_refused_naming_the_file_and_the_key() {
     archive(&path, &big, (&[2, 3], &hidden), None);
     assert!(read(&path, &TrackFile::default()).is_ok());
     // A NaN in a seen frame's extrinsics is named as such, not blamed on trajs_3d.
-    let mut extrinsics = [0f32; 32];
+    let mut identity = [0f32; 32];
     for k in 0..2 {
         for d in 0..4 {
-            extrinsics[16 * k + 5 * d] = 1.0;
+            identity[16 * k + 5 * d] = 1.0;
         }
     }
+    let mut extrinsics = identity;
     extrinsics[16 + 7] = f32::NAN;
-    std::fs::write(
-        &path,
-        encode_npz_values(&[
-            ("trajs_3d", &[2, 3, 3], NpyValues::F16(&trajs)),
-            ("visibs", &[2, 3], NpyValues::Bool(&seen)),
-            ("valids", &[2, 3], NpyValues::Bool(&seen)),
-            ("extrinsics", &[2, 4, 4], NpyValues::F32(&extrinsics)),
-        ]),
-    )
-    .unwrap();
+    let with_extrinsics = |extrinsics: &[f32]| {
+        std::fs::write(
+            &path,
+            encode_npz_values(&[
+                ("trajs_3d", &[2, 3, 3], NpyValues::F16(&trajs)),
+                ("visibs", &[2, 3], NpyValues::Bool(&seen)),
+                ("valids", &[2, 3], NpyValues::Bool(&seen)),
+                ("extrinsics", &[2, 4, 4], NpyValues::F32(extrinsics)),
+            ]),
+        )
+        .unwrap()
+    };
+    with_extrinsics(&extrinsics);
     let camera = TrackFile {
         frame: Some(CoordFrame::Camera),
         ..TrackFile::default()
@@ -223,6 +227,30 @@ fn bad_tracker_files_are_refused_naming_the_file_and_the_key() {
         "{err}"
     );
     assert!(!err.contains("trajs_3d"), "{err}");
+    // Finite entries that take a finite point past the f32 range are named too: the
+    // entry whose product overflowed, else the largest term of a sum that did.
+    for (entries, needles) in [
+        (
+            [(0, 3e38f32)].as_slice(),
+            ["extrinsics[0, 0, 0] = 3e38", "point 1 of frame 0"],
+        ),
+        (
+            [(5, 2e38), (6, 0.9e38)].as_slice(),
+            ["extrinsics[0, 1, 1] = 2e38", "point 0 of frame 0"],
+        ),
+    ] {
+        let mut extrinsics = identity;
+        for &(i, v) in entries {
+            extrinsics[i] = v;
+        }
+        with_extrinsics(&extrinsics);
+        let err = read(&path, &camera).unwrap_err().to_string();
+        assert!(err.contains("anno.npz"), "{err}");
+        for n in needles {
+            assert!(err.contains(n), "{err} lacks {n}");
+        }
+        assert!(!err.contains("trajs_3d"), "{err}");
+    }
 }
 
 #[test]

@@ -191,6 +191,114 @@ fn refusing_a_hostile_model_config_costs_under_100_mb() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Every subcommand that builds a network from size flags checks its parameter count
+/// before it allocates: a 10⁹-layer or 10⁹-wide SIREN is refused, not aborted on.
+#[test]
+fn subcommands_refuse_a_huge_network_before_allocating_it() {
+    let _serial = counting::serial();
+    let billion = "1000000000";
+    let pictures = std::env::temp_dir().join(format!("doma-huge-png-{}", std::process::id()));
+    let pictures = pictures.to_str().unwrap();
+    let cases: [&[&str]; 5] = [
+        &["mesh-alignment", "--n-hidden", billion, "--iters", "1"],
+        &["mesh-alignment", "--hidden", billion, "--iters", "1"],
+        &["synthetic", "--hidden", billion, "--iters", "1"],
+        &[
+            "image2d",
+            "--widths",
+            billion,
+            "--resolution",
+            "16",
+            "--frames",
+            "2",
+            "--iters",
+            "1",
+            "--png-dir",
+            pictures,
+        ],
+        &["fluid", "--widths", billion, "--iters", "1"],
+    ];
+    for case in cases {
+        let command: Vec<String> = std::iter::once("doma")
+            .chain(case.iter().copied())
+            .chain(["--quiet"])
+            .map(String::from)
+            .collect();
+        let mut status = 0;
+        let peak = extra_peak(|| status = doma::cli::run_args(command.clone()));
+        assert_eq!(status, 1, "{command:?} was not refused");
+        assert!(!std::path::Path::new(pictures).exists(), "{command:?} wrote");
+        assert!(
+            peak < 100 * MB,
+            "{command:?}: {:.1} MB",
+            peak as f64 / MB as f64
+        );
+    }
+}
+
+/// A tracker file whose reference frame sees nothing, and one whose camera extrinsics
+/// overflow, are refused before a fit, under 100 MB.
+#[test]
+fn refusing_a_hostile_tracker_file_costs_under_100_mb() {
+    let _serial = counting::serial();
+    use doma::data::layout::Layout;
+    use doma_formats::npy::NpyValues;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data");
+    let truth = doma::data::traj::read_traj(root.join("md2_faerie.traj"))
+        .unwrap()
+        .select_frames(112..124, 1)
+        .unwrap();
+    let faces = doma::data::mesh::read_obj(root.join("md2_faerie.obj"))
+        .unwrap()
+        .faces;
+    let config = doma::data::tracker::TrackerConfig::default();
+    let mut view = doma::data::tracker::simulate(&truth, &faces, &config).unwrap();
+    let (t, n) = (truth.frames(), truth.points());
+    view.visible[5 * n..6 * n].fill(false);
+    let dir = std::env::temp_dir().join(format!("doma-tracker-refusal-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (empty, overflow) = (dir.join("empty.npz"), dir.join("overflow.npz"));
+    view.write(&empty, Layout::PointOdyssey).unwrap();
+    let mut extrinsics: Vec<f32> = (0..t).flat_map(|_| view.extrinsics).collect();
+    extrinsics[0] = 3e38;
+    let all = vec![true; t * n];
+    std::fs::write(
+        &overflow,
+        doma_formats::npz::encode_npz_values(&[
+            ("trajs_3d", &[t, n, 3], NpyValues::F16(truth.positions())),
+            ("visibs", &[t, n], NpyValues::Bool(&all)),
+            ("valids", &[t, n], NpyValues::Bool(&all)),
+            ("extrinsics", &[t, 4, 4], NpyValues::F32(&extrinsics)),
+        ]),
+    )
+    .unwrap();
+    let out = dir.join("run");
+    let path = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let cases = [
+        vec![path(&empty), "--reference-frame".into(), "5".into()],
+        vec![path(&overflow), "--frame".into(), "camera".into()],
+    ];
+    for case in cases {
+        let command: Vec<String> = ["doma", "fit"]
+            .into_iter()
+            .map(String::from)
+            .chain(case)
+            .chain(["--drop-unobserved", "--quiet", "--out"].map(String::from))
+            .chain([path(&out)])
+            .collect();
+        let mut status = 0;
+        let peak = extra_peak(|| status = doma::cli::run_args(command.clone()));
+        assert_eq!(status, 1, "{command:?} was not refused");
+        assert!(!out.exists(), "{command:?} left {}", out.display());
+        assert!(
+            peak < 100 * MB,
+            "{command:?}: {:.1} MB",
+            peak as f64 / MB as f64
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Random model configs (JSON), each a valid config of one of the models with a few of its
 /// fields mutated: a numeric field set to a hostile or random value, a field deleted, or
 /// replaced by another JSON type. A structure-aware random search rather than a

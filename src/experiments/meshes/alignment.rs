@@ -157,9 +157,14 @@ pub fn mesh_alignment(
     job: &MeshAlignmentJob,
     mut on_run: impl FnMut(&MeshRecord),
 ) -> Result<Vec<MeshRecord>> {
+    let data = &job.sequence.trajectories;
+    // Every model's size is checked before anything is built: an allocation too large
+    // for memory aborts the process rather than failing.
+    for &model in &job.models {
+        job.model(model, data.frames()).validate()?;
+    }
     let device = job.backend.device()?;
     let ad = device.clone().autodiff();
-    let data = &job.sequence.trajectories;
     let task = job.task()?;
     let edges = unique_edges(&task.target_faces);
     let mut records = Vec::new();
