@@ -53,7 +53,7 @@ fn main() -> anyhow::Result<()> {
         drop_unobserved: true,
         hold_out: Some(doma::data::sequence::HoldOut {
             fraction: 0.2,
-            spans: doma::data::tracks::DEFAULT_SPANS,
+            spans: doma::gaps::spans::DEFAULT_SPANS,
             seed: 0,
         }),
         ..LoadOptions::default()

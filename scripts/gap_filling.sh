@@ -20,7 +20,9 @@ for name in cdp_male_wave md2_faerie; do
 done
 python3 - <<'PY'
 import json
-cols = ["doma", "carried", "framewise", "field", "linear", "spline", "neighbours", "low_rank"]
+# The columns by name, from the reports: doma's fill, the field alone, then every filler.
+first = json.load(open("results/tracks/cdp_male_wave_pointodyssey.json"))["held_out_observations"]
+cols = list(first["epe_x1e4"])
 print("| sequence | layout | hidden observations | " + " | ".join(cols) + " |")
 print("|---" * (3 + len(cols)) + "|")
 for name in ["cdp_male_wave", "md2_faerie"]:

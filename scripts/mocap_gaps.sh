@@ -34,8 +34,13 @@ done
 python3 - "$seeds" <<'PY'
 import json, sys
 seeds = sys.argv[1].split()
-cols = ["doma", "carried", "framewise", "field", "linear", "spline", "neighbours", "low_rank"]
-base = ["linear", "spline", "neighbours", "low_rank"]
+# The columns by name, from the reports: doma's fill, the field alone, then every filler.
+# The field's fills are not baselines (reports before 2026-12 called them carried and
+# framewise).
+FIELDS = {"doma", "field", "field_fill", "field_fill_framewise", "carried", "framewise"}
+first = json.load(open(f"results/mocap/85_12_2-8_{seeds[0]}.json"))["held_out_observations"]
+cols = list(first["distance"])
+base = [c for c in cols if c not in FIELDS]
 fmt = lambda v: f"{v:.1f}" if v >= 10 else f"{v:.2f}"
 print("| recording | gaps | hidden | " + " | ".join(cols) + " | doma / best baseline | per seed | blend used (short, long) |")
 print("|---" * (6 + len(cols)) + "|")

@@ -33,11 +33,12 @@
 //! ```
 //!
 //! **Layers**: each module imports only those of the layers before it, from the leaves
-//! ([`dual`], [`io`], [`knn`], [`names`], …) through the network ([`siren`], [`jacobian`],
-//! [`field`]), data and losses ([`data`], [`loss`]), [`warp`] and [`metrics`], fitting
-//! ([`train`], [`register`]) and the jobs ([`run`], [`experiments`], [`export`],
-//! [`view`], [`batch`]) to the command line ([`cli`]). The list, with what each layer
-//! holds, is in docs/design.md §4.
+//! ([`dual`], [`io`], [`knn`], [`names`], …) and gap filling on bare numbers ([`gaps`]:
+//! the fillers, the field's fill, the blend, the spans) through the network ([`siren`],
+//! [`jacobian`], [`field`]), data and losses ([`data`], [`loss`]), [`warp`] and
+//! [`metrics`], fitting ([`train`], [`register`]) and the jobs ([`run`], [`experiments`],
+//! [`export`], [`view`], [`batch`]) to the command line ([`cli`]). The list, with what
+//! each layer holds, is in docs/design.md §4.
 //!
 //! Equation numbers refer to the CVPR 2024 paper (main text): Eq. 1 SIREN, Eq. 2 DPF,
 //! Eq. 4 the affinity field, Eq. 6 the SIREN Jacobian, Eq. 10–12 the Trans, SE(3) and

@@ -54,11 +54,13 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
             eprintln!("  {name} gaps: the field's fill ({why})");
             continue;
         }
+        let weights: Vec<String> = w
+            .iter()
+            .map(|(f, v)| format!("{} {v:.2}", f.label()))
+            .collect();
         eprintln!(
-            "  {name} gaps (weights from {count} validation entries): field's fill {:.2}, \
-             with lenders frame by frame {:.2}, spline {:.2}, neighbours {:.2}, low rank {:.2}, \
-             linear {:.2}",
-            w.carried, w.framewise, w.spline, w.neighbours, w.low_rank, w.linear
+            "  {name} gaps (weights from {count} validation entries): {}",
+            weights.join(", ")
         );
     }
     Ok(())

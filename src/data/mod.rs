@@ -66,7 +66,7 @@ impl From<doma_formats::Frames> for Trajectories {
 /// Tracks from a tracker are not seen in every frame: an optional observed mask `[T, N]`
 /// says which entries are data. An unobserved entry stores a finite stand-in (the track's
 /// linear interpolation between its observations, held constant past its ends,
-/// [`tracks::interpolate`]); the losses and metrics never read it. The field's input
+/// [`crate::gaps::Marked::linear`]); the losses and metrics never read it. The field's input
 /// `x` of each point, its *canonical* position, is frame 0's position for complete
 /// data, and for masked data the position in a reference frame
 /// ([`tracks::Tracks::into_trajectories`]).

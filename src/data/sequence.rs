@@ -11,8 +11,9 @@ use rand_chacha::ChaCha8Rng;
 
 use super::layout::TrackFile;
 use super::mesh::read_obj;
-use super::tracks::{Tracks, hold_out_spans};
+use super::tracks::Tracks;
 use super::{Trajectories, anime, c3d, layout, npy, traj};
+use crate::gaps::spans::hold_out_spans;
 use crate::{DomaError, Result};
 
 /// An animated mesh: vertex trajectories `[T, V, 3]` and, when known, the triangles.
@@ -144,46 +145,13 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
         None => tracks,
     };
     let mut kept = None;
-    let never = tracks.never_observed();
-    if options.drop_unobserved && !never.is_empty() {
-        if never.len() == tracks.points() {
-            return Err(malformed("no track is observed in any frame".into()));
-        }
-        let keep: Vec<usize> = (0..tracks.points())
-            .filter(|i| never.binary_search(i).is_err())
-            .collect();
-        tracks = tracks.select_points(&keep);
-        // The faces of kept vertices alone, renumbered.
-        let mut new_index = vec![u32::MAX; never.len() + keep.len()];
-        for (r, &i) in keep.iter().enumerate() {
-            new_index[i] = r as u32;
-        }
-        faces = faces.map(|f| {
-            f.iter()
-                .filter_map(|t| {
-                    let m = t.map(|v| new_index[v as usize]);
-                    m.iter().all(|&v| v != u32::MAX).then_some(m)
-                })
-                .collect()
-        });
+    if options.drop_unobserved && !tracks.never_observed().is_empty() {
+        let keep = observed_somewhere(&tracks).map_err(malformed)?;
+        (tracks, faces) = (tracks.select_points(&keep), renumber(faces, &keep));
         kept = Some(keep);
     }
     let held_out = match &options.hold_out {
-        Some(h) => {
-            let entries = hold_out_spans(&tracks, h.fraction, h.spans.clone(), h.seed)
-                .map_err(|e| malformed(format!("--holdout-observations: {e}")))?;
-            let n = tracks.points();
-            let truth = entries
-                .iter()
-                .map(|&(k, i)| {
-                    let e = 3 * (k * n + i);
-                    let p = &tracks.positions()[e..e + 3];
-                    [p[0], p[1], p[2]]
-                })
-                .collect();
-            tracks.hide(&entries);
-            Some(HeldOut { entries, truth })
-        }
+        Some(h) => Some(hold_out(&mut tracks, h).map_err(malformed)?),
         None => None,
     };
     let trajectories = tracks
@@ -216,6 +184,52 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
         held_out,
         kept,
     })
+}
+
+/// The tracks observed in some frame; refuses tracks none of which is.
+fn observed_somewhere(tracks: &Tracks) -> std::result::Result<Vec<usize>, String> {
+    let never = tracks.never_observed();
+    if never.len() == tracks.points() {
+        return Err("no track is observed in any frame".into());
+    }
+    Ok((0..tracks.points())
+        .filter(|i| never.binary_search(i).is_err())
+        .collect())
+}
+
+/// The faces of the `kept` vertices alone, renumbered.
+fn renumber(faces: Option<Vec<[u32; 3]>>, kept: &[usize]) -> Option<Vec<[u32; 3]>> {
+    let total = kept.last().map_or(0, |&i| i + 1);
+    let mut new_index = vec![u32::MAX; total];
+    for (r, &i) in kept.iter().enumerate() {
+        new_index[i] = r as u32;
+    }
+    faces.map(|f| {
+        f.iter()
+            .filter_map(|t| {
+                let m = t.map(|v| new_index.get(v as usize).copied().unwrap_or(u32::MAX));
+                m.iter().all(|&v| v != u32::MAX).then_some(m)
+            })
+            .collect()
+    })
+}
+
+/// Hides `h`'s seeded spans of `tracks`' observations ([`hold_out_spans`]), returning them
+/// with their true positions.
+fn hold_out(tracks: &mut Tracks, h: &HoldOut) -> std::result::Result<HeldOut, String> {
+    let entries = hold_out_spans(&tracks.marked(), h.fraction, h.spans.clone(), h.seed)
+        .map_err(|e| format!("--holdout-observations: {e}"))?;
+    let n = tracks.points();
+    let truth = entries
+        .iter()
+        .map(|&(k, i)| {
+            let e = 3 * (k * n + i);
+            let p = &tracks.positions()[e..e + 3];
+            [p[0], p[1], p[2]]
+        })
+        .collect();
+    tracks.hide(&entries);
+    Ok(HeldOut { entries, truth })
 }
 
 /// The file's extension, lower-case ("" if none).

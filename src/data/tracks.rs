@@ -9,20 +9,18 @@
 //! - a track observed there starts from its observation;
 //! - a track not observed there starts from its observation in the nearest frame `s` where
 //!   it is seen, moved by the mean motion from `s` to the reference frame of its
-//!   [`NEIGHBOURS`] nearest tracks seen in both.
+//!   [`PLACEMENT_NEIGHBOURS`] nearest tracks seen in both.
 //!
-//! The unobserved entries then store the track's linear interpolation ([`interpolate`]),
-//! which is also the first gap-filling baseline ([`crate::gaps::baselines`] has the others).
-
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+//! The unobserved entries then store the track's linear interpolation
+//! ([`crate::gaps::Marked::linear`], one of the gap fillers of [`crate::gaps`]).
 
 use super::Trajectories;
+use crate::gaps::Marked;
 use crate::knn::PointTree;
 use crate::{DomaError, Result};
 
 /// The neighbours whose motion places an unseen track's canonical position.
-pub const NEIGHBOURS: usize = 8;
+pub const PLACEMENT_NEIGHBOURS: usize = 8;
 
 /// Positions with an observed mask; unobserved entries are never read.
 #[derive(Clone, Debug, PartialEq)]
@@ -210,6 +208,11 @@ impl Tracks {
         })
     }
 
+    /// The positions and mask as the gap fillers' view ([`crate::gaps`]).
+    pub fn marked(&self) -> Marked<'_> {
+        Marked::new(self.frames, self.points, &self.positions, &self.observed)
+    }
+
     /// Marks the entries `(frame, point)` unobserved.
     pub fn hide(&mut self, entries: &[(usize, usize)]) {
         for &(k, i) in entries {
@@ -239,8 +242,8 @@ impl Tracks {
     }
 
     /// The trajectories these tracks give: the canonical positions in `reference` (default:
-    /// [`Self::most_observed_frame`]) as the module says, the unobserved entries
-    /// [`interpolate`]d. Complete tracks with reference 0 give exactly the complete
+    /// [`Self::most_observed_frame`]) as the module says, the unobserved entries filled by
+    /// linear interpolation ([`Marked::linear`]). Complete tracks with reference 0 give exactly the complete
     /// [`Trajectories`]. Refuses a track that is never observed, with the count and the
     /// first, a reference frame past the end, and one where no track is observed.
     pub fn into_trajectories(self, reference: Option<usize>) -> Result<Trajectories> {
@@ -276,8 +279,7 @@ impl Tracks {
                 self.points
             )));
         }
-        let mut filled = self.positions;
-        interpolate(self.frames, self.points, &mut filled, &self.observed);
+        let filled = self.marked().linear();
         let canonical = canonical_positions(self.frames, self.points, &filled, &self.observed, r)?;
         let data = Trajectories::new(self.frames, self.points, filled)?.with_observations(
             self.observed,
@@ -291,49 +293,9 @@ impl Tracks {
     }
 }
 
-/// Replaces, in place, every entry of `positions` (`[T, N, 3]`) that `observed` (`[T, N]`)
-/// does not mark by its track's linear interpolation in frame index between the nearest
-/// observations before and after, or holds it at the first or last observation past the
-/// ends. Only observed entries are read, so the writes never feed later reads. A track with
-/// no observation is left as it is.
-pub fn interpolate(frames: usize, points: usize, positions: &mut [f32], observed: &[bool]) {
-    let mut seen = Vec::with_capacity(frames);
-    for i in 0..points {
-        seen.clear();
-        seen.extend((0..frames).filter(|&k| observed[k * points + i]));
-        if seen.is_empty() || seen.len() == frames {
-            continue;
-        }
-        let at = |p: &[f32], k: usize, c: usize| p[3 * (k * points + i) + c];
-        let mut next = 0;
-        for k in 0..frames {
-            if observed[k * points + i] {
-                continue;
-            }
-            while next < seen.len() && seen[next] < k {
-                next += 1;
-            }
-            for c in 0..3 {
-                let p = &*positions;
-                let value = match (next.checked_sub(1), seen.get(next)) {
-                    (Some(q), Some(&b)) => {
-                        let a = seen[q];
-                        let w = (k - a) as f32 / (b - a) as f32;
-                        at(p, a, c) + w * (at(p, b, c) - at(p, a, c))
-                    }
-                    (Some(q), None) => at(p, seen[q], c),
-                    (None, Some(&b)) => at(p, b, c),
-                    (None, None) => unreachable!("the track has an observation"),
-                };
-                positions[3 * (k * points + i) + c] = value;
-            }
-        }
-    }
-}
-
 /// The canonical position of every track in frame `r`: its observation there, else its
 /// observation in the nearest frame `s` where it is seen (the earlier of two as near)
-/// moved by the mean `s → r` motion of its [`NEIGHBOURS`] nearest tracks (in frame `s`)
+/// moved by the mean `s → r` motion of its [`PLACEMENT_NEIGHBOURS`] nearest tracks (in frame `s`)
 /// that are seen in both frames, else that observation unmoved.
 fn canonical_positions(
     frames: usize,
@@ -369,7 +331,7 @@ fn canonical_positions(
             let p = at(s, j);
             let mut moved = p;
             if let Some(tree) = &tree {
-                let near = tree.nearest_k(&p, NEIGHBOURS.min(both.len()));
+                let near = tree.nearest_k(&p, PLACEMENT_NEIGHBOURS.min(both.len()));
                 for c in 0..3 {
                     let motion: f64 = near
                         .iter()
@@ -385,170 +347,6 @@ fn canonical_positions(
     Ok(canonical)
 }
 
-/// The span lengths of [`hold_out_spans`] unless asked otherwise: 2 to 10 frames.
-pub const DEFAULT_SPANS: std::ops::RangeInclusive<usize> = 2..=10;
-
-/// A seeded choice of about `fraction` of the observed entries of `tracks` to hide, in
-/// spans of `spans` consecutive frames of one track (as a marker or a tracked point is lost
-/// for a while). Every span lies inside its track's observations: the track keeps an
-/// observation before it and one after, so that every hidden entry is a gap to fill, not an
-/// extrapolation past the ends. Returns the entries `(frame, point)`, sorted. Refuses a
-/// fraction outside `(0, 1)`, an empty or zero-length span range, and a fraction that cannot
-/// be reached.
-pub fn hold_out_spans(
-    tracks: &Tracks,
-    fraction: f64,
-    spans: std::ops::RangeInclusive<usize>,
-    seed: u64,
-) -> std::result::Result<Vec<(usize, usize)>, String> {
-    check_fraction(fraction)?;
-    let (shortest, longest) = (*spans.start(), *spans.end());
-    if shortest == 0 || shortest > longest {
-        return Err(format!(
-            "spans of {shortest} to {longest} frames: the lengths must be at least 1 and in order"
-        ));
-    }
-    let t = tracks.frames;
-    hold_out_drawn(
-        t,
-        tracks.points,
-        &tracks.observed,
-        fraction,
-        [shortest, longest],
-        seed,
-        |rng| rng.random_range(shortest..=longest.min(t - 2)),
-    )
-}
-
-/// The length of every interior gap of `observed` `[T, N]` (a run of unobserved frames
-/// with an observation on each side), one entry per gap.
-pub fn gap_lengths(t: usize, n: usize, observed: &[bool]) -> Vec<usize> {
-    let mut lengths = Vec::new();
-    for i in 0..n {
-        let mut last = None;
-        for k in 0..t {
-            if !observed[k * n + i] {
-                continue;
-            }
-            if let Some(a) = last
-                && k > a + 1
-            {
-                lengths.push(k - a - 1);
-            }
-            last = Some(k);
-        }
-    }
-    lengths
-}
-
-/// A seeded choice of about `fraction` of the observed entries of `observed` `[T, N]` to
-/// hide for validating a gap fill: spans inside the tracks' observations, their lengths
-/// drawn from the tracks' own interior gaps (one draw per gap, so the spans are as long as
-/// the gaps to fill), or from [`DEFAULT_SPANS`] when there is no interior gap. Refuses
-/// what [`hold_out_spans`] refuses.
-pub fn validation_spans(
-    t: usize,
-    n: usize,
-    observed: &[bool],
-    fraction: f64,
-    seed: u64,
-) -> std::result::Result<Vec<(usize, usize)>, String> {
-    let mut lengths: Vec<usize> = gap_lengths(t, n, observed)
-        .into_iter()
-        .filter(|&l| l + 2 <= t)
-        .collect();
-    if lengths.is_empty() {
-        lengths = DEFAULT_SPANS.filter(|&l| l + 2 <= t).collect();
-    }
-    hold_out_lengths(t, n, observed, fraction, &lengths, seed)
-}
-
-/// [`hold_out_spans`] on a bare mask `observed` `[T, N]` (frame-major), each span's length
-/// drawn from `lengths` (each at least 1 and at most `T − 2`), uniformly: a list of the
-/// data's own gap lengths gives spans distributed as its gaps are.
-fn hold_out_lengths(
-    t: usize,
-    n: usize,
-    observed: &[bool],
-    fraction: f64,
-    lengths: &[usize],
-    seed: u64,
-) -> std::result::Result<Vec<(usize, usize)>, String> {
-    let (Some(&shortest), Some(&longest)) = (lengths.iter().min(), lengths.iter().max()) else {
-        return Err("no span lengths to draw from".into());
-    };
-    if shortest == 0 || longest + 2 > t {
-        return Err(format!(
-            "spans of {shortest} to {longest} frames do not fit inside {t} frames"
-        ));
-    }
-    hold_out_drawn(t, n, observed, fraction, [shortest, longest], seed, |rng| {
-        lengths[rng.random_range(0..lengths.len())]
-    })
-}
-
-fn check_fraction(fraction: f64) -> std::result::Result<(), String> {
-    if fraction > 0.0 && fraction < 1.0 {
-        Ok(())
-    } else {
-        Err(format!(
-            "a held-out fraction of {fraction} is not strictly between 0 and 1"
-        ))
-    }
-}
-
-/// The draw of [`hold_out_spans`] and [`hold_out_lengths`]: `length` draws each span's
-/// length, `[shortest, longest]` bound it (for the checks and the message).
-fn hold_out_drawn(
-    t: usize,
-    n: usize,
-    observed: &[bool],
-    fraction: f64,
-    [shortest, longest]: [usize; 2],
-    seed: u64,
-    mut length: impl FnMut(&mut ChaCha8Rng) -> usize,
-) -> std::result::Result<Vec<(usize, usize)>, String> {
-    debug_assert_eq!(observed.len(), t * n);
-    check_fraction(fraction)?;
-    let observed_count = observed.iter().filter(|&&o| o).count();
-    let target = (fraction * observed_count as f64).round() as usize;
-    let mut observed = observed.to_vec();
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut hidden = Vec::with_capacity(target);
-    let mut tries = 0usize;
-    let cannot = |hid: usize| {
-        format!(
-            "cannot hide {fraction} of the {observed_count} observations in spans of {shortest} \
-             to {longest} frames inside the tracks' observations (hid {hid} of {target})"
-        )
-    };
-    while hidden.len() < target {
-        tries += 1;
-        if tries > 100 * (target + n) || t < shortest + 2 || n == 0 {
-            return Err(cannot(hidden.len()));
-        }
-        let i = rng.random_range(0..n);
-        // A frame before and one after the span.
-        let len = length(&mut rng);
-        let start = rng.random_range(1..=t - 1 - len);
-        let seen = |k: usize| observed[k * n + i];
-        if !(0..start).any(seen) || !(start + len..t).any(seen) {
-            continue;
-        }
-        for k in start..start + len {
-            if hidden.len() == target {
-                break;
-            }
-            if observed[k * n + i] {
-                observed[k * n + i] = false;
-                hidden.push((k, i));
-            }
-        }
-    }
-    hidden.sort_unstable();
-    Ok(hidden)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -558,22 +356,6 @@ mod tests {
         (0..frames)
             .flat_map(|k| (0..points).flat_map(move |p| [(k + 10 * p) as f32, 2.0 * k as f32, 0.0]))
             .collect()
-    }
-
-    #[test]
-    fn interpolation_is_linear_between_observations_and_constant_past_the_ends() {
-        let positions = linear(5, 1);
-        // Seen in frames 1 and 3 only: frame 2 is their midpoint, 0 and 4 are held.
-        let observed = [false, true, false, true, false];
-        let mut poisoned = positions.clone();
-        for k in [0, 2, 4] {
-            poisoned[3 * k] = f32::NAN;
-        }
-        interpolate(5, 1, &mut poisoned, &observed);
-        let out = poisoned;
-        assert_eq!(&out[6..9], &[2.0, 4.0, 0.0]);
-        assert_eq!(&out[0..3], &[1.0, 2.0, 0.0]);
-        assert_eq!(&out[12..15], &[3.0, 6.0, 0.0]);
     }
 
     #[test]
@@ -639,41 +421,5 @@ mod tests {
         let err = Tracks::new(2, 3, positions, vec![true; 6]).unwrap_err();
         assert!(err.contains("point 1 of frame 1"), "{err}");
         assert!(Tracks::new(2, 3, linear(2, 3), vec![true; 5]).is_err());
-    }
-
-    #[test]
-    fn held_out_spans_are_seeded_leave_every_track_seen_and_reach_the_fraction() {
-        let tracks = Tracks::new(20, 30, linear(20, 30), vec![true; 600]).unwrap();
-        let a = hold_out_spans(&tracks, 0.25, DEFAULT_SPANS, 7).unwrap();
-        assert_eq!(a, hold_out_spans(&tracks, 0.25, DEFAULT_SPANS, 7).unwrap());
-        assert_ne!(a, hold_out_spans(&tracks, 0.25, DEFAULT_SPANS, 8).unwrap());
-        assert_eq!(a.len(), 150);
-        let mut hidden = tracks.clone();
-        hidden.hide(&a);
-        assert!(hidden.never_observed().is_empty());
-        // In spans: most hidden entries have a hidden neighbour in time on their track.
-        let set: std::collections::BTreeSet<_> = a.iter().copied().collect();
-        let runs = a
-            .iter()
-            .filter(|&&(k, i)| set.contains(&(k + 1, i)) || (k > 0 && set.contains(&(k - 1, i))))
-            .count();
-        assert!(runs as f64 > 0.9 * a.len() as f64, "{runs} of {}", a.len());
-        // Inside the observations: every track keeps its first and last frame.
-        assert!(a.iter().all(|&(k, _)| k > 0 && k < 19));
-        assert!(hold_out_spans(&tracks, 1.0, DEFAULT_SPANS, 0).is_err());
-        assert!(hold_out_spans(&tracks, 0.2, 0..=3, 0).is_err());
-        // Long spans: runs of at least 6 frames, where the track had them.
-        let long = hold_out_spans(&tracks, 0.2, 6..=12, 3).unwrap();
-        let set: std::collections::BTreeSet<_> = long.iter().copied().collect();
-        let starts: Vec<_> = long
-            .iter()
-            .filter(|&&(k, i)| !set.contains(&(k.wrapping_sub(1), i)))
-            .collect();
-        assert!(
-            starts.len() * 6 <= long.len() + 6,
-            "{} spans for {} entries",
-            starts.len(),
-            long.len()
-        );
     }
 }

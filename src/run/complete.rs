@@ -10,8 +10,8 @@ use super::{RunConfig, RunDir, field_everywhere};
 use crate::data::c3d::{C3d, c3d_tracks, read_c3d, write_c3d};
 use crate::data::layout::Layout;
 use crate::data::sequence::read_tracks;
-use crate::gaps::FieldPrediction;
 use crate::gaps::blend::{Blend, blended_fill};
+use crate::gaps::{FieldPrediction, Marked};
 use crate::io::write_atomic;
 use crate::{DomaError, Result};
 
@@ -199,7 +199,8 @@ fn complete_with(
         .collect();
     let predicted = field_everywhere(&field, data, device)?;
     let field = FieldPrediction::new(n, &predicted, data.canonical(), seen);
-    let (filled, blend) = blended_fill(t, n, &normalised, seen, &field, config.fit.seed);
+    let tracks = Marked::new(t, n, &normalised, seen);
+    let (filled, blend) = blended_fill(&tracks, &field, config.fit.seed);
     // Observed entries exactly as the input holds them; filled ones back in its units.
     let tracks: Vec<f32> = input
         .positions()

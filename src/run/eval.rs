@@ -4,14 +4,12 @@ use std::path::Path;
 
 use burn::tensor::Device;
 
-use super::{GapErrors, GapReport, Report, RunConfig, RunDir};
+use super::{Report, RunDir, gap_report};
 use crate::data::Trajectories;
 use crate::data::layout::TrackFile;
 use crate::data::mesh::as_points;
-use crate::data::sequence::{LoadOptions, Sequence, load_sequence_with};
+use crate::data::sequence::{LoadOptions, load_sequence_with};
 use crate::field::MotionField;
-use crate::gaps::FieldPrediction;
-use crate::gaps::blend::{self, fills_at};
 use crate::io::load_json;
 use crate::metrics::{EPE_SCALE, field_epe_per_frame, mean_over_frames};
 use crate::train::IterationRecord;
@@ -40,117 +38,6 @@ pub fn evaluate(
         seconds: 0.0,
         held_out_observations: None,
     })
-}
-
-/// The gap-filling report of `field` fitted under `config`: on the held-out observations
-/// of the fitted tracks, doma's fill and the field's beside the baselines ([`GapReport`]);
-/// `None` when nothing was held out. `placed` is the run's data as loaded (the baselines use
-/// its observations, nothing the fit learned), `data` the same with the canonical positions
-/// the fit learned ([`RunDir::load_data`]).
-pub fn gap_report(
-    field: &dyn MotionField,
-    config: &RunConfig,
-    placed: &Sequence,
-    data: &Sequence,
-    device: &Device,
-) -> Result<Option<GapReport>> {
-    let Some(held) = &data.held_out else {
-        return Ok(None);
-    };
-    let (train_idx, _) = config.split_indices(data.trajectories.points())?;
-    let train = data.trajectories.select_points(&train_idx)?;
-    let given = placed.trajectories.select_points(&train_idx)?;
-    let mut row = vec![usize::MAX; data.trajectories.points()];
-    for (r, &i) in train_idx.iter().enumerate() {
-        row[i] = r;
-    }
-    // The entries of fitted tracks, as (frame, fitted row), with their truth.
-    let (entries, truth): (Vec<(usize, usize)>, Vec<[f32; 3]>) = held
-        .entries
-        .iter()
-        .zip(&held.truth)
-        .filter(|((_, i), _)| row[*i] != usize::MAX)
-        .map(|(&(k, i), &p)| ((k, row[i]), p))
-        .unzip();
-    if entries.is_empty() {
-        return Ok(None);
-    }
-    let (t, n) = (given.frames(), given.points());
-    let positions = given.positions();
-    let all_seen = vec![true; t * n];
-    let observed = given.observed().unwrap_or(&all_seen);
-    let predicted = field_everywhere(field, &train, device)?;
-    let at = |filled: &[f32]| -> Vec<[f32; 3]> {
-        entries
-            .iter()
-            .map(|&(k, r)| {
-                let e = 3 * (k * n + r);
-                [filled[e], filled[e + 1], filled[e + 2]]
-            })
-            .collect()
-    };
-    // doma's fill and its fillers (the field's fill and the baselines) at the same entries.
-    let field_fill = FieldPrediction::new(n, &predicted, train.canonical(), observed);
-    let fills = fills_at(
-        t,
-        n,
-        positions,
-        observed,
-        &field_fill,
-        config.fit.seed,
-        &entries,
-    );
-    let filler = |m: usize| -> Vec<[f32; 3]> { fills.fillers.iter().map(|p| p[m]).collect() };
-    let methods = [
-        fills.doma.clone(),
-        at(&predicted),
-        filler(blend::at::CARRIED),
-        filler(blend::at::LINEAR),
-        filler(blend::at::SPLINE),
-        filler(blend::at::NEIGHBOURS),
-        filler(blend::at::LOW_RANK),
-        filler(blend::at::FRAMEWISE),
-    ];
-    let blend = fills.blend;
-    let errors = |metric: &dyn Fn(&[f32; 3], &[f32; 3]) -> f64| {
-        let e: Vec<f64> = methods
-            .iter()
-            .map(|pred| {
-                pred.iter()
-                    .zip(&truth)
-                    .map(|(a, b)| metric(a, b))
-                    .sum::<f64>()
-                    / entries.len() as f64
-            })
-            .collect();
-        GapErrors {
-            doma: e[0],
-            field: e[1],
-            carried: Some(e[2]),
-            linear: e[3],
-            spline: e[4],
-            neighbours: e[5],
-            low_rank: e[6],
-            framewise: Some(e[7]),
-        }
-    };
-    let l1 = |a: &[f32; 3], b: &[f32; 3]| {
-        EPE_SCALE * (0..3).map(|c| (a[c] - b[c]).abs() as f64).sum::<f64>()
-    };
-    let scale = data.scale as f64;
-    let euclid = |a: &[f32; 3], b: &[f32; 3]| {
-        scale
-            * (0..3)
-                .map(|c| ((a[c] - b[c]) as f64).powi(2))
-                .sum::<f64>()
-                .sqrt()
-    };
-    Ok(Some(GapReport {
-        entries: entries.len(),
-        blend: Some(blend),
-        epe_x1e4: errors(&l1),
-        distance: errors(&euclid),
-    }))
 }
 
 /// The field's prediction `[T, N, 3]` of every track of `data` (from its canonical

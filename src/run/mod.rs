@@ -20,6 +20,7 @@
 mod complete;
 mod eval;
 mod fit;
+mod gap_report;
 mod info;
 mod lock;
 mod plot;
@@ -28,8 +29,9 @@ mod spec;
 mod warp;
 
 pub use complete::{CompletedTracks, Completion, complete_run, complete_tracks};
-pub use eval::{eval_run, eval_run_as, evaluate, field_everywhere, gap_report};
+pub use eval::{eval_run, eval_run_as, evaluate, field_everywhere};
 pub use fit::{FitOutcome, fit_run, fit_run_locked};
+pub use gap_report::{GapErrors, GapReport, gap_report};
 pub use info::{RunInfo, info};
 pub use lock::RunLock;
 pub use plot::plot_run;
@@ -47,8 +49,8 @@ use crate::checkpoint::decode_checkpoint;
 use crate::data::Trajectories;
 use crate::data::layout::TrackFile;
 use crate::data::sequence::{HoldOut, LoadOptions, Sequence, load_sequence_with, split_indices};
-use crate::data::tracks::DEFAULT_SPANS;
 use crate::field::model::{Model, ModelConfig};
+use crate::gaps::spans::DEFAULT_SPANS;
 use crate::train::FitConfig;
 use crate::{DomaError, Result};
 
@@ -291,54 +293,6 @@ pub struct Report {
     /// (`--holdout-observations`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out_observations: Option<GapReport>,
-}
-
-/// Gap filling (`--holdout-observations`): on the observations of the fitted tracks that
-/// the fit did not see, the error of doma's fill ([`crate::gaps::blend`]: the field plus
-/// each track's residual carried across the gap, blended with the baselines by validated
-/// weights), of the field alone, and of the
-/// baselines ([`crate::gaps::baselines::Marked`]) on the same entries from the same
-/// observations.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct GapReport {
-    /// The hidden observations of the fitted tracks.
-    pub entries: usize,
-    /// The weights of doma's fill, learned on observations of the rest (absent in reports
-    /// written before the blend).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub blend: Option<crate::gaps::blend::Blend>,
-    /// The EPE × 10⁴ (the L1 distance summed over x, y, z, averaged over the entries, in
-    /// the normalised coordinates of the fit).
-    pub epe_x1e4: GapErrors,
-    /// The mean Euclidean distance to the truth, in the data's own units (mm for a C3D
-    /// file's markers read in mm, metres for a `.npz` in metres).
-    pub distance: GapErrors,
-}
-
-/// One error per gap filler, on the same entries.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
-pub struct GapErrors {
-    /// doma's fill (what `doma complete` writes, [`crate::gaps::blend`]).
-    pub doma: f64,
-    /// The fitted field alone, from each track's canonical position.
-    pub field: f64,
-    /// The field's fill alone ([`crate::gaps::transfer_residuals`]), one of the
-    /// fillers doma's fill blends (absent in reports written before the blend).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub carried: Option<f64>,
-    /// The field's fill with lenders chosen frame by frame
-    /// ([`crate::gaps::Lending::FrameByFrame`]), the other field's fill doma's fill blends
-    /// (absent in reports written before it).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub framewise: Option<f64>,
-    /// Each track's linear interpolation.
-    pub linear: f64,
-    /// Each track's natural cubic spline.
-    pub spline: f64,
-    /// The neighbours' motion.
-    pub neighbours: f64,
-    /// The low-rank (PCA) reconstruction.
-    pub low_rank: f64,
 }
 
 /// A per-frame list with NaN (a frame with nothing to measure) written as JSON's `null`.

@@ -304,7 +304,7 @@ fn a_hidden_entry_s_stored_value_changes_nothing() {
         drop_unobserved: true,
         hold_out: Some(HoldOut {
             fraction: 0.2,
-            spans: doma::data::tracks::DEFAULT_SPANS,
+            spans: doma::gaps::spans::DEFAULT_SPANS,
             seed: 4,
         }),
         ..LoadOptions::default()

@@ -1,57 +1,38 @@
-//! The gap-filling baselines that a motion field must beat on real markers: each track's
-//! linear and natural-cubic-spline interpolation, the neighbours' motion (the simplest form
-//! of the "pattern" or "rigid-body" fill of capture software), and a low-rank (PCA)
-//! reconstruction of the marker trajectories (Gløersen & Federolf 2016; Tits et al. 2018).
-//! All of them see only the observed entries (docs/design.md §7).
+//! The classic gap fillers of the motion-capture literature, each a method of [`Marked`]:
+//! each track's linear and natural-cubic-spline interpolation, the neighbours' motion (the
+//! simplest form of the "pattern" or "rigid-body" fill of capture software), and a
+//! low-rank (PCA) reconstruction of the marker trajectories (Gløersen & Federolf 2016; Tits
+//! et al. 2018). Each returns a copy of the positions (or values at given entries) with
+//! the gaps filled from the observed entries alone.
 
-/// Neighbours averaged by [`Marked::neighbours`].
-pub const NEIGHBOURS: usize = 4;
+use super::fillers::Marked;
+use super::linalg::{natural_second_derivatives, spline_at, symmetric_eigen};
+use super::spans::gaps;
 
-/// Tracks with a mask: `positions` `[T, N, 3]` and `observed` `[T, N]`, frame-major.
-#[derive(Clone, Copy, Debug)]
-pub struct Marked<'a> {
-    /// Frames `T`.
-    pub frames: usize,
-    /// Tracks `N`.
-    pub points: usize,
-    /// `[T, N, 3]`; unobserved entries are never read.
-    pub positions: &'a [f32],
-    /// `[T, N]`.
-    pub observed: &'a [bool],
-}
-
-impl<'a> Marked<'a> {
-    /// The view of `positions` and `observed`; panics if their lengths are not `3·T·N` and
-    /// `T·N` (a caller's bug, not bad data).
-    pub fn new(frames: usize, points: usize, positions: &'a [f32], observed: &'a [bool]) -> Self {
-        assert_eq!(positions.len(), 3 * frames * points);
-        assert_eq!(observed.len(), frames * points);
-        Marked {
-            frames,
-            points,
-            positions,
-            observed,
-        }
-    }
-
-    fn seen(&self, k: usize, i: usize) -> bool {
-        self.observed[k * self.points + i]
-    }
-
-    fn at(&self, k: usize, i: usize) -> [f32; 3] {
-        let e = 3 * (k * self.points + i);
-        [
-            self.positions[e],
-            self.positions[e + 1],
-            self.positions[e + 2],
-        ]
-    }
-
+impl Marked<'_> {
     /// Each track's linear interpolation in frame index between the observations on
-    /// either side of a gap, held at the first or last observation past the ends.
+    /// either side of a gap, held at the first or last observation past the ends. Only
+    /// observed entries are read; a track never observed is left as it is.
     pub fn linear(&self) -> Vec<f32> {
         let mut out = self.positions.to_vec();
-        crate::data::tracks::interpolate(self.frames, self.points, &mut out, self.observed);
+        let n = self.points;
+        for gap in gaps(self) {
+            let i = gap.track;
+            for k in gap.frames.clone() {
+                for c in 0..3 {
+                    let at = |j: usize| self.positions[3 * (j * n + i) + c];
+                    out[3 * (k * n + i) + c] = match (gap.before, gap.after) {
+                        (Some(a), Some(b)) => {
+                            let w = (k - a) as f32 / (b - a) as f32;
+                            at(a) + w * (at(b) - at(a))
+                        }
+                        (Some(a), None) => at(a),
+                        (None, Some(b)) => at(b),
+                        (None, None) => unreachable!("a gap borders an observation"),
+                    };
+                }
+            }
+        }
         out
     }
 
@@ -87,7 +68,7 @@ impl<'a> Marked<'a> {
 
     /// The neighbours' motion at each entry `(k, i)`: from the nearest frame `s` where track
     /// `i` is observed (the earlier of two as near), among the other tracks observed at both
-    /// `s` and `k`, the [`NEIGHBOURS`] nearest to `i` at `s`; `x_i(s)` moved by their mean
+    /// `s` and `k`, the [`MOTION_NEIGHBOURS`] nearest to `i` at `s`; `x_i(s)` moved by their mean
     /// motion `x_j(k) − x_j(s)`, or held at `x_i(s)` when no track is observed at both.
     /// An entry of a track never observed stays NaN.
     pub fn neighbours(&self, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
@@ -113,7 +94,7 @@ impl<'a> Marked<'a> {
                             (d, j)
                         }),
                 );
-                let m = NEIGHBOURS.min(near.len());
+                let m = MOTION_NEIGHBOURS.min(near.len());
                 if m == 0 {
                     return xi;
                 }
@@ -185,45 +166,14 @@ impl<'a> Marked<'a> {
     }
 }
 
+/// The neighbours averaged by [`Marked::neighbours`].
+pub const MOTION_NEIGHBOURS: usize = 4;
+
 /// The share of the variance kept by [`Marked::low_rank`].
 pub const LOW_RANK_ENERGY: f64 = 0.99;
 
 /// The most rounds of [`Marked::low_rank`].
 pub const LOW_RANK_ITERATIONS: usize = 100;
-
-/// The second derivatives of the natural cubic spline through `(x, y)` (0 at both ends),
-/// by the tridiagonal (Thomas) solve.
-fn natural_second_derivatives(x: &[f64], y: &[f64]) -> Vec<f64> {
-    let n = x.len();
-    let mut m = vec![0f64; n];
-    if n < 3 {
-        return m;
-    }
-    // Rows 1..n-1: h[j-1] m[j-1] + 2 (h[j-1] + h[j]) m[j] + h[j] m[j+1] = 6 (slope_j − slope_{j-1}).
-    let h: Vec<f64> = x.windows(2).map(|w| w[1] - w[0]).collect();
-    let mut diag = vec![0f64; n];
-    let mut rhs = vec![0f64; n];
-    for j in 1..n - 1 {
-        diag[j] = 2.0 * (h[j - 1] + h[j]);
-        rhs[j] = 6.0 * ((y[j + 1] - y[j]) / h[j] - (y[j] - y[j - 1]) / h[j - 1]);
-    }
-    for j in 2..n - 1 {
-        let w = h[j - 1] / diag[j - 1];
-        diag[j] -= w * h[j - 1];
-        rhs[j] -= w * rhs[j - 1];
-    }
-    for j in (1..n - 1).rev() {
-        m[j] = (rhs[j] - h[j] * m[j + 1]) / diag[j];
-    }
-    m
-}
-
-/// The spline of [`natural_second_derivatives`] at `v` in `[x[j], x[j+1]]`.
-fn spline_at(x: &[f64], y: &[f64], m: &[f64], j: usize, v: f64) -> f64 {
-    let h = x[j + 1] - x[j];
-    let (a, b) = ((x[j + 1] - v) / h, (v - x[j]) / h);
-    a * y[j] + b * y[j + 1] + ((a * a * a - a) * m[j] + (b * b * b - b) * m[j + 1]) * h * h / 6.0
-}
 
 /// `x` (`[t, d]`, row-major) projected onto its column means plus the principal components
 /// that hold `energy` of its variance.
@@ -299,58 +249,26 @@ fn low_rank_projection(x: &[f64], t: usize, d: usize, energy: f64) -> Vec<f64> {
     }
     out
 }
-
-/// The eigenvalues and eigenvectors (columns of the returned `[n, n]`) of the symmetric
-/// `a` (`[n, n]`, row-major), by cyclic Jacobi rotations.
-fn symmetric_eigen(mut a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>) {
-    let mut v = vec![0f64; n * n];
-    for i in 0..n {
-        v[i * n + i] = 1.0;
-    }
-    let scale: f64 = a.iter().map(|x| x * x).sum::<f64>().max(1e-300);
-    for _sweep in 0..60 {
-        let off: f64 = (0..n)
-            .flat_map(|p| (0..n).filter(move |&q| q != p).map(move |q| (p, q)))
-            .map(|(p, q)| a[p * n + q] * a[p * n + q])
-            .sum();
-        if off <= 1e-24 * scale {
-            break;
-        }
-        for p in 0..n {
-            for q in p + 1..n {
-                let apq = a[p * n + q];
-                if apq.abs() <= 1e-300 {
-                    continue;
-                }
-                let theta = (a[q * n + q] - a[p * n + p]) / (2.0 * apq);
-                let tan = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let tan = if theta == 0.0 { 1.0 } else { tan };
-                let cos = 1.0 / (tan * tan + 1.0).sqrt();
-                let sin = tan * cos;
-                for k in 0..n {
-                    let (akp, akq) = (a[k * n + p], a[k * n + q]);
-                    a[k * n + p] = cos * akp - sin * akq;
-                    a[k * n + q] = sin * akp + cos * akq;
-                }
-                for k in 0..n {
-                    let (apk, aqk) = (a[p * n + k], a[q * n + k]);
-                    a[p * n + k] = cos * apk - sin * aqk;
-                    a[q * n + k] = sin * apk + cos * aqk;
-                }
-                for k in 0..n {
-                    let (vkp, vkq) = (v[k * n + p], v[k * n + q]);
-                    v[k * n + p] = cos * vkp - sin * vkq;
-                    v[k * n + q] = sin * vkp + cos * vkq;
-                }
-            }
-        }
-    }
-    ((0..n).map(|i| a[i * n + i]).collect(), v)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn interpolation_is_linear_between_observations_and_constant_past_the_ends() {
+        let positions: Vec<f32> = (0..5)
+            .flat_map(|k| [k as f32, 2.0 * k as f32, 0.0])
+            .collect();
+        // Seen in frames 1 and 3 only: frame 2 is their midpoint, 0 and 4 are held.
+        let observed = [false, true, false, true, false];
+        let mut poisoned = positions.clone();
+        for k in [0, 2, 4] {
+            poisoned[3 * k] = f32::NAN;
+        }
+        let out = Marked::new(5, 1, &poisoned, &observed).linear();
+        assert_eq!(&out[6..9], &[2.0, 4.0, 0.0]);
+        assert_eq!(&out[0..3], &[1.0, 2.0, 0.0]);
+        assert_eq!(&out[12..15], &[3.0, 6.0, 0.0]);
+    }
 
     /// One track per closure, `T` frames.
     fn tracks(t: usize, f: &[&dyn Fn(f64) -> [f64; 3]]) -> Vec<f32> {
@@ -374,16 +292,6 @@ mod tests {
         // Past the ends: held at the first and last observation.
         assert_eq!(&filled[0..3], &positions[3..6]);
         assert_eq!(&filled[33..36], &positions[30..33]);
-    }
-
-    #[test]
-    fn natural_spline_values_match_a_hand_solved_case() {
-        // Knots (0,0), (1,1), (2,0): m1 = 6·(−1 − 1)/(2·2) = −3, so at 0.5:
-        // 0.5·0 + 0.5·1 + (0.125 − 0.5)·(−3)/6 = 0.5 + 0.1875.
-        let (x, y) = ([0.0, 1.0, 2.0], [0.0, 1.0, 0.0]);
-        let m = natural_second_derivatives(&x, &y);
-        assert_eq!(m, vec![0.0, -3.0, 0.0]);
-        assert!((spline_at(&x, &y, &m, 0, 0.5) - 0.6875).abs() < 1e-12);
     }
 
     #[test]
@@ -479,21 +387,5 @@ mod tests {
             err(&filled),
             err(&linear)
         );
-    }
-
-    #[test]
-    fn jacobi_diagonalises_a_known_matrix() {
-        // [[2, 1], [1, 2]]: eigenvalues 1 and 3.
-        let (values, vectors) = symmetric_eigen(vec![2.0, 1.0, 1.0, 2.0], 2);
-        let mut sorted = values.clone();
-        sorted.sort_by(f64::total_cmp);
-        assert!((sorted[0] - 1.0).abs() < 1e-12 && (sorted[1] - 3.0).abs() < 1e-12);
-        // A v = λ v for each column.
-        for j in 0..2 {
-            let v = [vectors[j], vectors[2 + j]];
-            let av = [2.0 * v[0] + v[1], v[0] + 2.0 * v[1]];
-            assert!((av[0] - values[j] * v[0]).abs() < 1e-12);
-            assert!((av[1] - values[j] * v[1]).abs() < 1e-12);
-        }
     }
 }

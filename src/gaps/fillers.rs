@@ -1,0 +1,288 @@
+//! The words of gap filling in code: the one view of masked tracks that everything here
+//! reads ([`Marked`]), the fillers that doma's fill blends and is measured against
+//! ([`Filler`], one variant each), what they fill from ([`Sources`]), and one value per
+//! filler ([`PerFiller`], a blend's weights or a report's errors, keyed by name in JSON).
+//!
+//! The classic fillers are in [`super::classic`], the field's fills in
+//! [`super::field_fill`]. Every filler sees only the observed entries (docs/design.md §7).
+
+use std::cell::OnceCell;
+use std::ops::{Index, IndexMut};
+
+use serde::de::{Deserializer, IgnoredAny, MapAccess, Visitor};
+use serde::ser::{SerializeMap, Serializer};
+use serde::{Deserialize, Serialize};
+
+use super::field_fill::{FieldPrediction, Lending, carry_residuals, field_fill_from_carry};
+
+/// Tracks with a mask: `positions` `[T, N, 3]` and `observed` `[T, N]`, frame-major. What
+/// every filler, span and gap of this module reads.
+#[derive(Clone, Copy, Debug)]
+pub struct Marked<'a> {
+    /// Frames `T`.
+    pub frames: usize,
+    /// Tracks `N`.
+    pub points: usize,
+    /// `[T, N, 3]`; unobserved entries are never read.
+    pub positions: &'a [f32],
+    /// `[T, N]`.
+    pub observed: &'a [bool],
+}
+
+impl<'a> Marked<'a> {
+    /// The view of `positions` and `observed`; panics if their lengths are not `3·T·N` and
+    /// `T·N` (a caller's bug, not bad data).
+    pub fn new(frames: usize, points: usize, positions: &'a [f32], observed: &'a [bool]) -> Self {
+        assert_eq!(positions.len(), 3 * frames * points);
+        assert_eq!(observed.len(), frames * points);
+        Marked {
+            frames,
+            points,
+            positions,
+            observed,
+        }
+    }
+
+    /// The same tracks seen through another mask (`[T, N]`).
+    pub fn with_observed(&self, observed: &'a [bool]) -> Self {
+        Marked::new(self.frames, self.points, self.positions, observed)
+    }
+
+    /// Whether track `i` is observed at frame `k`.
+    pub fn seen(&self, k: usize, i: usize) -> bool {
+        self.observed[k * self.points + i]
+    }
+
+    /// Track `i`'s position at frame `k` (whatever it holds there).
+    pub fn at(&self, k: usize, i: usize) -> [f32; 3] {
+        let e = 3 * (k * self.points + i);
+        [
+            self.positions[e],
+            self.positions[e + 1],
+            self.positions[e + 2],
+        ]
+    }
+}
+
+/// A gap filler: one variant and one arm of [`Filler::fill_at`] each. Reports, `doma
+/// complete`'s printout and the blend's weights list them by [`Filler::name`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Filler {
+    /// The field's fill: the field corrected by its neighbours' and the track's own
+    /// residuals ([`super::field_fill::field_fill`], [`Lending::Fixed`]).
+    FieldFill,
+    /// Each track's natural cubic spline ([`Marked::spline`]).
+    Spline,
+    /// The neighbours' motion ([`Marked::neighbours`]).
+    Neighbours,
+    /// The low-rank (PCA) reconstruction ([`Marked::low_rank`]).
+    LowRank,
+    /// Each track's linear interpolation ([`Marked::linear`]).
+    Linear,
+    /// The field's fill with lenders chosen frame by frame among the tracks seen there
+    /// ([`Lending::FrameByFrame`]).
+    FieldFillFramewise,
+}
+
+impl Filler {
+    /// The number of fillers.
+    pub const COUNT: usize = 6;
+
+    /// Every filler, in the order of a blend's weights: a tie in the blend goes to the
+    /// earlier (the field's fill first).
+    pub const ALL: [Filler; Filler::COUNT] = [
+        Filler::FieldFill,
+        Filler::Spline,
+        Filler::Neighbours,
+        Filler::LowRank,
+        Filler::Linear,
+        Filler::FieldFillFramewise,
+    ];
+
+    /// Its place in [`Filler::ALL`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Its key in reports and weights.
+    pub fn name(self) -> &'static str {
+        match self {
+            Filler::FieldFill => "field_fill",
+            Filler::Spline => "spline",
+            Filler::Neighbours => "neighbours",
+            Filler::LowRank => "low_rank",
+            Filler::Linear => "linear",
+            Filler::FieldFillFramewise => "field_fill_framewise",
+        }
+    }
+
+    /// Its name for people.
+    pub fn label(self) -> &'static str {
+        match self {
+            Filler::FieldFill => "field's fill",
+            Filler::Spline => "spline",
+            Filler::Neighbours => "neighbours",
+            Filler::LowRank => "low rank",
+            Filler::Linear => "linear",
+            Filler::FieldFillFramewise => "field's fill, lenders frame by frame",
+        }
+    }
+
+    /// The filler named `name` ([`Filler::name`], or the key reports written before these
+    /// names used: `carried` and `framewise`).
+    pub fn from_name(name: &str) -> Option<Filler> {
+        match name {
+            "carried" => Some(Filler::FieldFill),
+            "framewise" => Some(Filler::FieldFillFramewise),
+            _ => Filler::ALL.into_iter().find(|f| f.name() == name),
+        }
+    }
+
+    /// Whether it is one of the field's fills (the others are the classic fillers).
+    pub fn is_field(self) -> bool {
+        matches!(self, Filler::FieldFill | Filler::FieldFillFramewise)
+    }
+
+    /// This filler's value at each of `entries` `(frame, track)`, filled from the
+    /// observations of `sources`. An entry of a track never observed is whatever the
+    /// positions hold there (NaN for the neighbours' motion).
+    pub fn fill_at(self, sources: &Sources, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
+        let marked = &sources.marked;
+        let whole = match self {
+            Filler::FieldFill => sources.field_fill(Lending::Fixed),
+            Filler::FieldFillFramewise => sources.field_fill(Lending::FrameByFrame),
+            Filler::Spline => marked.spline(),
+            Filler::LowRank => marked.low_rank(),
+            Filler::Linear => marked.linear(),
+            Filler::Neighbours => return marked.neighbours(entries),
+        };
+        let n = marked.points;
+        entries
+            .iter()
+            .map(|&(k, i)| {
+                let e = 3 * (k * n + i);
+                [whole[e], whole[e + 1], whole[e + 2]]
+            })
+            .collect()
+    }
+}
+
+/// What every filler fills from: the masked tracks and the field's prediction of them, with
+/// the residual carry that both field's fills start from computed once.
+pub struct Sources<'a> {
+    /// The tracks and the observations to fill from.
+    pub marked: Marked<'a>,
+    /// The field's prediction of the tracks.
+    pub field: &'a FieldPrediction<'a>,
+    carried: OnceCell<Vec<f32>>,
+}
+
+impl<'a> Sources<'a> {
+    /// The sources of `marked` and `field`.
+    pub fn new(marked: Marked<'a>, field: &'a FieldPrediction<'a>) -> Self {
+        Sources {
+            marked,
+            field,
+            carried: OnceCell::new(),
+        }
+    }
+
+    /// The field's fill of every gap with `lending`.
+    pub fn field_fill(&self, lending: Lending) -> Vec<f32> {
+        let carried = self
+            .carried
+            .get_or_init(|| carry_residuals(&self.marked, self.field.predicted));
+        field_fill_from_carry(&self.marked, self.field, carried, lending)
+    }
+}
+
+/// One value per [`Filler`], indexed by it; in JSON an object keyed by [`Filler::name`]
+/// (earlier reports' keys are read too, a key for no filler is passed over).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PerFiller<T>(pub [T; Filler::COUNT]);
+
+/// A value of a [`PerFiller`]: what a key missing from the JSON reads as, and whether a
+/// value is left out when written.
+pub trait FillerValue: Copy {
+    /// The value of a missing key.
+    const ABSENT: Self;
+    /// Whether the value is left out of the JSON.
+    fn is_absent(&self) -> bool;
+}
+
+/// A weight: a missing one is 0, every one is written.
+impl FillerValue for f64 {
+    const ABSENT: f64 = 0.0;
+    fn is_absent(&self) -> bool {
+        false
+    }
+}
+
+/// A measure that a report may lack (one written before that filler existed).
+impl FillerValue for Option<f64> {
+    const ABSENT: Option<f64> = None;
+    fn is_absent(&self) -> bool {
+        self.is_none()
+    }
+}
+
+impl<T> Index<Filler> for PerFiller<T> {
+    type Output = T;
+    fn index(&self, f: Filler) -> &T {
+        &self.0[f.index()]
+    }
+}
+
+impl<T> IndexMut<Filler> for PerFiller<T> {
+    fn index_mut(&mut self, f: Filler) -> &mut T {
+        &mut self.0[f.index()]
+    }
+}
+
+impl<T: FillerValue> PerFiller<T> {
+    /// `f(filler)` for every filler.
+    pub fn from_fn(f: impl FnMut(Filler) -> T) -> Self {
+        PerFiller(Filler::ALL.map(f))
+    }
+
+    /// Every filler with its value, in the order of [`Filler::ALL`].
+    pub fn iter(&self) -> impl Iterator<Item = (Filler, T)> + '_ {
+        Filler::ALL.into_iter().map(|f| (f, self[f]))
+    }
+}
+
+impl<T: FillerValue + Serialize> Serialize for PerFiller<T> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let present: Vec<(Filler, T)> = self.iter().filter(|(_, v)| !v.is_absent()).collect();
+        let mut map = s.serialize_map(Some(present.len()))?;
+        for (f, v) in present {
+            map.serialize_entry(f.name(), &v)?;
+        }
+        map.end()
+    }
+}
+
+impl<'de, T: FillerValue + Deserialize<'de>> Deserialize<'de> for PerFiller<T> {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct ByName<T>(std::marker::PhantomData<T>);
+        impl<'de, T: FillerValue + Deserialize<'de>> Visitor<'de> for ByName<T> {
+            type Value = PerFiller<T>;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("an object keyed by filler names")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+                let mut out = PerFiller([T::ABSENT; Filler::COUNT]);
+                while let Some(key) = map.next_key::<String>()? {
+                    match Filler::from_name(&key) {
+                        Some(f) => out[f] = map.next_value()?,
+                        None => {
+                            map.next_value::<IgnoredAny>()?;
+                        }
+                    }
+                }
+                Ok(out)
+            }
+        }
+        d.deserialize_map(ByName(std::marker::PhantomData))
+    }
+}

@@ -1,0 +1,239 @@
+//! The small solvers of gap filling: the natural cubic spline's tridiagonal system, the
+//! symmetric eigenproblem of a PCA, and the least squares on the simplex that weighs a
+//! blend. Plain `f64` arithmetic on slices and fixed-size arrays, no tensors.
+
+// Index loops over small matrices read as the algebra they implement.
+#![allow(clippy::needless_range_loop)]
+
+/// The second derivatives of the natural cubic spline through `(x, y)` (0 at both ends),
+/// by the tridiagonal (Thomas) solve.
+pub fn natural_second_derivatives(x: &[f64], y: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    let mut m = vec![0f64; n];
+    if n < 3 {
+        return m;
+    }
+    // Rows 1..n-1: h[j-1] m[j-1] + 2 (h[j-1] + h[j]) m[j] + h[j] m[j+1] = 6 (slope_j − slope_{j-1}).
+    let h: Vec<f64> = x.windows(2).map(|w| w[1] - w[0]).collect();
+    let mut diag = vec![0f64; n];
+    let mut rhs = vec![0f64; n];
+    for j in 1..n - 1 {
+        diag[j] = 2.0 * (h[j - 1] + h[j]);
+        rhs[j] = 6.0 * ((y[j + 1] - y[j]) / h[j] - (y[j] - y[j - 1]) / h[j - 1]);
+    }
+    for j in 2..n - 1 {
+        let w = h[j - 1] / diag[j - 1];
+        diag[j] -= w * h[j - 1];
+        rhs[j] -= w * rhs[j - 1];
+    }
+    for j in (1..n - 1).rev() {
+        m[j] = (rhs[j] - h[j] * m[j + 1]) / diag[j];
+    }
+    m
+}
+
+/// The spline of [`natural_second_derivatives`] at `v` in `[x[j], x[j+1]]`.
+pub fn spline_at(x: &[f64], y: &[f64], m: &[f64], j: usize, v: f64) -> f64 {
+    let h = x[j + 1] - x[j];
+    let (a, b) = ((x[j + 1] - v) / h, (v - x[j]) / h);
+    a * y[j] + b * y[j + 1] + ((a * a * a - a) * m[j] + (b * b * b - b) * m[j + 1]) * h * h / 6.0
+}
+
+/// The eigenvalues and eigenvectors (columns of the returned `[n, n]`) of the symmetric
+/// `a` (`[n, n]`, row-major), by cyclic Jacobi rotations.
+pub fn symmetric_eigen(mut a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut v = vec![0f64; n * n];
+    for i in 0..n {
+        v[i * n + i] = 1.0;
+    }
+    let scale: f64 = a.iter().map(|x| x * x).sum::<f64>().max(1e-300);
+    for _sweep in 0..60 {
+        let off: f64 = (0..n)
+            .flat_map(|p| (0..n).filter(move |&q| q != p).map(move |q| (p, q)))
+            .map(|(p, q)| a[p * n + q] * a[p * n + q])
+            .sum();
+        if off <= 1e-24 * scale {
+            break;
+        }
+        for p in 0..n {
+            for q in p + 1..n {
+                let apq = a[p * n + q];
+                if apq.abs() <= 1e-300 {
+                    continue;
+                }
+                let theta = (a[q * n + q] - a[p * n + p]) / (2.0 * apq);
+                let tan = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let tan = if theta == 0.0 { 1.0 } else { tan };
+                let cos = 1.0 / (tan * tan + 1.0).sqrt();
+                let sin = tan * cos;
+                for k in 0..n {
+                    let (akp, akq) = (a[k * n + p], a[k * n + q]);
+                    a[k * n + p] = cos * akp - sin * akq;
+                    a[k * n + q] = sin * akp + cos * akq;
+                }
+                for k in 0..n {
+                    let (apk, aqk) = (a[p * n + k], a[q * n + k]);
+                    a[p * n + k] = cos * apk - sin * aqk;
+                    a[q * n + k] = sin * apk + cos * aqk;
+                }
+                for k in 0..n {
+                    let (vkp, vkq) = (v[k * n + p], v[k * n + q]);
+                    v[k * n + p] = cos * vkp - sin * vkq;
+                    v[k * n + q] = sin * vkp + cos * vkq;
+                }
+            }
+        }
+    }
+    ((0..n).map(|i| a[i * n + i]).collect(), v)
+}
+
+/// The weights `w ≥ 0`, `Σ w = 1` that minimise `wᵀ E w`, for `E` the Gram matrix of the
+/// fillers' errors: the exact minimum over every support (2^M − 1 of them), each solved
+/// with its equality constraint by the KKT system `[E_S 1; 1ᵀ 0] [w; λ] = [0; 1]`.
+pub fn simplex_least_squares<const M: usize>(e: &[[f64; M]; M]) -> [f64; M] {
+    let mut best = ([0f64; M], f64::INFINITY);
+    for support in 1u32..(1 << M) {
+        let idx: Vec<usize> = (0..M).filter(|&m| support & (1 << m) != 0).collect();
+        let s = idx.len();
+        // The KKT system, (s + 1) × (s + 1), augmented with its right-hand side.
+        let mut a = vec![vec![0f64; s + 2]; s + 1];
+        for (r, &m) in idx.iter().enumerate() {
+            for (c, &l) in idx.iter().enumerate() {
+                a[r][c] = e[m][l];
+            }
+            a[r][s] = 1.0;
+        }
+        for c in 0..s {
+            a[s][c] = 1.0;
+        }
+        a[s][s + 1] = 1.0;
+        let Some(x) = solve(a) else { continue };
+        if x[..s].iter().any(|&w| w < -1e-12 || !w.is_finite()) {
+            continue;
+        }
+        let mut w = [0f64; M];
+        for (r, &m) in idx.iter().enumerate() {
+            w[m] = x[r].max(0.0);
+        }
+        let total: f64 = w.iter().sum();
+        w.iter_mut().for_each(|v| *v /= total);
+        let objective = quadratic(&w, e);
+        // Ties go to the support found first (lower indices before higher).
+        if objective < best.1 * (1.0 - 1e-12) {
+            best = (w, objective);
+        }
+    }
+    best.0
+}
+
+/// `wᵀ E w`.
+pub fn quadratic<const M: usize>(w: &[f64; M], e: &[[f64; M]; M]) -> f64 {
+    (0..M)
+        .flat_map(|m| (0..M).map(move |l| (m, l)))
+        .map(|(m, l)| w[m] * e[m][l] * w[l])
+        .sum()
+}
+
+/// Gaussian elimination with partial pivoting on an augmented `m × (m + 1)` system; `None`
+/// if it is singular.
+fn solve(mut a: Vec<Vec<f64>>) -> Option<Vec<f64>> {
+    let m = a.len();
+    let scale = a
+        .iter()
+        .flat_map(|r| r[..m].iter())
+        .fold(0f64, |s, v| s.max(v.abs()));
+    for col in 0..m {
+        let pivot = (col..m).max_by(|&x, &y| a[x][col].abs().total_cmp(&a[y][col].abs()))?;
+        if a[pivot][col].abs() <= 1e-12 * scale {
+            return None;
+        }
+        a.swap(col, pivot);
+        for r in 0..m {
+            if r != col {
+                let f = a[r][col] / a[col][col];
+                if f != 0.0 {
+                    for c in col..=m {
+                        a[r][c] -= f * a[col][c];
+                    }
+                }
+            }
+        }
+    }
+    Some((0..m).map(|r| a[r][m] / a[r][r]).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn natural_spline_values_match_a_hand_solved_case() {
+        // Knots (0,0), (1,1), (2,0): m1 = 6·(−1 − 1)/(2·2) = −3, so at 0.5:
+        // 0.5·0 + 0.5·1 + (0.125 − 0.5)·(−3)/6 = 0.5 + 0.1875.
+        let (x, y) = ([0.0, 1.0, 2.0], [0.0, 1.0, 0.0]);
+        let m = natural_second_derivatives(&x, &y);
+        assert_eq!(m, vec![0.0, -3.0, 0.0]);
+        assert!((spline_at(&x, &y, &m, 0, 0.5) - 0.6875).abs() < 1e-12);
+    }
+
+    #[test]
+    fn jacobi_diagonalises_a_known_matrix() {
+        // [[2, 1], [1, 2]]: eigenvalues 1 and 3.
+        let (values, vectors) = symmetric_eigen(vec![2.0, 1.0, 1.0, 2.0], 2);
+        let mut sorted = values.clone();
+        sorted.sort_by(f64::total_cmp);
+        assert!((sorted[0] - 1.0).abs() < 1e-12 && (sorted[1] - 3.0).abs() < 1e-12);
+        // A v = λ v for each column.
+        for j in 0..2 {
+            let v = [vectors[j], vectors[2 + j]];
+            let av = [2.0 * v[0] + v[1], v[0] + 2.0 * v[1]];
+            assert!((av[0] - values[j] * v[0]).abs() < 1e-12);
+            assert!((av[1] - values[j] * v[1]).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn the_simplex_minimum_matches_hand_solved_cases() {
+        const M: usize = 6;
+        // Independent errors of variances 1, 4 and 100: the weights are the inverse
+        // variances, normalised: (1, 1/4, 1/100, 1/100, 1/100, 1/100) / 1.29.
+        let mut e = [[0f64; M]; M];
+        e[0][0] = 1.0;
+        e[1][1] = 4.0;
+        for m in 2..M {
+            e[m][m] = 100.0;
+        }
+        let w = simplex_least_squares(&e);
+        let want = [1.0, 0.25, 0.01, 0.01, 0.01, 0.01].map(|v| v / 1.29);
+        for m in 0..M {
+            assert!((w[m] - want[m]).abs() < 1e-12, "{w:?}");
+        }
+        // A filler that is exact takes the whole weight.
+        let mut e = [[1f64; M]; M];
+        for m in 0..M {
+            e[m][m] = 2.0;
+        }
+        for l in 0..M {
+            e[3][l] = 0.0;
+            e[l][3] = 0.0;
+        }
+        let w = simplex_least_squares(&e);
+        assert_eq!(w, [0.0, 0.0, 0.0, 1.0, 0.0, 0.0]);
+        // Perfectly anti-correlated errors cancel: (1, −1) → (0.5, 0.5) with zero error,
+        // which a negative weight elsewhere cannot improve on.
+        let mut e = [[0f64; M]; M];
+        e[0][0] = 1.0;
+        e[1][1] = 1.0;
+        e[0][1] = -1.0;
+        e[1][0] = -1.0;
+        for m in 2..M {
+            e[m][m] = 3.0;
+        }
+        let w = simplex_least_squares(&e);
+        assert!(
+            (w[0] - 0.5).abs() < 1e-12 && (w[1] - 0.5).abs() < 1e-12,
+            "{w:?}"
+        );
+        assert!(w[2..].iter().all(|&v| v == 0.0), "{w:?}");
+    }
+}

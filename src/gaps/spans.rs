@@ -1,0 +1,331 @@
+//! Where the gaps are, and where to make new ones: each track's gaps ([`Gap`], the one place
+//! that finds their borders), their classes and lengths, and the seeded spans of observations
+//! hidden to measure a fill ([`hold_out_spans`]) or to validate a blend
+//! ([`validation_spans`]). Every span lies inside its track's observations, so a hidden
+//! entry is a gap to fill, never an extrapolation past the ends.
+
+use std::ops::Range;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::field_fill::SPLINE_CARRY_FRAMES;
+use super::fillers::Marked;
+
+/// A run of frames in which one track is unobserved, with the observed frames that border
+/// it (`None` past either end of the clip).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Gap {
+    /// The track.
+    pub track: usize,
+    /// The unobserved frames.
+    pub frames: Range<usize>,
+    /// The last observed frame before the gap.
+    pub before: Option<usize>,
+    /// The first observed frame after the gap.
+    pub after: Option<usize>,
+}
+
+impl Gap {
+    /// The frames in the gap.
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Never: a gap holds at least one frame (for clippy's `len` without `is_empty`).
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+
+    /// Whether the track is observed on both sides: a gap that interpolation fills, not a
+    /// run before the first or after the last observation.
+    pub fn is_interior(&self) -> bool {
+        self.before.is_some() && self.after.is_some()
+    }
+
+    /// Whether the gap is long: more than [`SPLINE_CARRY_FRAMES`] frames (a run past either
+    /// end counts its own length).
+    pub fn is_long(&self) -> bool {
+        self.len() > SPLINE_CARRY_FRAMES
+    }
+}
+
+/// The gaps of track `i` of `tracks`, in frame order; none for a track never observed.
+pub fn track_gaps(tracks: &Marked, i: usize) -> Vec<Gap> {
+    let t = tracks.frames;
+    let mut out = Vec::new();
+    let mut before = None;
+    let mut start = 0;
+    for k in 0..=t {
+        if k < t && !tracks.seen(k, i) {
+            continue;
+        }
+        if k > start {
+            let after = (k < t).then_some(k);
+            if before.is_some() || after.is_some() {
+                out.push(Gap {
+                    track: i,
+                    frames: start..k,
+                    before,
+                    after,
+                });
+            }
+        }
+        before = Some(k);
+        start = k + 1;
+    }
+    out
+}
+
+/// Every gap of every track, track by track and in frame order within a track.
+pub fn gaps<'a>(tracks: &'a Marked<'a>) -> impl Iterator<Item = Gap> + 'a {
+    (0..tracks.points).flat_map(move |i| track_gaps(tracks, i))
+}
+
+/// For each entry `[T, N]`: `None` if observed or of a track never observed, else whether
+/// its gap [`Gap::is_long`].
+pub fn gap_classes(tracks: &Marked) -> Vec<Option<bool>> {
+    let n = tracks.points;
+    let mut out = vec![None; tracks.frames * n];
+    for gap in gaps(tracks) {
+        for k in gap.frames.clone() {
+            out[k * n + gap.track] = Some(gap.is_long());
+        }
+    }
+    out
+}
+
+/// The length of every interior gap of `tracks` (observed on both sides), track by track.
+pub fn gap_lengths(tracks: &Marked) -> Vec<usize> {
+    gaps(tracks)
+        .filter(Gap::is_interior)
+        .map(|g| g.len())
+        .collect()
+}
+
+/// The span lengths of [`hold_out_spans`] unless asked otherwise: 2 to 10 frames.
+pub const DEFAULT_SPANS: std::ops::RangeInclusive<usize> = 2..=10;
+
+/// A seeded choice of about `fraction` of the observed entries of `tracks` to hide, in
+/// spans of `spans` consecutive frames of one track (as a marker or a tracked point is lost
+/// for a while). Every span lies inside its track's observations: the track keeps an
+/// observation before it and one after, so that every hidden entry is a gap to fill, not an
+/// extrapolation past the ends. Returns the entries `(frame, point)`, sorted. Refuses a
+/// fraction outside `(0, 1)`, an empty or zero-length span range, and a fraction that cannot
+/// be reached.
+pub fn hold_out_spans(
+    tracks: &Marked,
+    fraction: f64,
+    spans: std::ops::RangeInclusive<usize>,
+    seed: u64,
+) -> Result<Vec<(usize, usize)>, String> {
+    check_fraction(fraction)?;
+    let (shortest, longest) = (*spans.start(), *spans.end());
+    if shortest == 0 || shortest > longest {
+        return Err(format!(
+            "spans of {shortest} to {longest} frames: the lengths must be at least 1 and in order"
+        ));
+    }
+    let t = tracks.frames;
+    hold_out_drawn(tracks, fraction, [shortest, longest], seed, |rng| {
+        rng.random_range(shortest..=longest.min(t - 2))
+    })
+}
+
+/// A seeded choice of about `fraction` of the observed entries of `tracks` to
+/// hide for validating a gap fill: spans inside the tracks' observations, their lengths
+/// drawn from the tracks' own interior gaps (one draw per gap, so the spans are as long as
+/// the gaps to fill), or from [`DEFAULT_SPANS`] when there is no interior gap. Refuses
+/// what [`hold_out_spans`] refuses.
+pub fn validation_spans(
+    tracks: &Marked,
+    fraction: f64,
+    seed: u64,
+) -> Result<Vec<(usize, usize)>, String> {
+    let t = tracks.frames;
+    let mut lengths: Vec<usize> = gap_lengths(tracks)
+        .into_iter()
+        .filter(|&l| l + 2 <= t)
+        .collect();
+    if lengths.is_empty() {
+        lengths = DEFAULT_SPANS.filter(|&l| l + 2 <= t).collect();
+    }
+    hold_out_lengths(tracks, fraction, &lengths, seed)
+}
+
+/// [`hold_out_spans`] with each span's length
+/// drawn from `lengths` (each at least 1 and at most `T − 2`), uniformly: a list of the
+/// data's own gap lengths gives spans distributed as its gaps are.
+fn hold_out_lengths(
+    tracks: &Marked,
+    fraction: f64,
+    lengths: &[usize],
+    seed: u64,
+) -> Result<Vec<(usize, usize)>, String> {
+    let (Some(&shortest), Some(&longest)) = (lengths.iter().min(), lengths.iter().max()) else {
+        return Err("no span lengths to draw from".into());
+    };
+    let t = tracks.frames;
+    if shortest == 0 || longest + 2 > t {
+        return Err(format!(
+            "spans of {shortest} to {longest} frames do not fit inside {t} frames"
+        ));
+    }
+    hold_out_drawn(tracks, fraction, [shortest, longest], seed, |rng| {
+        lengths[rng.random_range(0..lengths.len())]
+    })
+}
+
+fn check_fraction(fraction: f64) -> Result<(), String> {
+    if fraction > 0.0 && fraction < 1.0 {
+        Ok(())
+    } else {
+        Err(format!(
+            "a held-out fraction of {fraction} is not strictly between 0 and 1"
+        ))
+    }
+}
+
+/// The draw of [`hold_out_spans`] and [`hold_out_lengths`]: `length` draws each span's
+/// length, `[shortest, longest]` bound it (for the checks and the message).
+fn hold_out_drawn(
+    tracks: &Marked,
+    fraction: f64,
+    [shortest, longest]: [usize; 2],
+    seed: u64,
+    mut length: impl FnMut(&mut ChaCha8Rng) -> usize,
+) -> Result<Vec<(usize, usize)>, String> {
+    let (t, n) = (tracks.frames, tracks.points);
+    check_fraction(fraction)?;
+    let observed_count = tracks.observed.iter().filter(|&&o| o).count();
+    let target = (fraction * observed_count as f64).round() as usize;
+    let mut observed = tracks.observed.to_vec();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut hidden = Vec::with_capacity(target);
+    let mut tries = 0usize;
+    let cannot = |hid: usize| {
+        format!(
+            "cannot hide {fraction} of the {observed_count} observations in spans of {shortest} \
+             to {longest} frames inside the tracks' observations (hid {hid} of {target})"
+        )
+    };
+    while hidden.len() < target {
+        tries += 1;
+        if tries > 100 * (target + n) || t < shortest + 2 || n == 0 {
+            return Err(cannot(hidden.len()));
+        }
+        let i = rng.random_range(0..n);
+        // A frame before and one after the span.
+        let len = length(&mut rng);
+        let start = rng.random_range(1..=t - 1 - len);
+        let seen = |k: usize| observed[k * n + i];
+        if !(0..start).any(seen) || !(start + len..t).any(seen) {
+            continue;
+        }
+        for k in start..start + len {
+            if hidden.len() == target {
+                break;
+            }
+            if observed[k * n + i] {
+                observed[k * n + i] = false;
+                hidden.push((k, i));
+            }
+        }
+    }
+    hidden.sort_unstable();
+    Ok(hidden)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gaps_are_the_unobserved_runs_between_the_nearest_observed_frames() {
+        let seen = [false, true, false, false, true, false];
+        let positions = vec![0f32; 18];
+        let tracks = Marked::new(6, 1, &positions, &seen);
+        assert_eq!(
+            track_gaps(&tracks, 0),
+            vec![
+                Gap {
+                    track: 0,
+                    frames: 0..1,
+                    before: None,
+                    after: Some(1)
+                },
+                Gap {
+                    track: 0,
+                    frames: 2..4,
+                    before: Some(1),
+                    after: Some(4)
+                },
+                Gap {
+                    track: 0,
+                    frames: 5..6,
+                    before: Some(4),
+                    after: None
+                },
+            ]
+        );
+        let never = [false; 6];
+        assert!(track_gaps(&Marked::new(6, 1, &positions, &never), 0).is_empty());
+    }
+
+    #[test]
+    fn gap_classes_and_lengths_follow_the_gaps() {
+        // One track of 40 frames: seen at 0, 4, 30, 39 (gaps of 3, 25 and 8), and one never
+        // seen.
+        let (t, n) = (40, 2);
+        let mut observed = vec![false; t * n];
+        for k in [0, 4, 30, 39] {
+            observed[k * n] = true;
+        }
+        let positions = vec![0f32; 3 * t * n];
+        let tracks = Marked::new(t, n, &positions, &observed);
+        let classes = gap_classes(&tracks);
+        assert_eq!(classes[2 * n], Some(false));
+        assert_eq!(classes[10 * n], Some(true));
+        assert!(classes.iter().skip(1).step_by(2).all(Option::is_none));
+        assert_eq!(gap_lengths(&tracks), vec![3, 25, 8]);
+    }
+
+    #[test]
+    fn held_out_spans_are_seeded_leave_every_track_seen_and_reach_the_fraction() {
+        let (positions, all) = (vec![0f32; 1800], vec![true; 600]);
+        let tracks = Marked::new(20, 30, &positions, &all);
+        let a = hold_out_spans(&tracks, 0.25, DEFAULT_SPANS, 7).unwrap();
+        assert_eq!(a, hold_out_spans(&tracks, 0.25, DEFAULT_SPANS, 7).unwrap());
+        assert_ne!(a, hold_out_spans(&tracks, 0.25, DEFAULT_SPANS, 8).unwrap());
+        assert_eq!(a.len(), 150);
+        let mut left = all.clone();
+        for &(k, i) in &a {
+            left[k * 30 + i] = false;
+        }
+        assert!((0..30).all(|i| (0..20).any(|k| left[k * 30 + i])));
+        // In spans: most hidden entries have a hidden neighbour in time on their track.
+        let set: std::collections::BTreeSet<_> = a.iter().copied().collect();
+        let runs = a
+            .iter()
+            .filter(|&&(k, i)| set.contains(&(k + 1, i)) || (k > 0 && set.contains(&(k - 1, i))))
+            .count();
+        assert!(runs as f64 > 0.9 * a.len() as f64, "{runs} of {}", a.len());
+        // Inside the observations: every track keeps its first and last frame.
+        assert!(a.iter().all(|&(k, _)| k > 0 && k < 19));
+        assert!(hold_out_spans(&tracks, 1.0, DEFAULT_SPANS, 0).is_err());
+        assert!(hold_out_spans(&tracks, 0.2, 0..=3, 0).is_err());
+        // Long spans: runs of at least 6 frames, where the track had them.
+        let long = hold_out_spans(&tracks, 0.2, 6..=12, 3).unwrap();
+        let set: std::collections::BTreeSet<_> = long.iter().copied().collect();
+        let starts: Vec<_> = long
+            .iter()
+            .filter(|&&(k, i)| !set.contains(&(k.wrapping_sub(1), i)))
+            .collect();
+        assert!(
+            starts.len() * 6 <= long.len() + 6,
+            "{} spans for {} entries",
+            starts.len(),
+            long.len()
+        );
+    }
+}
