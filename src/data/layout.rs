@@ -167,16 +167,50 @@ impl TrackFile {
 /// `[T, N]`, an observed coordinate that is not finite (an f16 overflow reads as
 /// infinity), a frame or flag that the layout does not have.
 pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
-    let malformed = |reason: String| DomaError::Malformed {
-        path: path.to_path_buf(),
-        reason,
-    };
     let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
-    let members = npz_members(&bytes).map_err(malformed)?;
+    let members = npz_members(&bytes).map_err(|reason| malformed(path, reason))?;
     let names: Vec<&str> = members.iter().map(|m| m.name.as_str()).collect();
     let layout = file
         .layout
         .unwrap_or_else(|| Layout::detect(names.iter().copied()));
+    check_flags(path, layout, file)?;
+    if layout == Layout::Plain {
+        return Ok(Tracks::complete(read_npz_trajectories(path, None)?));
+    }
+    let archive = Archive::open(path, &bytes, &members, layout, file)?;
+    let observed = archive.observed(file.count_hidden)?;
+    let mut positions = read_npz_member(&bytes, archive.member(archive.tracks_key)?)
+        .map_err(|reason| malformed(path, reason))?
+        .data;
+    if layout == Layout::PointOdyssey && file.frame == Some(CoordFrame::Camera) {
+        archive.to_camera(&mut positions, &observed)?;
+    }
+    let (t, n, key) = (archive.frames, archive.points, archive.tracks_key);
+    let tracks = Tracks::new(t, n, positions, observed).map_err(|reason| {
+        let hint = if archive.half && reason.contains("inf") {
+            " (an f16 value past ±65504 reads as infinity)"
+        } else {
+            ""
+        };
+        malformed(path, format!("{key}: {reason}{hint}"))
+    })?;
+    match &file.confidence {
+        Some(key) => tracks
+            .with_weights(archive.entries(key)?)
+            .map_err(|reason| malformed(path, format!("{key}: {reason}"))),
+        None => Ok(tracks),
+    }
+}
+
+fn malformed(path: &Path, reason: String) -> DomaError {
+    DomaError::Malformed {
+        path: path.to_path_buf(),
+        reason,
+    }
+}
+
+/// Refuses a flag that `layout` does not have, naming it.
+fn check_flags(path: &Path, layout: Layout, file: &TrackFile) -> Result<()> {
     let usage =
         |what: &str| DomaError::Usage(format!("{what}: {} is read as {layout}", path.display()));
     match (layout, file.frame) {
@@ -209,82 +243,135 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
         if file.visibility_threshold.is_some() {
             return Err(usage("--visibility-threshold needs a tracker layout"));
         }
-        let data = read_npz_trajectories(path, None)?;
-        return Ok(Tracks::complete(data));
     }
-    let member = |key: &str| -> Result<&NpzMember> {
-        members.iter().find(|m| m.name == key).ok_or_else(|| {
-            malformed(format!(
-                "no key {key:?}, which the {layout} layout needs ({:?}); the archive holds {names:?}",
-                layout.keys()
+    Ok(())
+}
+
+/// A tracker's archive: its members, its layout, and the shape of its tracks, read from
+/// the headers before any values are inflated.
+struct Archive<'a> {
+    path: &'a Path,
+    bytes: &'a [u8],
+    members: &'a [NpzMember],
+    layout: Layout,
+    tracks_key: &'static str,
+    frames: usize,
+    points: usize,
+    /// Whether the tracks are stored as f16.
+    half: bool,
+    threshold: f64,
+}
+
+impl<'a> Archive<'a> {
+    fn open(
+        path: &'a Path,
+        bytes: &'a [u8],
+        members: &'a [NpzMember],
+        layout: Layout,
+        file: &TrackFile,
+    ) -> Result<Self> {
+        let mut archive = Archive {
+            path,
+            bytes,
+            members,
+            layout,
+            tracks_key: layout.keys()[0],
+            frames: 0,
+            points: 0,
+            half: false,
+            threshold: file.visibility_threshold.unwrap_or(VISIBILITY_THRESHOLD),
+        };
+        let header = archive.header(archive.tracks_key)?;
+        (archive.frames, archive.points) = match header.shape[..] {
+            [t, n, 3] => (t, n),
+            _ => {
+                return Err(archive.malformed(format!(
+                    "{} has shape {:?}, not [T, N, 3]",
+                    archive.tracks_key, header.shape
+                )));
+            }
+        };
+        archive.half = header.is_half();
+        Ok(archive)
+    }
+
+    fn malformed(&self, reason: String) -> DomaError {
+        malformed(self.path, reason)
+    }
+
+    fn member(&self, key: &str) -> Result<&'a NpzMember> {
+        self.members.iter().find(|m| m.name == key).ok_or_else(|| {
+            let names: Vec<&str> = self.members.iter().map(|m| m.name.as_str()).collect();
+            self.malformed(format!(
+                "no key {key:?}, which the {} layout needs ({:?}); the archive holds {names:?}",
+                self.layout,
+                self.layout.keys()
             ))
         })
-    };
-    // Shapes are checked from the headers before any values are inflated.
-    let tracks_key = layout.keys()[0];
-    let tracks_member = member(tracks_key)?;
-    let header = npz_member_header(&bytes, tracks_member).map_err(malformed)?;
-    let (t, n) = match header.shape[..] {
-        [t, n, 3] => (t, n),
-        _ => {
-            return Err(malformed(format!(
-                "{tracks_key} has shape {:?}, not [T, N, 3]",
-                header.shape
-            )));
-        }
-    };
-    let half = header.is_half();
-    // A `[T, N]` array beside the tracks: a mask or the confidence weights.
-    let read_entries = |key: &str| -> Result<Vec<f32>> {
-        let m = member(key)?;
-        let h = npz_member_header(&bytes, m).map_err(malformed)?;
+    }
+
+    fn header(&self, key: &str) -> Result<doma_formats::npy::NpyHeader> {
+        npz_member_header(self.bytes, self.member(key)?).map_err(|r| self.malformed(r))
+    }
+
+    /// A `[T, N]` array beside the tracks: a mask or the confidence weights.
+    fn entries(&self, key: &str) -> Result<Vec<f32>> {
+        let (t, n) = (self.frames, self.points);
+        let h = self.header(key)?;
         if h.shape != [t, n] {
-            return Err(malformed(format!(
-                "{key} has shape {:?}, but {tracks_key} of shape [{t}, {n}, 3] needs [{t}, {n}]",
-                h.shape
+            return Err(self.malformed(format!(
+                "{key} has shape {:?}, but {} of shape [{t}, {n}, 3] needs [{t}, {n}]",
+                h.shape, self.tracks_key
             )));
         }
-        Ok(read_npz_member(&bytes, m).map_err(malformed)?.data)
-    };
-    let threshold = file.visibility_threshold.unwrap_or(VISIBILITY_THRESHOLD);
-    let read_mask = |key: &str| -> Result<Vec<bool>> {
-        let kind = npz_member_header(&bytes, member(key)?)
-            .map_err(malformed)?
-            .kind();
-        visibility_mask(key, kind, &read_entries(key)?, n, threshold).map_err(malformed)
-    };
-    let observed = match layout {
-        Layout::PointOdyssey => {
-            let valid = read_mask("valids")?;
-            if file.count_hidden {
-                valid
-            } else {
-                let visible = read_mask("visibs")?;
-                valid.iter().zip(visible).map(|(&a, b)| a && b).collect()
+        Ok(read_npz_member(self.bytes, self.member(key)?)
+            .map_err(|r| self.malformed(r))?
+            .data)
+    }
+
+    fn mask(&self, key: &str) -> Result<Vec<bool>> {
+        let kind = self.header(key)?.kind();
+        visibility_mask(key, kind, &self.entries(key)?, self.points, self.threshold)
+            .map_err(|r| self.malformed(r))
+    }
+
+    /// The observed mask of the layout: PointOdyssey's valid and visible entries (or its
+    /// valid ones, `count_hidden`), TAPVid-3D's visibility, the masked layout's `observed`.
+    fn observed(&self, count_hidden: bool) -> Result<Vec<bool>> {
+        Ok(match self.layout {
+            Layout::PointOdyssey => {
+                let valid = self.mask("valids")?;
+                if count_hidden {
+                    valid
+                } else {
+                    let visible = self.mask("visibs")?;
+                    valid.iter().zip(visible).map(|(&a, b)| a && b).collect()
+                }
             }
-        }
-        Layout::TapVid3d => read_mask("visibility")?,
-        Layout::Masked => read_mask("observed")?,
-        Layout::Plain => unreachable!("plain archives returned above"),
-    };
-    let mut positions = read_npz_member(&bytes, tracks_member)
-        .map_err(malformed)?
-        .data;
-    if layout == Layout::PointOdyssey && file.frame == Some(CoordFrame::Camera) {
-        let m = member("extrinsics")?;
-        let h = npz_member_header(&bytes, m).map_err(malformed)?;
+            Layout::TapVid3d => self.mask("visibility")?,
+            Layout::Masked => self.mask("observed")?,
+            Layout::Plain => unreachable!("plain archives are read as trajectories"),
+        })
+    }
+
+    /// `positions` moved to the camera frame by PointOdyssey's `extrinsics`.
+    fn to_camera(&self, positions: &mut [f32], observed: &[bool]) -> Result<()> {
+        let (t, n) = (self.frames, self.points);
+        let h = self.header("extrinsics")?;
         if h.shape != [t, 4, 4] {
-            return Err(malformed(format!(
+            return Err(self.malformed(format!(
                 "extrinsics has shape {:?}, but {t} frames need [{t}, 4, 4]",
                 h.shape
             )));
         }
-        let e = read_npz_member(&bytes, m).map_err(malformed)?.data;
+        let e = read_npz_member(self.bytes, self.member("extrinsics")?)
+            .map_err(|r| self.malformed(r))?
+            .data;
         // A frame's matrix matters where one of its points is observed; a non-finite entry
         // there would reach the points and be blamed on the tracks.
         let seen = |k: usize| observed[k * n..(k + 1) * n].iter().any(|&o| o);
         if let Some(i) = (0..16 * t).find(|&i| seen(i / 16) && !e[i].is_finite()) {
-            return Err(malformed(format!(
+            return Err(self.malformed(format!(
                 "extrinsics[{}, {}, {}] is {}: frame {} has observed points, so its \
                  world-to-camera matrix must be finite",
                 i / 16,
@@ -294,21 +381,7 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
                 i / 16
             )));
         }
-        to_camera(&mut positions, &e, &observed, n).map_err(malformed)?;
-    }
-    let tracks = Tracks::new(t, n, positions, observed).map_err(|reason| {
-        let hint = if half && reason.contains("inf") {
-            " (an f16 value past ±65504 reads as infinity)"
-        } else {
-            ""
-        };
-        malformed(format!("{tracks_key}: {reason}{hint}"))
-    })?;
-    match &file.confidence {
-        Some(key) => tracks
-            .with_weights(read_entries(key)?)
-            .map_err(|reason| malformed(format!("{key}: {reason}"))),
-        None => Ok(tracks),
+        to_camera(positions, &e, observed, n).map_err(|r| self.malformed(r))
     }
 }
 

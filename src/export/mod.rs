@@ -25,6 +25,7 @@ use std::path::Path;
 use burn::tensor::Device;
 
 use crate::data::mesh::{as_points, read_obj};
+use crate::data::sequence::Sequence;
 use crate::data::textured::{Part, TexturedMesh};
 use crate::run::{OpenRun, RunDir};
 use crate::{DomaError, Result};
@@ -81,32 +82,7 @@ pub fn export_gltf(
         |p: [f32; 3]| -> [f32; 3] { std::array::from_fn(|c| p[c] * own.scale + own.center[c]) };
     let to_norm =
         |p: [f32; 3]| -> [f32; 3] { std::array::from_fn(|c| (p[c] - own.center[c]) / own.scale) };
-    // The shape, in the data's units, and whether its vertices are the run's points.
-    let (shape, are_points) = match mesh {
-        Some(path) if options.color_by_error => {
-            let strict = read_obj(path)?;
-            if strict.vertices.len() != own.trajectories.points() {
-                return Err(DomaError::Malformed {
-                    path: path.to_path_buf(),
-                    reason: format!(
-                        "{} vertices, but the run's data has {} points: colouring by error needs one vertex per point, in order",
-                        strict.vertices.len(),
-                        own.trajectories.points()
-                    ),
-                });
-            }
-            (single_part(strict.vertices, strict.faces, path), true)
-        }
-        Some(path) => (TexturedMesh::read(path)?, false),
-        None => {
-            let vertices: Vec<[f32; 3]> = as_points(own.trajectories.canonical())
-                .into_iter()
-                .map(to_data)
-                .collect();
-            let faces = own.faces.clone().unwrap_or_default();
-            (single_part(vertices, faces, &config.data), true)
-        }
-    };
+    let (shape, are_points) = export_shape(mesh, options, &own, &config.data, to_data)?;
     let canonical: Vec<[f32; 3]> = shape.positions().into_iter().map(to_norm).collect();
     let mut frames: Vec<Vec<[f32; 3]>> = Vec::with_capacity(range.len());
     let mut error_sum = vec![0f64; canonical.len()];
@@ -131,20 +107,8 @@ pub fn export_gltf(
         frames.push(y.into_iter().map(to_data).collect());
         Ok(())
     })?;
-    let colors = (options.color_by_error && are_points).then(|| {
-        let mean: Vec<f64> = error_sum
-            .iter()
-            .zip(&error_count)
-            .map(|(e, &n)| if n > 0 { e / n as f64 } else { 0.0 })
-            .collect();
-        let max = mean.iter().copied().fold(0.0, f64::max).max(1e-12);
-        mean.iter()
-            .map(|&e| {
-                let [r, g, b] = crate::plot::ramp(e / max);
-                [r as f32 / 255.0, g as f32 / 255.0, b as f32 / 255.0]
-            })
-            .collect::<Vec<[f32; 3]>>()
-    });
+    let colors =
+        (options.color_by_error && are_points).then(|| error_colors(&error_sum, &error_count));
     let fps = options.fps.unwrap_or(24.0);
     // The last key time, (T − 1) / fps, must be a finite f32: `--fps 1e-45` is not.
     let last = (frames.len().saturating_sub(1)) as f32 / fps;
@@ -182,6 +146,59 @@ pub fn export_gltf(
         triangles: shape.parts.iter().map(|p| p.triangles.len()).sum(),
         frames: frames.len(),
         bytes: glb.len(),
+    })
+}
+
+/// Each vertex's colour on the error ramp: its mean L1 error over the frames where it is
+/// observed, relative to the largest.
+fn error_colors(error_sum: &[f64], error_count: &[usize]) -> Vec<[f32; 3]> {
+    let mean: Vec<f64> = error_sum
+        .iter()
+        .zip(error_count)
+        .map(|(e, &n)| if n > 0 { e / n as f64 } else { 0.0 })
+        .collect();
+    let max = mean.iter().copied().fold(0.0, f64::max).max(1e-12);
+    mean.iter()
+        .map(|&e| {
+            let [r, g, b] = crate::plot::ramp(e / max);
+            [r as f32 / 255.0, g as f32 / 255.0, b as f32 / 255.0]
+        })
+        .collect()
+}
+
+/// The shape to export, in the data's units, and whether its vertices are the run's points:
+/// `mesh` (one vertex per point when colouring by error), or the run's own points and faces.
+fn export_shape(
+    mesh: Option<&Path>,
+    options: &ExportOptions,
+    own: &Sequence,
+    data: &Path,
+    to_data: impl Fn([f32; 3]) -> [f32; 3],
+) -> Result<(TexturedMesh, bool)> {
+    Ok(match mesh {
+        Some(path) if options.color_by_error => {
+            let strict = read_obj(path)?;
+            if strict.vertices.len() != own.trajectories.points() {
+                return Err(DomaError::Malformed {
+                    path: path.to_path_buf(),
+                    reason: format!(
+                        "{} vertices, but the run's data has {} points: colouring by error needs one vertex per point, in order",
+                        strict.vertices.len(),
+                        own.trajectories.points()
+                    ),
+                });
+            }
+            (single_part(strict.vertices, strict.faces, path), true)
+        }
+        Some(path) => (TexturedMesh::read(path)?, false),
+        None => {
+            let vertices: Vec<[f32; 3]> = as_points(own.trajectories.canonical())
+                .into_iter()
+                .map(to_data)
+                .collect();
+            let faces = own.faces.clone().unwrap_or_default();
+            (single_part(vertices, faces, data), true)
+        }
     })
 }
 

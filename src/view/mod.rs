@@ -11,6 +11,7 @@ use burn::tensor::Device;
 use serde::Serialize;
 
 use crate::data::mesh::as_points;
+use crate::data::sequence::Sequence;
 use crate::data::textured::TexturedMesh;
 use crate::metrics::EPE_SCALE;
 use crate::run::{OpenRun, RunDir};
@@ -68,6 +69,63 @@ fn b64<T: bytemuck::Pod>(values: &[T]) -> String {
     base64::engine::general_purpose::STANDARD.encode(bytemuck::cast_slice(values))
 }
 
+/// The normalised vertices shown, their triangles, and whether they are the run's points.
+type ViewShape = (Vec<[f32; 3]>, Option<Vec<[u32; 3]>>, bool);
+
+/// The 95th percentile of `errors` (0 for none).
+fn percentile_95(mut errors: Vec<f32>) -> f32 {
+    errors.sort_by(f32::total_cmp);
+    errors.get(errors.len() * 95 / 100).copied().unwrap_or(0.0)
+}
+
+/// The axis to show upwards: the longest extent of `pred` (`[.., 3]` flat) when it is
+/// clearly the longest (1.3 times the others), else y.
+fn up_axis(pred: &[f32]) -> usize {
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for p in pred.chunks_exact(3) {
+        for c in 0..3 {
+            lo[c] = lo[c].min(p[c]);
+            hi[c] = hi[c].max(p[c]);
+        }
+    }
+    let ext: Vec<f32> = (0..3).map(|c| hi[c] - lo[c]).collect();
+    let longest = (0..3)
+        .max_by(|&a, &b| ext[a].total_cmp(&ext[b]))
+        .unwrap_or(1);
+    let clearly = (0..3)
+        .filter(|&c| c != longest)
+        .all(|c| ext[longest] > 1.3 * ext[c]);
+    if clearly { longest } else { 1 }
+}
+
+/// The shape to show, normalised as the run's data: `mesh`'s vertices and triangles, or
+/// the run's own points and faces; and whether its vertices are the run's points (with a
+/// truth to compare to).
+fn view_shape(mesh: Option<&Path>, own: &Sequence) -> Result<ViewShape> {
+    Ok(match mesh {
+        Some(path) => {
+            let textured = TexturedMesh::read(path)?;
+            let mut tris = Vec::new();
+            let mut offset = 0u32;
+            for part in &textured.parts {
+                tris.extend(part.triangles.iter().map(|t| t.map(|i| i + offset)));
+                offset += part.positions.len() as u32;
+            }
+            let norm: Vec<[f32; 3]> = textured
+                .positions()
+                .iter()
+                .map(|v| std::array::from_fn(|c| (v[c] - own.center[c]) / own.scale))
+                .collect();
+            (norm, Some(tris).filter(|t| !t.is_empty()), false)
+        }
+        None => (
+            as_points(own.trajectories.canonical()),
+            own.faces.clone(),
+            true,
+        ),
+    })
+}
+
 /// The viewer page of the run in `run`: its own points (with its faces, if any) against
 /// the truth, or the user's `mesh` (any OBJ in the data's units) warped; `frames` (default
 /// all of the run's); `up` the vertical axis (default: guessed from the box). Where the
@@ -89,28 +147,7 @@ pub fn view_html(
     let total = own.trajectories.frames();
     let to_data =
         |p: &[f32; 3]| -> [f32; 3] { std::array::from_fn(|c| p[c] * own.scale + own.center[c]) };
-    let (canonical, triangles, with_truth) = match mesh {
-        Some(path) => {
-            let textured = TexturedMesh::read(path)?;
-            let mut tris = Vec::new();
-            let mut offset = 0u32;
-            for part in &textured.parts {
-                tris.extend(part.triangles.iter().map(|t| t.map(|i| i + offset)));
-                offset += part.positions.len() as u32;
-            }
-            let norm: Vec<[f32; 3]> = textured
-                .positions()
-                .iter()
-                .map(|v| std::array::from_fn(|c| (v[c] - own.center[c]) / own.scale))
-                .collect();
-            (norm, Some(tris).filter(|t| !t.is_empty()), false)
-        }
-        None => (
-            as_points(own.trajectories.canonical()),
-            own.faces.clone(),
-            true,
-        ),
-    };
+    let (canonical, triangles, with_truth) = view_shape(mesh, &own)?;
     let v = canonical.len();
     let mut pred = Vec::with_capacity(range.len() * v * 3);
     let mut truth = Vec::new();
@@ -153,32 +190,8 @@ pub fn view_html(
             (i / 3) % v
         )));
     }
-    let error_max = {
-        let mut sorted = seen_errors;
-        sorted.sort_by(f32::total_cmp);
-        sorted
-            .get(sorted.len() * 95 / 100)
-            .copied()
-            .unwrap_or(0.0)
-            .max(1e-6) as f64
-    };
-    let up = up.map(Axis::index).unwrap_or_else(|| {
-        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-        for p in pred.chunks_exact(3) {
-            for c in 0..3 {
-                lo[c] = lo[c].min(p[c]);
-                hi[c] = hi[c].max(p[c]);
-            }
-        }
-        let ext: Vec<f32> = (0..3).map(|c| hi[c] - lo[c]).collect();
-        let longest = (0..3)
-            .max_by(|&a, &b| ext[a].total_cmp(&ext[b]))
-            .unwrap_or(1);
-        let clearly = (0..3)
-            .filter(|&c| c != longest)
-            .all(|c| ext[longest] > 1.3 * ext[c]);
-        if clearly { longest } else { 1 }
-    });
+    let error_max = percentile_95(seen_errors).max(1e-6) as f64;
+    let up = up.map(Axis::index).unwrap_or_else(|| up_axis(&pred));
     let name = format!(
         "{} — {}",
         run.dir

@@ -1,0 +1,362 @@
+//! Reading a C3D file: the header, the parameter section and the points.
+
+use super::{C3d, Processor};
+
+/// One parameter of the parameter section.
+struct Param<'a> {
+    group: u8,
+    name: String,
+    kind: i8,
+    dims: Vec<usize>,
+    data: &'a [u8],
+}
+
+struct Params<'a> {
+    processor: Processor,
+    groups: Vec<(u8, String)>,
+    params: Vec<Param<'a>>,
+}
+
+impl<'a> Params<'a> {
+    fn get(&self, group: &str, name: &str) -> Option<&Param<'a>> {
+        let id = self
+            .groups
+            .iter()
+            .find(|(_, g)| g.eq_ignore_ascii_case(group))?
+            .0;
+        self.params
+            .iter()
+            .find(|p| p.group == id && p.name.eq_ignore_ascii_case(name))
+    }
+
+    /// The first value as an unsigned 16-bit count (C3D stores counts in `i16`s that
+    /// writers fill up to 65535).
+    fn u16(&self, group: &str, name: &str) -> Option<u16> {
+        let p = self.get(group, name)?;
+        match p.kind {
+            2 if p.data.len() >= 2 => Some(self.processor.u16(p.data)),
+            1 if !p.data.is_empty() => Some(p.data[0] as u16),
+            4 if p.data.len() >= 4 => {
+                let v = self.processor.f32(p.data);
+                (v.is_finite() && (0.0..=65535.0).contains(&v)).then_some(v as u16)
+            }
+            _ => None,
+        }
+    }
+
+    fn f32(&self, group: &str, name: &str) -> Option<f32> {
+        let p = self.get(group, name)?;
+        match p.kind {
+            4 if p.data.len() >= 4 => Some(self.processor.f32(p.data)),
+            2 if p.data.len() >= 2 => Some(self.processor.u16(p.data) as i16 as f32),
+            _ => None,
+        }
+    }
+
+    /// A frame number stored as two 16-bit words, low then high.
+    fn frame(&self, group: &str, name: &str) -> Option<u32> {
+        let p = self.get(group, name)?;
+        (p.kind == 2 && p.data.len() >= 4).then(|| {
+            self.processor.u16(&p.data[0..2]) as u32
+                | ((self.processor.u16(&p.data[2..4]) as u32) << 16)
+        })
+    }
+
+    /// A character parameter as strings: `dims = [length, count]` (or `[length]`: one).
+    fn strings(&self, group: &str, name: &str) -> Option<Vec<String>> {
+        let p = self.get(group, name)?;
+        if p.kind != -1 {
+            return None;
+        }
+        let len = p.dims.first().copied().unwrap_or(p.data.len()).max(1);
+        Some(
+            p.data
+                .chunks(len)
+                .map(|s| {
+                    String::from_utf8_lossy(s)
+                        .trim_matches(|c: char| c == '\0' || c.is_whitespace())
+                        .to_string()
+                })
+                .collect(),
+        )
+    }
+}
+
+fn parse_params(section: &[u8], processor: Processor) -> Result<Params<'_>, String> {
+    let mut groups = Vec::new();
+    let mut params = Vec::new();
+    let truncated = |what: &str| format!("the parameter section ends inside {what}");
+    let mut pos = 4;
+    while pos + 2 <= section.len() {
+        let name_len = (section[pos] as i8).unsigned_abs() as usize;
+        if name_len == 0 {
+            break;
+        }
+        let id = section[pos + 1] as i8;
+        let at = pos + 2;
+        let name = section
+            .get(at..at + name_len)
+            .ok_or_else(|| truncated("a name"))?;
+        let name = String::from_utf8_lossy(name).trim().to_string();
+        let offset_at = at + name_len;
+        let offset = section
+            .get(offset_at..offset_at + 2)
+            .map(|b| processor.u16(b) as i16)
+            .ok_or_else(|| truncated(&format!("the entry of {name}")))?;
+        let body = offset_at + 2;
+        if id < 0 {
+            // −128 names a group no parameter can belong to (ids reach 127).
+            groups.push((id.unsigned_abs(), name.clone()));
+        } else if id > 0 {
+            let head = section
+                .get(body..body + 2)
+                .ok_or_else(|| truncated(&format!("parameter {name}")))?;
+            let kind = head[0] as i8;
+            let ndims = head[1] as usize;
+            let dims: Vec<usize> = section
+                .get(body + 2..body + 2 + ndims)
+                .ok_or_else(|| truncated(&format!("the dimensions of {name}")))?
+                .iter()
+                .map(|&d| d as usize)
+                .collect();
+            let size = match kind {
+                -1 | 1 => 1,
+                2 => 2,
+                4 => 4,
+                k => return Err(format!("parameter {name} has the unknown type {k}")),
+            };
+            // At most 255^255 by the format; the section's length bounds it first.
+            let len = dims
+                .iter()
+                .try_fold(size, |a: usize, &d| a.checked_mul(d))
+                .filter(|&l| l <= section.len())
+                .ok_or_else(|| truncated(&format!("the values of {name}")))?;
+            let start = body + 2 + ndims;
+            let data = section
+                .get(start..start + len)
+                .ok_or_else(|| truncated(&format!("the values of {name}")))?;
+            params.push(Param {
+                group: id as u8,
+                name: name.clone(),
+                kind,
+                dims,
+                data,
+            });
+        }
+        if offset == 0 {
+            break;
+        }
+        if offset < 0 {
+            return Err(format!("the entry of {name} points backwards ({offset})"));
+        }
+        pos = offset_at + offset as usize;
+    }
+    Ok(Params {
+        processor,
+        groups,
+        params,
+    })
+}
+
+/// Parses the bytes of a C3D file: its points, residuals, labels, rate and units (the
+/// analog samples are skipped). The error says what is wrong (the caller adds the file
+/// name).
+pub fn parse(bytes: &[u8]) -> Result<C3d, String> {
+    let (processor, params) = parameters(bytes)?;
+    let layout = Layout::of(bytes, processor, &params)?;
+    let (positions, residuals, cameras) = read_points(bytes, processor, &layout);
+    let units = params
+        .strings("POINT", "UNITS")
+        .and_then(|u| u.into_iter().next())
+        .filter(|u| !u.is_empty())
+        .unwrap_or_else(|| "mm".into());
+    Ok(C3d {
+        frames: layout.frames,
+        points: layout.points,
+        first_frame: layout.first_frame,
+        rate: layout.rate,
+        scale: layout.scale,
+        units,
+        labels: labels(&params, layout.points),
+        positions,
+        residuals,
+        cameras,
+    })
+}
+
+/// The header's checks, the processor, and the parameter section.
+fn parameters(bytes: &[u8]) -> Result<(Processor, Params<'_>), String> {
+    if bytes.len() < 512 {
+        return Err(format!(
+            "truncated: {} bytes, shorter than the 512-byte header",
+            bytes.len()
+        ));
+    }
+    if bytes[1] != 0x50 {
+        return Err(format!(
+            "not a C3D file: its second byte is {:#04x}, not 0x50",
+            bytes[1]
+        ));
+    }
+    let param_block = bytes[0] as usize;
+    if param_block == 0 {
+        return Err("the header names parameter block 0".into());
+    }
+    let pstart = (param_block - 1) * 512;
+    let phead = bytes.get(pstart..pstart + 4).ok_or_else(|| {
+        format!(
+            "truncated: the parameters start at byte {pstart}, past its {} bytes",
+            bytes.len()
+        )
+    })?;
+    let processor = match phead[3] {
+        84 => Processor::Intel,
+        85 => Processor::Dec,
+        86 => Processor::Mips,
+        p => {
+            return Err(format!(
+                "unknown processor type {p} (84 Intel, 85 DEC, 86 MIPS)"
+            ));
+        }
+    };
+    let pend = bytes.len().min(pstart + (phead[2] as usize).max(1) * 512);
+    Ok((processor, parse_params(&bytes[pstart..pend], processor)?))
+}
+
+/// Where the points are and how they are stored: what the header and the parameters say,
+/// checked against the file's length.
+struct Layout {
+    points: usize,
+    frames: usize,
+    first_frame: u32,
+    scale: f32,
+    rate: f32,
+    /// The byte where the first frame starts.
+    start: usize,
+    /// The bytes of one frame, points and analog samples.
+    record: usize,
+}
+
+impl Layout {
+    fn of(bytes: &[u8], processor: Processor, params: &Params) -> Result<Self, String> {
+        let word = |w: usize| processor.u16(&bytes[2 * (w - 1)..2 * w]);
+        let points = params.u16("POINT", "USED").unwrap_or_else(|| word(2)) as usize;
+        if points == 0 {
+            return Err("no 3-D points (POINT:USED is 0)".into());
+        }
+        let scale = params
+            .f32("POINT", "SCALE")
+            .unwrap_or_else(|| processor.f32(&bytes[12..16]));
+        if !scale.is_finite() || scale == 0.0 {
+            return Err(format!("the point scale is {scale}"));
+        }
+        let rate = params
+            .f32("POINT", "RATE")
+            .unwrap_or_else(|| processor.f32(&bytes[20..24]));
+        if !(rate.is_finite() && rate > 0.0) {
+            return Err(format!("the frame rate is {rate}"));
+        }
+        let first_frame = params
+            .frame("TRIAL", "ACTUAL_START_FIELD")
+            .unwrap_or(word(4) as u32);
+        let header_last = word(5) as u32;
+        let last = params
+            .frame("TRIAL", "ACTUAL_END_FIELD")
+            .filter(|&l| l >= header_last)
+            .unwrap_or(header_last);
+        if last < first_frame {
+            return Err(format!(
+                "the last frame ({last}) comes before the first ({first_frame})"
+            ));
+        }
+        let frames = (last - first_frame) as usize + 1;
+        let data_block = match word(9) {
+            0 => params.u16("POINT", "DATA_START").unwrap_or(0),
+            b => b,
+        } as usize;
+        if data_block < 2 {
+            return Err(format!("the data start at block {data_block}"));
+        }
+        let analog = word(3) as usize;
+        let size = if scale < 0.0 { 4 } else { 2 };
+        let record = (4 * points + analog) * size;
+        let start = (data_block - 1) * 512;
+        let needed = frames
+            .checked_mul(record)
+            .and_then(|d| d.checked_add(start))
+            .ok_or_else(|| format!("{frames} frames of {points} points overflow"))?;
+        if bytes.len() < needed {
+            return Err(format!(
+                "truncated: {frames} frames of {points} points (and {analog} analog words) \
+                 need {needed} bytes, the file has {}",
+                bytes.len()
+            ));
+        }
+        Ok(Layout {
+            points,
+            frames,
+            first_frame,
+            scale,
+            rate,
+            start,
+            record,
+        })
+    }
+}
+
+/// The positions `[T, N, 3]`, residuals `[T, N]` and camera masks `[T, N]` of every frame.
+fn read_points(
+    bytes: &[u8],
+    processor: Processor,
+    layout: &Layout,
+) -> (Vec<f32>, Vec<f32>, Vec<u8>) {
+    let (frames, points, start, record) =
+        (layout.frames, layout.points, layout.start, layout.record);
+    let float = layout.scale < 0.0;
+    let size = if float { 4 } else { 2 };
+    let magnitude = layout.scale.abs();
+    let mut positions = Vec::with_capacity(frames * points * 3);
+    let mut residuals = Vec::with_capacity(frames * points);
+    let mut cameras = Vec::with_capacity(frames * points);
+    for k in 0..frames {
+        let row = &bytes[start + k * record..start + k * record + 4 * points * size];
+        for p in row.chunks_exact(4 * size) {
+            let w = if float {
+                for c in 0..3 {
+                    positions.push(processor.f32(&p[4 * c..4 * c + 4]));
+                }
+                let w = processor.f32(&p[12..16]);
+                // The word is an integer stored as a float; NaN counts as not measured.
+                if w.is_nan() { -1 } else { w as i32 }
+            } else {
+                for c in 0..3 {
+                    let v = processor.u16(&p[2 * c..2 * c + 2]) as i16;
+                    positions.push(v as f32 * magnitude);
+                }
+                processor.u16(&p[6..8]) as i16 as i32
+            };
+            if w < 0 {
+                residuals.push(-1.0);
+                cameras.push(0);
+            } else {
+                residuals.push((w & 0xff) as f32 * magnitude);
+                cameras.push(((w & 0x7f00) >> 8) as u8);
+            }
+        }
+    }
+    (positions, residuals, cameras)
+}
+
+/// The `points` labels: `POINT:LABELS`, then `LABELS2`, ... until there are enough, `""`
+/// where missing.
+fn labels(params: &Params, points: usize) -> Vec<String> {
+    let mut labels: Vec<String> = params.strings("POINT", "LABELS").unwrap_or_default();
+    for more in 2.. {
+        match params.strings("POINT", &format!("LABELS{more}")) {
+            Some(l) if labels.len() < points => labels.extend(l),
+            _ => break,
+        }
+    }
+    labels.resize(points, String::new());
+    labels
+}
