@@ -8,7 +8,7 @@ use doma::DomaError;
 use doma::Result;
 use doma::backend::BackendKind;
 use doma::data::layout::Layout;
-use doma::run::{FitOutcome, NewFit, RunDir, RunLock, fit_run, fit_run_locked};
+use doma::run::{Claim, FitOutcome, NewFit, RunDir, RunLock, fit_run, fit_run_locked};
 use doma::train::select::WeightSearch;
 use doma::train::{IterationRecord, Progress};
 use doma_formats::npy::NpyValues;
@@ -72,79 +72,19 @@ pub fn fit(
         let mut spec = run_spec(options)?;
         let (dims, positions) = contiguous(&tracks, "tracks", &[None, None, Some(3)], false)?;
         let (t, n) = (dims[0], dims[1]);
-        // SAFETY: the caller holds both buffers for this call.
+        // SAFETY: the caller holds the buffer for this call.
         let positions = unsafe { positions.slice() };
-        let mask = match &observed {
-            Some(o) => {
-                let (_, mask) = contiguous(o, "observed", &[Some(t), Some(n)], false)?;
-                // SAFETY: as above.
-                Some(
-                    unsafe { mask.slice() }
-                        .iter()
-                        .map(|&b| b != 0)
-                        .collect::<Vec<bool>>(),
-                )
-            }
-            None => None,
-        };
+        let mask = read_mask(observed.as_ref(), t, n)?;
         check_tracks(t, n, positions, mask.as_deref())?;
         let (dir, temporary) = match out {
             Some(dir) => (dir, false),
             None => (temporary_dir().py()?, true),
         };
-        let run = RunDir::new(&dir);
-        if run.config().exists() {
-            return Err(errors::to_py(DomaError::RunExists(dir)));
-        }
-        let made = !dir.exists();
-        std::fs::create_dir_all(&dir)
-            .map_err(|e| DomaError::io(&dir, e))
-            .py()?;
-        let lock_file = dir.join(".lock");
-        let had_lock_file = lock_file.exists();
-        // The lock before anything in the folder is read, written or deleted: a second caller
-        // is refused here, and touches nothing of the first one's.
-        let lock = match RunLock::acquire(&dir) {
-            Ok(lock) => lock,
-            Err(e) => {
-                if made {
-                    // Empty unless the other caller is in it; then it stays.
-                    let _ = std::fs::remove_dir(&dir);
-                }
-                return Err(errors::to_py(e));
-            }
-        };
-        let data = dir.join(DATA_FILE);
-        // A data file that `overwrite` lets this call replace is set aside until the fit has
-        // started, so that a refused call puts it back.
-        let replaced = dir.join(".tracks.npz.replaced");
-        let had_data = data.exists();
-        // What this call made, undone under the lock if the fit does not start.
-        let undo = |wrote_data: bool| {
-            if run.config().exists() {
-                let _ = std::fs::remove_file(&replaced);
-                return;
-            }
-            if wrote_data {
-                let _ = std::fs::remove_file(&data);
-            }
-            if had_data {
-                let _ = std::fs::rename(&replaced, &data);
-            }
-            if !had_lock_file {
-                let _ = std::fs::remove_file(&lock_file);
-            }
-            if made {
-                let _ = std::fs::remove_dir(&dir);
-            }
-        };
-        if run.config().exists() {
-            return Err(errors::to_py(DomaError::RunExists(dir.clone())));
-        }
+        let (mut claim, lock) = Claim::take(&dir).py()?;
         // The files a fit writes beside `config.json`: the run's own, its data and its plots.
         let written = crate::field::RUN_FILES.iter().chain(&[DATA_FILE, "plots"]);
-        if !overwrite && let Some(file) = written.map(|f| dir.join(f)).find(|f| f.exists()) {
-            undo(false);
+        if !overwrite && let Some(file) = claim.holds(written.copied()) {
+            claim.undo(Some(lock));
             return Err(PyFileExistsError::new_err(format!(
                 "{}: the folder is not a doma run but holds {}, which a fit writes; choose \
                  another `out`, or pass overwrite=True to replace it",
@@ -152,20 +92,17 @@ pub fn fit(
                 file.display()
             )));
         }
-        if had_data && let Err(e) = std::fs::rename(&data, &replaced) {
-            undo(false);
-            return Err(errors::to_py(DomaError::io(&data, e)));
-        }
         // The data file is written once and read once, by `prepare`; the fit runs on what it
         // read.
         let prepared = (|| -> Result<NewFit> {
+            let data = claim.replace(DATA_FILE)?;
             let (s3, s2) = ([t, n, 3], [t, n]);
             let mut members = vec![("tracks", &s3[..], NpyValues::F32(positions))];
             if let Some(mask) = &mask {
                 members.push(("observed", &s2[..], NpyValues::Bool(mask)));
             }
             doma::io::write_atomic(&data, &doma_formats::npz::encode_npz_values(&members))?;
-            spec.data = Some(data.clone());
+            spec.data = Some(data);
             spec.layout = Some(if mask.is_some() {
                 Layout::Masked
             } else {
@@ -183,25 +120,38 @@ pub fn fit(
         let new = match prepared {
             Ok(new) => new,
             Err(e) => {
-                undo(true);
+                claim.undo(Some(lock));
                 return Err(errors::to_py(e));
             }
         };
         let shape = DataShape::of(&new.sequence);
+        let run = RunDir::new(&dir);
         let result = run_fit(py, &run, Some((new, lock)), progress, each);
         if result.is_err() {
-            // The lock went with the fit: undo only what is still ours.
-            if let Ok(_again) = RunLock::acquire(&dir) {
-                undo(true);
-            }
+            // The lock went with the fit: the undo takes it again, and touches nothing of
+            // another process that took the folder meanwhile.
+            claim.undo(None);
             if temporary {
                 let _ = std::fs::remove_dir_all(&dir);
             }
+        } else {
+            claim.keep();
         }
         let device = result?;
-        let _ = std::fs::remove_file(&replaced);
         Field::fitted(&dir, temporary, device, shape).py()
     })
+}
+
+/// The mask `observed` ([T, N] uint8) as booleans, checked against the tracks' shape.
+fn read_mask(observed: Option<&PyBuffer<u8>>, t: usize, n: usize) -> PyResult<Option<Vec<bool>>> {
+    let Some(o) = observed else {
+        return Ok(None);
+    };
+    let (_, mask) = contiguous(o, "observed", &[Some(t), Some(n)], false)?;
+    // SAFETY: the caller holds the buffer for this call.
+    Ok(Some(
+        unsafe { mask.slice() }.iter().map(|&b| b != 0).collect(),
+    ))
 }
 
 /// Refuses tracks that no fit can read, naming the entry: an observed coordinate that is

@@ -139,17 +139,18 @@ fn fit_holding<'a>(
     }
 }
 
-/// Makes the run folder of a new fit, locks it (unless its lock is `held`) and writes its
-/// config. The data was read
-/// and checked before ([`NewFit`]), so that bad data leaves nothing behind.
+/// Claims the run folder of a new fit ([`super::Claim`]: made, locked, refused if it holds
+/// a run) unless its lock is `held`, and writes its config. The data were read and checked
+/// before ([`NewFit`]), so that bad data leaves nothing behind.
 fn start(run: &RunDir, config: &RunConfig, held: Option<RunLock>) -> Result<RunLock> {
     // The lock first: a folder being fitted is refused naming the process that fits it,
     // rather than as a run to resume (which that process would refuse too).
     let lock = match held {
         Some(lock) => lock,
         None => {
-            std::fs::create_dir_all(&run.dir).map_err(|e| DomaError::io(&run.dir, e))?;
-            RunLock::acquire(&run.dir)?
+            let (claim, lock) = super::Claim::take(&run.dir)?;
+            claim.keep();
+            lock
         }
     };
     if run.config().exists() {

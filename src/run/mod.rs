@@ -17,6 +17,7 @@
 //! weights as an uninterrupted fit on the same device. A non-finite loss stops the fit with
 //! an error naming the iteration and leaves the last good checkpoint in place.
 
+mod claim;
 mod complete;
 mod eval;
 mod fit;
@@ -28,6 +29,7 @@ mod resume;
 mod spec;
 mod warp;
 
+pub use claim::Claim;
 pub use complete::{CompletedTracks, Completion, complete_run, complete_tracks};
 pub use eval::{eval_run, eval_run_as, evaluate, field_everywhere};
 pub use fit::{FitOutcome, fit_run, fit_run_locked};
