@@ -77,12 +77,12 @@ pub struct RunSpec {
     pub data: Option<PathBuf>,
     /// A fit config (JSON, the `fit` part of a run's config.json; missing fields take
     /// their defaults); the other options override it.
-    #[arg(long)]
+    #[arg(long, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub config: Option<PathBuf>,
     /// The model: a DOMA variant (which also sets the authors' `L_H` sampling for it) or
     /// the frame-wise `dpf` baseline.
-    #[arg(long = "variant", value_name = "MODEL")]
+    #[arg(long = "variant", value_name = "MODEL", help_heading = "Model")]
     #[serde(default, alias = "variant", skip_serializing_if = "Option::is_none")]
     pub model: Option<ModelChoice>,
     /// The compute backend (default flex).
@@ -90,119 +90,124 @@ pub struct RunSpec {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub backend: Option<BackendKind>,
     /// How the spatial Jacobian is computed.
-    #[arg(long)]
+    #[arg(long, help_heading = "Model")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub jacobian: Option<JacobianKind>,
     /// Iterations (passes over all frames; default 1000, or 300 for tracks with gaps).
-    #[arg(long = "iters", value_name = "N", value_parser = at_least_one)]
+    #[arg(long = "iters", value_name = "N", value_parser = at_least_one, help_heading = "Training")]
     #[serde(default, alias = "iters", skip_serializing_if = "Option::is_none")]
     pub iterations: Option<usize>,
     /// Adam's base learning rate (default 1e-4, the authors'; `--recipe fast` scales it
     /// by 1.5, and this value wins over the recipe's).
-    #[arg(long, value_name = "LR", value_parser = positive)]
+    #[arg(long, value_name = "LR", value_parser = positive, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub learning_rate: Option<f64>,
     /// The initialisation's weight scale α: every SIREN weight but the output layer's is
     /// drawn α times wider (default 1, the authors' initialisation; docs/speed.md, "Time
     /// to accuracy").
-    #[arg(long, value_name = "ALPHA", value_parser = positive)]
+    #[arg(long, value_name = "ALPHA", value_parser = positive, help_heading = "Model")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub init_scale: Option<f64>,
     /// The weight of the smoothness loss L_H (Eq. 13; 0 = off; default 0, or 0.1 for tracks
     /// with gaps), or `auto`: chosen by validation on held-out training points before the
     /// fit (the grid goes into config.json and the plots).
-    #[arg(long, value_name = "W", allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_name = "W",
+        allow_negative_numbers = true,
+        help_heading = "Training"
+    )]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub h_weight: Option<Weight>,
     /// The weight of the temporal smoothness loss L_T (the squared acceleration of the
     /// fitted tracks' warped positions, every frame, seen or not; not in the paper; default
     /// 0 = off).
-    #[arg(long, value_name = "W", value_parser = non_negative)]
+    #[arg(long, value_name = "W", value_parser = non_negative, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub t_weight: Option<f64>,
     /// Seed of the weights, the split and the frame order.
-    #[arg(long)]
+    #[arg(long, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
     /// An OBJ whose vertices are the points in order, for the faces (default: NAME.obj next
     /// to a .traj, or the .anime's own faces).
-    #[arg(long)]
+    #[arg(long, help_heading = "Data")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mesh: Option<PathBuf>,
     /// A clip of the frames, `A..B` (B excluded) or `A..=B`; in JSON `[A, B]`.
-    #[arg(long, value_name = "A..B", value_parser = clip)]
+    #[arg(long, value_name = "A..B", value_parser = clip, help_heading = "Data")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frames: Option<[usize; 2]>,
     /// Keep every N-th frame of the clip.
-    #[arg(long, value_name = "N", value_parser = at_least_one)]
+    #[arg(long, value_name = "N", value_parser = at_least_one, help_heading = "Data")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stride: Option<usize>,
     /// The fraction of tracks held out of the fit for the report (default 0: every track
     /// is fitted; the paper's Tab. 1 protocol holds out 0.75).
-    #[arg(long, value_name = "F", value_parser = held_fraction)]
+    #[arg(long, value_name = "F", value_parser = held_fraction, help_heading = "Data")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub test_fraction: Option<f64>,
     /// Iterations between checkpoints.
-    #[arg(long, value_name = "N", value_parser = at_least_one)]
+    #[arg(long, value_name = "N", value_parser = at_least_one, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub checkpoint_every: Option<usize>,
     /// Training points per step: a fresh random subset of K each step (default: all of
     /// them, the paper's protocol), so that a step's memory does not grow with the tracks.
-    #[arg(long, value_name = "K", value_parser = at_least_one)]
+    #[arg(long, value_name = "K", value_parser = at_least_one, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub points_per_step: Option<usize>,
     /// Frames per Adam step: each step minimises the sum of B frames' losses (default 1,
     /// the paper's protocol).
-    #[arg(long, value_name = "B", value_parser = at_least_one)]
+    #[arg(long, value_name = "B", value_parser = at_least_one, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frames_per_step: Option<usize>,
     /// The layout of a tracker's .npz (default: detected from its keys).
-    #[arg(long)]
+    #[arg(long, help_heading = "Tracker files")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub layout: Option<Layout>,
     /// The coordinate frame of a tracker's tracks: PointOdyssey's are in the world frame
     /// unless `camera` (its extrinsics applied); TAPVid-3D's are in the camera frame.
-    #[arg(long)]
+    #[arg(long, help_heading = "Tracker files")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frame: Option<CoordFrame>,
     /// Count PointOdyssey's valid but hidden entries (its ground truth) as observed.
-    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true")]
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", help_heading = "Tracker files")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub count_hidden: Option<bool>,
     /// The frame whose positions are the field's input x (default: the frame with the most
     /// observed points), counted within the clip; a frame where no track is observed is
     /// refused.
-    #[arg(long, value_name = "K")]
+    #[arg(long, value_name = "K", help_heading = "Tracker files")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reference_frame: Option<usize>,
     /// Go on without the tracks that are never observed (`complete` records the kept
     /// indices) rather than refuse them.
-    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true")]
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", help_heading = "Tracker files")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub drop_unobserved: Option<bool>,
     /// Hide this fraction of the observations from the fit, in spans inside each track's
     /// observations, and report the error of doma's fill on them beside the field alone and
     /// every filler (the field's fill, spline, linear, the neighbours' motion, low rank).
-    #[arg(long, value_name = "F", value_parser = fraction)]
+    #[arg(long, value_name = "F", value_parser = fraction, help_heading = "Gap filling")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout_observations: Option<f64>,
     /// The lengths of the held-out spans, `A..=B` frames (default 2..=10; `A..B` excludes B).
-    #[arg(long, value_name = "A..=B", value_parser = span_lengths)]
+    #[arg(long, value_name = "A..=B", value_parser = span_lengths, help_heading = "Gap filling")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout_span: Option<[usize; 2]>,
     /// The probability from which a tracker's float visibility counts as observed
     /// (default 0.5); a bool or 0/1 visibility is read as it is.
-    #[arg(long, value_name = "P")]
+    #[arg(long, value_name = "P", help_heading = "Tracker files")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub visibility_threshold: Option<f64>,
     /// The key of a `[T, N]` array of per-observation confidence weights in a tracker's
     /// .npz: each observation's share of the trajectory loss.
-    #[arg(long, value_name = "KEY")]
+    #[arg(long, value_name = "KEY", help_heading = "Tracker files")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub confidence: Option<String>,
     /// A robust trajectory loss for tracks with outliers: `huber[:DELTA]` or
     /// `charbonnier[:EPSILON]` (normalised units, default 0.01), or `l1` (the paper's).
-    #[arg(long, value_name = "PENALTY")]
+    #[arg(long, value_name = "PENALTY", help_heading = "Training")]
     #[serde(
         default,
         alias = "data_penalty",
@@ -213,14 +218,14 @@ pub struct RunSpec {
     /// A named recipe: `paper` (the paper's protocol, the default) or `fast` (1.5 times the
     /// learning rate, warm-up and cosine decay, 256 training points and 64 `L_H` samples
     /// per step; docs/speed.md). The other options override its settings.
-    #[arg(long)]
+    #[arg(long, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub recipe: Option<Recipe>,
     /// Stop once the EPE on a held-back tenth of the training tracks (checked every 10
     /// iterations) has not improved by 1 % for PATIENCE iterations, after a cool-down of
     /// PATIENCE more iterations whose learning rate falls linearly to 0; the held-back
     /// tracks are not fitted.
-    #[arg(long, value_name = "PATIENCE", value_parser = at_least_one)]
+    #[arg(long, value_name = "PATIENCE", value_parser = at_least_one, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub until_converged: Option<usize>,
 }
