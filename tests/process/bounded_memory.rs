@@ -227,7 +227,10 @@ fn subcommands_refuse_a_huge_network_before_allocating_it() {
         let mut status = 0;
         let peak = extra_peak(|| status = doma::cli::run_args(command.clone()));
         assert_eq!(status, 1, "{command:?} was not refused");
-        assert!(!std::path::Path::new(pictures).exists(), "{command:?} wrote");
+        assert!(
+            !std::path::Path::new(pictures).exists(),
+            "{command:?} wrote"
+        );
         assert!(
             peak < 100 * MB,
             "{command:?}: {:.1} MB",
