@@ -147,24 +147,45 @@ impl Filler {
     /// observations of `sources`. An entry of a track never observed is whatever the
     /// positions hold there (NaN for the neighbours' motion).
     pub fn fill_at(self, sources: &Sources, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
-        let marked = &sources.marked;
+        match self.fill_observed(&sources.marked, entries) {
+            Some(values) => values,
+            None => {
+                let lending = match self {
+                    Filler::FieldFillFramewise => Lending::FrameByFrame,
+                    _ => Lending::Fixed,
+                };
+                pick(&sources.field_fill(lending), entries, sources.marked.points)
+            }
+        }
+    }
+
+    /// This filler's value at each of `entries` from the observations of `marked` alone;
+    /// `None` for the field's fills, which need a field.
+    pub fn fill_observed(
+        self,
+        marked: &Marked,
+        entries: &[(usize, usize)],
+    ) -> Option<Vec<[f32; 3]>> {
         let whole = match self {
-            Filler::FieldFill => sources.field_fill(Lending::Fixed),
-            Filler::FieldFillFramewise => sources.field_fill(Lending::FrameByFrame),
+            Filler::FieldFill | Filler::FieldFillFramewise => return None,
             Filler::Spline => marked.spline(),
             Filler::LowRank => marked.low_rank(),
             Filler::Linear => marked.linear(),
-            Filler::Neighbours => return marked.neighbours(entries),
+            Filler::Neighbours => return Some(marked.neighbours(entries)),
         };
-        let n = marked.points;
-        entries
-            .iter()
-            .map(|&(k, i)| {
-                let e = 3 * (k * n + i);
-                [whole[e], whole[e + 1], whole[e + 2]]
-            })
-            .collect()
+        Some(pick(&whole, entries, marked.points))
     }
+}
+
+/// The values of `whole` (`[T, N, 3]`) at `entries`.
+fn pick(whole: &[f32], entries: &[(usize, usize)], n: usize) -> Vec<[f32; 3]> {
+    entries
+        .iter()
+        .map(|&(k, i)| {
+            let e = 3 * (k * n + i);
+            [whole[e], whole[e + 1], whole[e + 2]]
+        })
+        .collect()
 }
 
 /// What every filler fills from: the masked tracks and the field's prediction of them, with
