@@ -82,11 +82,15 @@ pub enum Filler {
     /// The field's fill with lenders chosen frame by frame among the tracks seen there
     /// ([`Lending::FrameByFrame`]).
     FieldFillFramewise,
+    /// Vicon Nexus's pattern fill: one donor's motion ([`Marked::pattern`]).
+    Pattern,
+    /// Vicon Nexus's rigid-body fill: three donors' rigid motion ([`Marked::rigid_body`]).
+    RigidBody,
 }
 
 impl Filler {
     /// The number of fillers.
-    pub const COUNT: usize = 6;
+    pub const COUNT: usize = 8;
 
     /// Every filler, in the order of a blend's weights: a tie in the blend goes to the
     /// earlier (the field's fill first).
@@ -97,6 +101,8 @@ impl Filler {
         Filler::LowRank,
         Filler::Linear,
         Filler::FieldFillFramewise,
+        Filler::Pattern,
+        Filler::RigidBody,
     ];
 
     /// Its place in [`Filler::ALL`].
@@ -113,6 +119,8 @@ impl Filler {
             Filler::LowRank => "low_rank",
             Filler::Linear => "linear",
             Filler::FieldFillFramewise => "field_fill_framewise",
+            Filler::Pattern => "pattern",
+            Filler::RigidBody => "rigid_body",
         }
     }
 
@@ -125,6 +133,8 @@ impl Filler {
             Filler::LowRank => "low rank",
             Filler::Linear => "linear",
             Filler::FieldFillFramewise => "field's fill, lenders frame by frame",
+            Filler::Pattern => "pattern",
+            Filler::RigidBody => "rigid body",
         }
     }
 
@@ -172,6 +182,8 @@ impl Filler {
             Filler::LowRank => marked.low_rank(),
             Filler::Linear => marked.linear(),
             Filler::Neighbours => return Some(marked.neighbours(entries)),
+            Filler::Pattern => return Some(marked.pattern(entries)),
+            Filler::RigidBody => return Some(marked.rigid_body(entries)),
         };
         Some(pick(&whole, entries, marked.points))
     }
