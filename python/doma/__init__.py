@@ -37,6 +37,7 @@ from . import _native
 __version__: str = _native.__version__
 __all__ = [
     "BACKENDS",
+    "FILLERS",
     "Field",
     "FitProgress",
     "JACOBIANS",
@@ -44,6 +45,7 @@ __all__ = [
     "SizeError",
     "Tracks",
     "VARIANTS",
+    "fill",
     "fit",
     "load",
     "read_tracks",
@@ -63,6 +65,8 @@ BACKENDS = _CHOICES["backend"]
 JACOBIANS = _CHOICES["jacobian"]
 #: The named recipes of ``fit(recipe=...)``.
 RECIPES = _CHOICES["recipe"]
+#: The methods of :func:`fill`: the gap fillers that need no field.
+FILLERS = _CHOICES["filler"]
 
 
 def _checked_array(value: Any, name: str, shape: Sequence[Optional[int]]) -> np.ndarray:
@@ -449,6 +453,45 @@ class Field:
         return f"<doma.Field {self.model} on {self.backend}, {self.n_tracks} tracks × {self.n_frames} frames, in {where}>"
 
 
+def _mask(observed: Any, positions: np.ndarray, time_axis: Optional[int]) -> np.ndarray:
+    """``observed`` as the C-contiguous uint8 view of a bool array of the tracks' [T, N]."""
+    mask_array = np.asarray(observed)
+    if time_axis == 1 and mask_array.ndim == 2:
+        mask_array = mask_array.T
+    if mask_array.dtype != np.bool_:
+        raise ValueError(f"observed must be a bool array, not {mask_array.dtype}")
+    if mask_array.shape != positions.shape[:2]:
+        raise ValueError(
+            f"observed has shape {list(mask_array.shape)}, but tracks of shape "
+            f"{list(positions.shape)} need {list(positions.shape[:2])}"
+        )
+    return np.ascontiguousarray(mask_array).view(np.uint8)
+
+
+def fill(tracks: Any, observed: Any, method: str = "rigid_body", *, time_axis: Optional[int] = None) -> np.ndarray:
+    """Fills the gaps of ``tracks`` ([T, N, 3]) that ``observed`` ([T, N] bool) leaves by
+    one of the classic fillers, without a fit: the fillers that :meth:`Field.complete`'s
+    blend weighs and that ``--holdout-observations`` reports.
+
+    Methods (:data:`FILLERS`): ``rigid_body`` (Vicon Nexus's: the three nearest markers
+    seen through the gap moved as a rigid body, from both borders), ``pattern`` (Nexus's:
+    one donor's motion), ``spline`` (natural cubic), ``linear``, ``neighbours`` (the mean
+    motion of the 4 nearest), ``low_rank`` (an iterative PCA). Where a gap is not interior
+    or has too few donors, ``rigid_body`` and ``pattern`` give the linear fill.
+
+    Returns a new [T, N, 3] float32 array: the observed entries as given, every unobserved
+    entry of a track observed somewhere filled, a track never observed as given.
+    """
+    positions = _time_major(_checked_array(tracks, "tracks", (None, None, 3)), time_axis)
+    positions = np.ascontiguousarray(positions, dtype=np.float32)
+    mask = _mask(observed, positions, time_axis)
+    if not isinstance(method, str) or method.lower() not in FILLERS:
+        raise ValueError(f"method {method!r} is not one of {', '.join(FILLERS)}")
+    out = np.empty_like(positions)
+    _native.fill_into(positions, mask, method.lower(), out)
+    return out
+
+
 def fit(
     tracks: Any,
     observed: Any = None,
@@ -529,19 +572,7 @@ def fit(
     """
     positions = _time_major(_checked_array(tracks, "tracks", (None, None, 3)), time_axis)
     positions = np.ascontiguousarray(positions, dtype=np.float32)
-    mask = None
-    if observed is not None:
-        mask_array = np.asarray(observed)
-        if time_axis == 1 and mask_array.ndim == 2:
-            mask_array = mask_array.T
-        if mask_array.dtype != np.bool_:
-            raise ValueError(f"observed must be a bool array, not {mask_array.dtype}")
-        if mask_array.shape != positions.shape[:2]:
-            raise ValueError(
-                f"observed has shape {list(mask_array.shape)}, but tracks of shape "
-                f"{list(positions.shape)} need {list(positions.shape[:2])}"
-            )
-        mask = np.ascontiguousarray(mask_array).view(np.uint8)
+    mask = None if observed is None else _mask(observed, positions, time_axis)
     if isinstance(reg, str):
         reg = reg.lower()
     if reg not in (None, "h"):

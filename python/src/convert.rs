@@ -182,5 +182,6 @@ pub fn choices(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     table.set_item("recipe", choices::<doma::train::Recipe>())?;
     table.set_item("layout", choices::<Layout>())?;
     table.set_item("frame", choices::<CoordFrame>())?;
+    table.set_item("filler", crate::fill::names())?;
     Ok(table)
 }

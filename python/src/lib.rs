@@ -16,6 +16,7 @@ mod command;
 mod convert;
 mod errors;
 mod field;
+mod fill;
 mod fit;
 mod interrupt;
 mod tracks;
@@ -31,6 +32,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit::resume, m)?)?;
     m.add_function(wrap_pyfunction!(fit::load, m)?)?;
     m.add_function(wrap_pyfunction!(tracks::read_tracks, m)?)?;
+    m.add_function(wrap_pyfunction!(fill::fill_into, m)?)?;
     m.add_function(wrap_pyfunction!(tracks::sequence_reads, m)?)?;
     m.add_function(wrap_pyfunction!(command::main, m)?)?;
     m.add_class::<field::Field>()?;

@@ -1,0 +1,75 @@
+"""The gap fillers of capture software, without a fit (`doma.fill`), checked against an
+independent implementation: `gapfill` (PyPI, Moon Ki Jung's transcription of Vicon Nexus's
+rigid-body fill) on a gap hidden in the shipped right-knee recording."""
+
+import pathlib
+
+import numpy as np
+import pytest
+
+import doma
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+RIGHT_KNEE = ROOT / "data" / "mocap" / "right_knee.c3d"
+
+
+def hidden_gap(start=200, length=60):
+    """The recording in mm with its most moving marker among those seen at frames
+    start - 1 ..= start + length hidden at frames start..start + length (0.6 s)."""
+    seq = doma.read_tracks(RIGHT_KNEE)
+    tracks, observed = seq.tracks.copy(), seq.observed.copy()
+    a, b = start - 1, start + length
+    seen = observed[a : b + 1].all(axis=0)
+    travel = np.nansum(np.linalg.norm(np.diff(tracks[a : b + 1], axis=0), axis=2), axis=0)
+    i = int(np.argmax(np.where(seen, travel, -1)))
+    observed[start : start + length, i] = False
+    return tracks, observed, i, a, b
+
+
+def donors(tracks, observed, i, a, b, count):
+    """The markers seen at every frame a..=b, nearest to marker i by the mean distance at a
+    and b: the donors doma's rigid-body fill takes."""
+    seen = observed[a : b + 1].all(axis=0)
+    seen[i] = False
+    distance = lambda f: np.linalg.norm(tracks[f].astype(np.float64) - tracks[f, i].astype(np.float64), axis=1)
+    mean = (distance(a) + distance(b)) / 2
+    candidates = [j for j in np.argsort(mean, kind="stable") if seen[j]]
+    return candidates[:count]
+
+
+def test_rigid_body_fill_is_gapfill_s_to_float32_rounding():
+    gapfill = pytest.importorskip("gapfill.gapfill")
+    tracks, observed, i, a, b = hidden_gap()
+    ours = doma.fill(tracks, observed, "rigid_body")
+    target = tracks[:, i].astype(np.float64)
+    target[~observed[:, i]] = np.nan
+    cluster = np.stack([tracks[:, j].astype(np.float64) for j in donors(tracks, observed, i, a, b, 3)])
+    updated, _ = gapfill.fill_marker_gap_rbt(target, cluster)
+    assert updated
+    gap = slice(a + 1, b)
+    np.testing.assert_array_max_ulp(ours[gap, i], target[gap].astype(np.float32), maxulp=1)
+    # Observed entries as given; the rigid-body fill is far closer to the truth than a line.
+    assert np.array_equal(ours[observed], tracks[observed])
+    truth = doma.read_tracks(RIGHT_KNEE).tracks[gap, i]
+    linear = doma.fill(tracks, observed, "linear")[gap, i]
+    rigid_error = np.linalg.norm(ours[gap, i] - truth, axis=1).mean()
+    linear_error = np.linalg.norm(linear - truth, axis=1).mean()
+    assert rigid_error < 0.5 * linear_error, (rigid_error, linear_error)
+
+
+def test_every_method_fills_every_gap_and_refuses_what_it_cannot_read():
+    tracks, observed, i, a, b = hidden_gap()
+    for method in doma.FILLERS:
+        filled = doma.fill(tracks, observed, method)
+        assert filled.dtype == np.float32 and filled.shape == tracks.shape
+        assert np.isfinite(filled[a + 1 : b, i]).all(), method
+        assert np.array_equal(filled[observed], tracks[observed]), method
+    assert set(doma.FILLERS) >= {"rigid_body", "pattern", "spline", "linear", "low_rank"}
+    with pytest.raises(ValueError, match="method 'field_fill' is not one of"):
+        doma.fill(tracks, observed, "field_fill")
+    poisoned = tracks.copy()
+    poisoned[3, 5, 1] = np.nan
+    with pytest.raises(ValueError, match=r"tracks\[3, 5, 1\] is NaN, and observed"):
+        doma.fill(poisoned, observed, "spline")
+    with pytest.raises(ValueError, match="bool array"):
+        doma.fill(tracks, observed.astype(np.uint8), "spline")
