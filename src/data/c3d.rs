@@ -26,6 +26,37 @@ pub fn read_c3d(path: impl AsRef<Path>) -> Result<C3d> {
     })
 }
 
+/// Reads a C3D file's bytes and its points.
+pub fn read_c3d_bytes(path: impl AsRef<Path>) -> Result<(Vec<u8>, C3d)> {
+    let path = path.as_ref();
+    let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
+    let points = doma_formats::c3d::parse(&bytes).map_err(|reason| DomaError::Malformed {
+        path: path.to_path_buf(),
+        reason,
+    })?;
+    Ok((bytes, points))
+}
+
+/// Writes `original` (the bytes of the C3D file `source`) to `path` with only `edits`
+/// changed ([`doma_formats::c3d::patch`]: every group, parameter, analog sample and event
+/// kept), atomically.
+pub fn write_c3d_patched(
+    path: impl AsRef<Path>,
+    source: &Path,
+    original: &[u8],
+    edits: &[doma_formats::c3d::PointEdit],
+) -> Result<()> {
+    let path = path.as_ref();
+    let bytes = doma_formats::c3d::patch(original, edits).map_err(|reason| {
+        DomaError::InvalidData(format!(
+            "cannot write {} from {}: {reason}",
+            path.display(),
+            source.display()
+        ))
+    })?;
+    write_atomic(path, &bytes)
+}
+
 /// The markers as tracks: an entry is observed where the file holds a point
 /// ([`C3d::present`]). A measured point that is not finite is refused, naming its frame
 /// and marker.

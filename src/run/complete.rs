@@ -7,13 +7,14 @@ use burn::tensor::Device;
 use doma_formats::npy::NpyValues;
 
 use super::{RunConfig, RunDir, field_everywhere};
-use crate::data::c3d::{C3d, c3d_tracks, read_c3d, write_c3d};
+use crate::data::c3d::{C3d, c3d_tracks, read_c3d_bytes, write_c3d_patched};
 use crate::data::layout::Layout;
 use crate::data::sequence::read_tracks;
 use crate::gaps::blend::{Blend, blended_fill};
 use crate::gaps::{FieldPrediction, Marked};
 use crate::io::write_atomic;
 use crate::{DomaError, Result};
+use doma_formats::c3d::PointEdit;
 
 /// What [`complete_run`] wrote.
 #[derive(Clone, Debug, PartialEq)]
@@ -43,10 +44,12 @@ pub struct Completion {
 /// instead: PointOdyssey's `trajs_3d` (as `f32`), `visibs` (the mask) and `valids` (all
 /// true), or TAPVid-3D's `tracks_XYZ` and `visibility`.
 ///
-/// A `.c3d` (from a C3D input alone, [`crate::data::c3d`]) holds the markers with the
-/// input's labels, units and scale, its rate divided by the stride and the clip's first
-/// frame number; a measured entry keeps its residual and cameras, and a filled one has
-/// residual 0, which marks a point computed rather than measured.
+/// A `.c3d` (from a C3D input alone, [`crate::data::c3d`]) is the input file with only the
+/// filled entries written, in its own byte order and number format: every group and
+/// parameter in its order, the analog samples, the events, the frames, rate and scale,
+/// and every marker (one never seen stays invalid). A filled entry has residual 0, which
+/// marks a point computed rather than measured; the frames outside the fitted clip, or
+/// between the frames of its stride, are as the input holds them.
 pub fn complete_run(
     run: &RunDir,
     out: &Path,
@@ -70,43 +73,37 @@ pub fn complete_run(
             .is_some_and(|e| e.eq_ignore_ascii_case("c3d"));
         if !is_c3d {
             return Err(DomaError::Usage(format!(
-                "a .c3d output takes its labels, rate and units from a C3D input, and this run \
-                 fitted {}: write a .npz",
+                "a .c3d output is the C3D input with its gaps filled, and this run fitted {}: \
+                 write a .npz",
                 config.data.display()
             )));
         }
-        Some(read_c3d(&config.data)?)
+        Some(read_c3d_bytes(&config.data)?)
     } else {
         None
     };
-    let done = complete_with(run, &config, markers.as_ref(), device)?;
+    let done = complete_with(run, &config, markers.as_ref().map(|(_, m)| m), device)?;
     let (t, n) = (done.frames, done.points);
-    if let Some(m) = &markers {
+    if let Some((original, _)) = &markers {
+        // The input file itself, with only the filled entries written: every group,
+        // parameter, analog sample and event kept, and the frames outside the fitted clip
+        // (or between its strided frames) as they were.
         let source_points: Vec<usize> = done.kept.clone().unwrap_or_else(|| (0..n).collect());
-        let source = |e: usize| done.source_frames[e / n] * m.points + source_points[e % n];
-        let (residuals, cameras) = (0..t * n)
-            .map(|e| {
-                if done.observed[e] {
-                    (m.residuals[source(e)].max(0.0), m.cameras[source(e)])
-                } else {
-                    (0.0, 0)
-                }
+        let edits: Vec<PointEdit> = (0..t * n)
+            .filter(|&e| !done.observed[e])
+            .map(|e| PointEdit {
+                frame: done.source_frames[e / n],
+                point: source_points[e % n],
+                position: [
+                    done.tracks[3 * e],
+                    done.tracks[3 * e + 1],
+                    done.tracks[3 * e + 2],
+                ],
+                residual: 0.0,
+                cameras: 0,
             })
-            .unzip();
-        let stride = config.stride.max(1);
-        let completed = C3d {
-            frames: t,
-            points: n,
-            first_frame: m.first_frame.saturating_add(done.source_frames[0] as u32),
-            rate: m.rate / stride as f32,
-            scale: m.scale,
-            units: m.units.clone(),
-            labels: source_points.iter().map(|&i| m.labels[i].clone()).collect(),
-            positions: done.tracks.clone(),
-            residuals,
-            cameras,
-        };
-        write_c3d(out, &completed)?;
+            .collect();
+        write_c3d_patched(out, &config.data, original, &edits)?;
     } else {
         write_npz(out, &done, layout)?;
     }

@@ -358,7 +358,7 @@ fn a_fit_that_holds_tracks_back_for_convergence_keeps_every_tracks_canonical_pos
 }
 
 #[test]
-fn a_c3d_clip_completes_into_a_c3d_with_its_labels_rate_and_measured_markers() {
+fn a_c3d_clip_completes_into_the_input_file_with_only_the_fitted_gaps_filled() {
     let v = view();
     let dir = common::scratch("doma-c3d-complete");
     let (t, n) = (v.truth.frames(), v.truth.points());
@@ -385,29 +385,33 @@ fn a_c3d_clip_completes_into_a_c3d_with_its_labels_rate_and_measured_markers() {
     });
     let out = dir.join("filled.c3d");
     let done = complete_run(&run, &out, None, &Device::flex()).unwrap();
-    let back = read_c3d(&out).unwrap();
+    let (back, given) = (read_c3d(&out).unwrap(), read_c3d(&input).unwrap());
     let kept = run.load_data(&run.load_config().unwrap()).unwrap().kept;
     let kept = kept.unwrap_or_else(|| (0..n).collect());
-    let frames: Vec<usize> = (1..t).step_by(2).collect();
-    assert_eq!((back.frames, back.points), (frames.len(), kept.len()));
+    // The input file with only the fitted frames' gaps filled: every frame and marker,
+    // its labels, rate and first frame.
+    assert_eq!((back.frames, back.points), (t, n));
     assert_eq!(
         (back.first_frame, back.rate, back.units.as_str()),
-        (11, 60.0, "mm")
+        (10, 120.0, "mm")
     );
-    let labels: Vec<String> = kept.iter().map(|&i| markers.labels[i].clone()).collect();
-    assert_eq!(back.labels, labels);
-    let m = kept.len();
+    assert_eq!(back.labels, markers.labels);
+    let fitted: Vec<usize> = (1..t).step_by(2).collect();
     let mut filled = 0;
-    for (r, &k) in frames.iter().enumerate() {
-        for (j, &i) in kept.iter().enumerate() {
-            let (e, src) = (r * m + j, k * n + i);
+    for k in 0..t {
+        for i in 0..n {
+            let e = k * n + i;
             let got = &back.positions[3 * e..3 * e + 3];
-            assert!(back.present()[e], "frame {k}, marker {i} is left missing");
-            if seen[src] {
-                assert_eq!(got, &markers.positions[3 * src..3 * src + 3]);
-                assert!((back.residuals[e] - 0.5).abs() < 1e-6);
-                assert_eq!(back.cameras[e], markers.cameras[src]);
+            if seen[e] || !fitted.contains(&k) || !kept.contains(&i) {
+                // As the input holds it: measured, or a gap outside what was fitted.
+                assert_eq!(got, &given.positions[3 * e..3 * e + 3]);
+                assert_eq!(
+                    back.residuals[e], given.residuals[e],
+                    "frame {k}, marker {i}"
+                );
+                assert_eq!(back.cameras[e], given.cameras[e]);
             } else {
+                assert!(back.present()[e], "frame {k}, marker {i} is left missing");
                 assert!(got.iter().all(|x| x.is_finite()));
                 assert_eq!((back.residuals[e], back.cameras[e]), (0.0, 0));
                 filled += 1;

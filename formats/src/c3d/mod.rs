@@ -17,12 +17,15 @@
 //!
 //! [`parse`] (`read.rs`) reads the points and skips the analog samples; [`encode`]
 //! (`write.rs`) writes an Intel float file with the `POINT` group alone (and
-//! `ANALOG:USED = 0`). Every count is checked against the file's length before anything is
+//! `ANALOG:USED = 0`); [`patch`] (`patch.rs`) rewrites chosen points of a file in its own
+//! format and keeps every other byte (groups, parameters, analog samples, events). Every count is checked against the file's length before anything is
 //! allocated.
 
+mod patch;
 mod read;
 mod write;
 
+pub use patch::{PointEdit, patch};
 pub use read::parse;
 pub use write::encode;
 
@@ -77,6 +80,26 @@ impl Processor {
         match self {
             Processor::Mips => u16::from_be_bytes([b[0], b[1]]),
             _ => u16::from_le_bytes([b[0], b[1]]),
+        }
+    }
+
+    fn put_u16(self, v: u16) -> [u8; 2] {
+        match self {
+            Processor::Mips => v.to_be_bytes(),
+            _ => v.to_le_bytes(),
+        }
+    }
+
+    /// `v` in this processor's float format (the inverse of [`Processor::f32`]).
+    fn put_f32(self, v: f32) -> [u8; 4] {
+        match self {
+            Processor::Intel => v.to_le_bytes(),
+            Processor::Mips => v.to_be_bytes(),
+            Processor::Dec if v == 0.0 => [0; 4],
+            Processor::Dec => {
+                let b = (v * 4.0).to_le_bytes();
+                [b[2], b[3], b[0], b[1]]
+            }
         }
     }
 

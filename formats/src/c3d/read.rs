@@ -11,7 +11,7 @@ struct Param<'a> {
     data: &'a [u8],
 }
 
-struct Params<'a> {
+pub(super) struct Params<'a> {
     processor: Processor,
     groups: Vec<(u8, String)>,
     params: Vec<Param<'a>>,
@@ -185,7 +185,7 @@ pub fn parse(bytes: &[u8]) -> Result<C3d, String> {
 }
 
 /// The header's checks, the processor, and the parameter section.
-fn parameters(bytes: &[u8]) -> Result<(Processor, Params<'_>), String> {
+pub(super) fn parameters(bytes: &[u8]) -> Result<(Processor, Params<'_>), String> {
     if bytes.len() < 512 {
         return Err(format!(
             "truncated: {} bytes, shorter than the 512-byte header",
@@ -225,20 +225,20 @@ fn parameters(bytes: &[u8]) -> Result<(Processor, Params<'_>), String> {
 
 /// Where the points are and how they are stored: what the header and the parameters say,
 /// checked against the file's length.
-struct Layout {
-    points: usize,
-    frames: usize,
-    first_frame: u32,
-    scale: f32,
-    rate: f32,
+pub(super) struct Layout {
+    pub(super) points: usize,
+    pub(super) frames: usize,
+    pub(super) first_frame: u32,
+    pub(super) scale: f32,
+    pub(super) rate: f32,
     /// The byte where the first frame starts.
-    start: usize,
+    pub(super) start: usize,
     /// The bytes of one frame, points and analog samples.
-    record: usize,
+    pub(super) record: usize,
 }
 
 impl Layout {
-    fn of(bytes: &[u8], processor: Processor, params: &Params) -> Result<Self, String> {
+    pub(super) fn of(bytes: &[u8], processor: Processor, params: &Params) -> Result<Self, String> {
         let word = |w: usize| processor.u16(&bytes[2 * (w - 1)..2 * w]);
         let points = params.u16("POINT", "USED").unwrap_or_else(|| word(2)) as usize;
         if points == 0 {

@@ -1,0 +1,185 @@
+//! Rewriting points of a C3D file in place: the file's bytes with only the given points
+//! changed, in its own byte order and number format, so that every group and parameter
+//! (in its order), every analog sample and every event is kept.
+
+use super::read::{Layout, parameters};
+
+/// One point to write over a file's.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointEdit {
+    /// The frame, counted from the file's first (0-based).
+    pub frame: usize,
+    /// The point (`POINT:USED` order).
+    pub point: usize,
+    /// `x, y, z` in the file's units.
+    pub position: [f32; 3],
+    /// The residual (in the file's units): negative for a point not measured, 0 for one
+    /// computed rather than measured.
+    pub residual: f32,
+    /// The mask of the cameras that saw it (7 bits).
+    pub cameras: u8,
+}
+
+/// `bytes` (a C3D file that [`super::parse`] reads) with each of `edits` written over its
+/// point's `x y z w` words, in the file's processor format (Intel, DEC or MIPS) and number
+/// format (floats, or `i16` multiples of the scale); every other byte as it was. The
+/// residual word is encoded as the reader decodes it: `−1` for not measured, else the
+/// residual in units of `|scale|` (rounded, at most 255) with the camera mask above it.
+/// Refuses an edit outside the file's frames or points, a position that is not finite,
+/// and a position that an integer file cannot hold (past ±32767 × the scale).
+pub fn patch(bytes: &[u8], edits: &[PointEdit]) -> Result<Vec<u8>, String> {
+    let (processor, params) = parameters(bytes)?;
+    let layout = Layout::of(bytes, processor, &params)?;
+    let float = layout.scale < 0.0;
+    let size = if float { 4 } else { 2 };
+    let magnitude = layout.scale.abs();
+    let mut out = bytes.to_vec();
+    for edit in edits {
+        if edit.frame >= layout.frames || edit.point >= layout.points {
+            return Err(format!(
+                "point {} of frame {} is outside the file's {} points and {} frames",
+                edit.point, edit.frame, layout.points, layout.frames
+            ));
+        }
+        if let Some(v) = edit.position.iter().find(|v| !v.is_finite()) {
+            return Err(format!(
+                "point {} of frame {}: the coordinate {v} is not finite",
+                edit.point, edit.frame
+            ));
+        }
+        let w: i32 = if edit.residual.is_nan() || edit.residual < 0.0 {
+            -1
+        } else {
+            let byte = (edit.residual / magnitude).round().clamp(0.0, 255.0) as i32;
+            ((edit.cameras as i32 & 0x7f) << 8) | byte
+        };
+        let at = layout.start + edit.frame * layout.record + edit.point * 4 * size;
+        let words = &mut out[at..at + 4 * size];
+        if float {
+            let values = [
+                edit.position[0],
+                edit.position[1],
+                edit.position[2],
+                w as f32,
+            ];
+            for (c, v) in values.into_iter().enumerate() {
+                words[4 * c..4 * c + 4].copy_from_slice(&processor.put_f32(v));
+            }
+        } else {
+            for c in 0..3 {
+                let q = (edit.position[c] / magnitude).round();
+                if !(-32767.0..=32767.0).contains(&q) {
+                    return Err(format!(
+                        "point {} of frame {}: {} is past what an integer C3D of scale {} holds",
+                        edit.point, edit.frame, edit.position[c], layout.scale
+                    ));
+                }
+                words[2 * c..2 * c + 2].copy_from_slice(&processor.put_u16(q as i16 as u16));
+            }
+            words[6..8].copy_from_slice(&processor.put_u16(w as i16 as u16));
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{C3d, encode, parse};
+    use super::*;
+
+    fn sample(scale: f32) -> C3d {
+        C3d {
+            frames: 4,
+            points: 3,
+            first_frame: 1,
+            rate: 100.0,
+            scale,
+            units: "mm".into(),
+            labels: vec!["A".into(), "B".into(), "C".into()],
+            positions: (0..36).map(|v| v as f32 * 2.5 - 20.0).collect(),
+            residuals: vec![
+                0.5, -1.0, 1.0, 0.5, 0.5, 0.5, -1.0, 0.5, 0.5, 0.5, 0.5, -1.0,
+            ],
+            cameras: vec![3, 0, 1, 3, 3, 3, 0, 3, 3, 3, 3, 0],
+        }
+    }
+
+    #[test]
+    fn a_patched_point_reads_back_and_no_other_byte_changes() {
+        // `encode` writes float files; integer files are patched in the Python tests (the
+        // independent writer writes them).
+        for scale in [-0.5f32, -0.1] {
+            let bytes = encode(&sample(scale)).unwrap();
+            let edits = [
+                PointEdit {
+                    frame: 0,
+                    point: 1,
+                    position: [1.5, -2.0, 3.0],
+                    residual: 0.0,
+                    cameras: 0,
+                },
+                PointEdit {
+                    frame: 2,
+                    point: 0,
+                    position: [7.0, 8.5, -9.0],
+                    residual: 1.0,
+                    cameras: 5,
+                },
+            ];
+            let patched = patch(&bytes, &edits).unwrap();
+            let (before, after) = (parse(&bytes).unwrap(), parse(&patched).unwrap());
+            for e in &edits {
+                let k = e.frame * 3 + e.point;
+                assert_eq!(&after.positions[3 * k..3 * k + 3], &e.position, "{scale}");
+                assert_eq!(after.residuals[k], e.residual, "{scale}");
+                assert_eq!(after.cameras[k], e.cameras, "{scale}");
+            }
+            let edited = |k: usize| edits.iter().any(|e| e.frame * 3 + e.point == k);
+            for k in (0..12).filter(|&k| !edited(k)) {
+                assert_eq!(
+                    after.positions[3 * k..3 * k + 3],
+                    before.positions[3 * k..3 * k + 3]
+                );
+                assert_eq!(after.residuals[k], before.residuals[k]);
+            }
+            let changed = bytes.iter().zip(&patched).filter(|(a, b)| a != b).count();
+            assert!(changed <= 2 * 4 * 4, "{changed} bytes changed");
+            assert_eq!(after.labels, before.labels);
+        }
+    }
+
+    #[test]
+    fn the_byte_orders_and_float_formats_round_trip() {
+        use super::super::Processor;
+        for p in [Processor::Intel, Processor::Dec, Processor::Mips] {
+            for v in [0.0f32, 1.0, -2.5, 1234.5678, -0.001, 3.0e5] {
+                assert_eq!(p.f32(&p.put_f32(v)), v, "{p:?} {v}");
+            }
+            for v in [0u16, 1, 0x7fff, 0xffff, 0x1234] {
+                assert_eq!(p.u16(&p.put_u16(v)), v, "{p:?} {v}");
+            }
+        }
+    }
+
+    #[test]
+    fn edits_the_file_cannot_hold_are_refused() {
+        let bytes = encode(&sample(-0.5)).unwrap();
+        let outside = PointEdit {
+            frame: 4,
+            point: 0,
+            position: [0.0; 3],
+            residual: 0.0,
+            cameras: 0,
+        };
+        assert!(patch(&bytes, &[outside]).unwrap_err().contains("outside"));
+        let nan = PointEdit {
+            frame: 0,
+            point: 0,
+            position: [f32::NAN, 0.0, 0.0],
+            residual: 0.0,
+            cameras: 0,
+        };
+        assert!(patch(&bytes, &[nan]).unwrap_err().contains("not finite"));
+        assert_eq!(patch(&bytes, &[]).unwrap(), bytes);
+    }
+}
