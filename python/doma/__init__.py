@@ -324,9 +324,14 @@ class Field:
         self._native.jacobian_into(x, _times(frames), out)
         return out[0] if one else out
 
-    def complete(self) -> "Tracks":
+    def complete(self, *, max_gap: Union[None, int, str] = None, extrapolate: bool = False) -> "Tracks":
         """Every track at every frame of the fitted clip, gaps filled: what ``doma complete``
-        writes, to the last bit.
+        writes, to the last bit (with ``--max-gap`` and ``--extrapolate`` as given here).
+
+        By default every gap with observations on both sides is filled, and nothing before a
+        track's first observation or after its last (``extrapolate=True`` fills those).
+        ``max_gap``: fill only gaps of at most that many frames of the input (an int), or
+        seconds at a C3D input's rate (``"0.5s"``). An entry left unfilled is NaN.
 
         Returns a :class:`Tracks` in the input's units, frame and track order: ``tracks``
         [T, N, 3] float32 (an observed entry as the input holds it, every other filled by
@@ -336,7 +341,10 @@ class Field:
         input's mask, and ``kept`` the input's index of each track when the fit dropped
         tracks never observed (else None).
         """
-        positions, (t, n), observed, kept = self._native.complete()
+        if max_gap is not None and not isinstance(max_gap, (int, str)):
+            raise ValueError(f"max_gap must be frames (an int) or seconds ('0.5s'), not {max_gap!r}")
+        gap = None if max_gap is None else str(max_gap)
+        positions, (t, n), observed, kept = self._native.complete(gap, bool(extrapolate))
         return Tracks(
             tracks=np.frombuffer(positions, dtype=np.float32).reshape(t, n, 3),
             observed=np.frombuffer(observed, dtype=np.bool_).reshape(t, n),

@@ -291,13 +291,17 @@ impl Field {
         })
     }
 
-    /// Every track at every frame of the clip, as `doma complete` writes it: `(tracks bytes
-    /// [T, N, 3] f32 in the input's units, [T, N], observed bytes [T, N], the input's index
-    /// of each track or None)`.
+    /// Every track at every frame of the clip, as `doma complete` writes it with
+    /// `--max-gap` (`N` frames or `Xs` seconds) and `--extrapolate`: `(tracks bytes
+    /// [T, N, 3] f32 in the input's units, NaN where left unfilled, [T, N], observed bytes
+    /// [T, N], the input's index of each track or None)`.
     #[allow(clippy::type_complexity)]
+    #[pyo3(signature = (max_gap=None, extrapolate=false))]
     fn complete<'py>(
         &self,
         py: Python<'py>,
+        max_gap: Option<String>,
+        extrapolate: bool,
     ) -> PyResult<(
         Bound<'py, pyo3::types::PyByteArray>,
         (usize, usize),
@@ -305,8 +309,16 @@ impl Field {
         Option<Vec<usize>>,
     )> {
         guarded("Field.complete", self.run_dir().as_deref(), || {
+            let max_gap = max_gap
+                .map(|g| g.parse::<doma::run::MaxGap>())
+                .transpose()
+                .map_err(|e| PyValueError::new_err(format!("max_gap: {e}")))?;
+            let policy = doma::run::FillPolicy {
+                max_gap,
+                extrapolate,
+            };
             let done = py
-                .detach(|| doma::run::complete_tracks(&self.run, &self.device))
+                .detach(|| doma::run::complete_tracks(&self.run, policy, &self.device))
                 .py()?;
             let observed: Vec<u8> = done.observed.iter().map(|&o| o as u8).collect();
             Ok((

@@ -65,7 +65,7 @@ def test_a_recording_with_gaps_fits_and_completes_to_a_c3d(cli, tmp_path):
 
     run, out = tmp_path / "run", tmp_path / "filled.c3d"
     subprocess.run([cli, "fit", source, "--out", run, "--iters", "30", "--quiet"], check=True, capture_output=True)
-    subprocess.run([cli, "complete", run, "--out", out], check=True, capture_output=True)
+    subprocess.run([cli, "complete", run, "--out", out, "--extrapolate"], check=True, capture_output=True)
 
     filled, out_labels, out_rate, out_first, out_units = read(out)
     assert filled.shape == given.shape

@@ -190,9 +190,24 @@ def test_complete_is_doma_complete_to_the_last_bit_in_the_input_units(cli, clip,
     tracks = np.where(observed[..., None], clip, np.nan).astype(np.float32)
     run = tmp_path / "run"
     field = doma.fit(tracks, observed, iters=20, progress=False, out=run, drop_unobserved=True)
-    done = field.complete()
-    subprocess.run([cli, "complete", run, "--out", tmp_path / "c.npz"], check=True, capture_output=True)
+    done = field.complete(extrapolate=True)
+    subprocess.run([cli, "complete", run, "--out", tmp_path / "c.npz", "--extrapolate"], check=True, capture_output=True)
     written = np.load(tmp_path / "c.npz")
+    # By default only gaps with observations on both sides are filled: the runs before a
+    # track's first observation and after its last stay NaN; the rest is the same fill.
+    inner = field.complete()
+    seen_k = observed[:, done.kept]
+    before = np.cumsum(seen_k, axis=0) == 0
+    after = np.cumsum(seen_k[::-1], axis=0)[::-1] == 0
+    edge = before | after
+    assert edge.any() and np.isnan(inner.tracks[edge]).all()
+    assert np.array_equal(inner.tracks[~edge], done.tracks[~edge])
+    short = field.complete(max_gap=2)
+    assert np.isnan(short.tracks[~seen_k & ~edge]).all()  # every hidden span is 5 frames
+    with pytest.raises(ValueError, match="max_gap"):
+        field.complete(max_gap="half a second")
+    with pytest.raises(ValueError, match="no frame rate"):
+        field.complete(max_gap="0.5s")
     assert np.array_equal(done.tracks, written["tracks"])
     assert np.array_equal(done.observed, written["observed"])
     assert np.array_equal(done.kept, written["kept"]) and 7 not in done.kept

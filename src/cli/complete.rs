@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use crate::Result;
 use crate::cli::DeviceArgs;
 use crate::data::layout::Layout;
-use crate::run::{RunDir, complete_run};
+use crate::run::{FillPolicy, MaxGap, RunDir, complete_run_with};
 
 /// The flags of `doma complete`.
 #[derive(clap::Parser, Debug, Clone)]
@@ -16,14 +16,22 @@ pub struct CompleteArgs {
     /// The run folder.
     pub run: PathBuf,
     /// The file to write: a .npz (`tracks` f32 [T, N, 3] and `observed` bool [T, N]), or,
-    /// when the run fitted a .c3d, a .c3d with its labels, rate and units, where a filled
-    /// marker has residual 0 (computed, not measured).
+    /// when the run fitted a .c3d, that file with only its filled markers written (residual
+    /// 0: computed, not measured), everything else kept.
     #[arg(long)]
     pub out: PathBuf,
     /// Write a tracker's keys instead (pointodyssey: trajs_3d, visibs, valids; tapvid3d:
     /// tracks_XYZ, visibility).
     #[arg(long, value_enum)]
     pub layout: Option<Layout>,
+    /// Fill gaps of at most this length only: N frames of the input, or Xs seconds (a
+    /// .c3d input's rate); longer gaps are left as the input holds them (NaN in a .npz).
+    #[arg(long, value_name = "N|Xs")]
+    pub max_gap: Option<MaxGap>,
+    /// Also fill before a track's first observation and after its last (by default only
+    /// gaps with observations on both sides are filled); the count is printed.
+    #[arg(long)]
+    pub extrapolate: bool,
     /// The device.
     #[command(flatten)]
     pub device: DeviceArgs,
@@ -32,7 +40,17 @@ pub struct CompleteArgs {
 /// Writes the completed tracks.
 pub fn run(args: &CompleteArgs) -> Result<()> {
     let device = args.device.backend.device()?;
-    let c = complete_run(&RunDir::new(&args.run), &args.out, args.layout, &device)?;
+    let policy = FillPolicy {
+        max_gap: args.max_gap,
+        extrapolate: args.extrapolate,
+    };
+    let c = complete_run_with(
+        &RunDir::new(&args.run),
+        &args.out,
+        args.layout,
+        policy,
+        &device,
+    )?;
     eprintln!(
         "wrote {}: {} tracks × {} frames, {} observed entries kept, {} filled",
         args.out.display(),
@@ -41,6 +59,22 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
         c.observed,
         c.filled
     );
+    if c.extrapolated > 0 {
+        eprintln!(
+            "  {} entries extrapolated, before a track's first observation or after its last",
+            c.extrapolated
+        );
+    }
+    if c.unfilled > 0 {
+        let why = match (args.max_gap, args.extrapolate) {
+            (Some(_), false) => {
+                "past --max-gap, or past a track's ends (--extrapolate fills those)"
+            }
+            (Some(_), true) => "past --max-gap",
+            (None, _) => "past a track's ends (--extrapolate fills those)",
+        };
+        eprintln!("  {} entries left unfilled: {why}", c.unfilled);
+    }
     let b = &c.blend;
     for (k, name) in ["short", "long"].iter().enumerate() {
         let w = if k == 0 { &b.short } else { &b.long };

@@ -25,10 +25,52 @@ pub struct Completion {
     pub tracks: usize,
     /// Entries the input observed (written as they were).
     pub observed: usize,
-    /// Entries filled.
+    /// Entries filled inside gaps (observed on both sides).
     pub filled: usize,
+    /// Entries filled before a track's first observation or after its last
+    /// ([`FillPolicy::extrapolate`]).
+    pub extrapolated: usize,
+    /// Entries left unfilled (a gap past [`FillPolicy::max_gap`], or past a track's ends
+    /// without [`FillPolicy::extrapolate`]).
+    pub unfilled: usize,
     /// The weights of the fill ([`crate::gaps::blend`]).
     pub blend: Blend,
+}
+
+/// Which unobserved entries a completion fills. The default fills every gap with
+/// observations on both sides, whatever its length, and nothing before a track's first
+/// observation or after its last (as Vicon Nexus fills; QTM adds a longest gap).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FillPolicy {
+    /// The longest gap filled (`None`: every length).
+    pub max_gap: Option<MaxGap>,
+    /// Also fill before a track's first observation and after its last.
+    pub extrapolate: bool,
+}
+
+/// A gap length: frames of the input (`--stride` does not change it), or seconds at the
+/// input's rate (a C3D input's).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MaxGap {
+    /// Frames of the input.
+    Frames(usize),
+    /// Seconds.
+    Seconds(f64),
+}
+
+impl std::str::FromStr for MaxGap {
+    type Err = String;
+    /// `N` frames or `Xs` seconds.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        let bad = || format!("`{s}` is not a gap length: N frames, or Xs seconds (e.g. 0.5s)");
+        match s.strip_suffix('s') {
+            Some(x) => match x.parse::<f64>() {
+                Ok(v) if v.is_finite() && v >= 0.0 => Ok(MaxGap::Seconds(v)),
+                _ => Err(bad()),
+            },
+            None => s.parse().map(MaxGap::Frames).map_err(|_| bad()),
+        }
+    }
 }
 
 /// Writes every track of the run in `run` at every frame of its clip into `out`, in the
@@ -56,6 +98,19 @@ pub fn complete_run(
     layout: Option<Layout>,
     device: &Device,
 ) -> Result<Completion> {
+    complete_run_with(run, out, layout, FillPolicy::default(), device)
+}
+
+/// [`complete_run`] filling what `policy` asks for: an entry left unfilled is NaN in a
+/// `.npz` (and not valid in PointOdyssey's `valids`) and stays as the input holds it in a
+/// `.c3d`.
+pub fn complete_run_with(
+    run: &RunDir,
+    out: &Path,
+    layout: Option<Layout>,
+    policy: FillPolicy,
+    device: &Device,
+) -> Result<Completion> {
     let to_c3d = out
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("c3d"));
@@ -67,11 +122,7 @@ pub fn complete_run(
     let config = run.load_config()?;
     crate::io::check_output(out, Some(&run.dir), &[&config.data])?;
     let markers = if to_c3d {
-        let is_c3d = config
-            .data
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("c3d"));
-        if !is_c3d {
+        if !is_c3d(&config.data) {
             return Err(DomaError::Usage(format!(
                 "a .c3d output is the C3D input with its gaps filled, and this run fitted {}: \
                  write a .npz",
@@ -79,18 +130,27 @@ pub fn complete_run(
             )));
         }
         Some(read_c3d_bytes(&config.data)?)
+    } else if is_c3d(&config.data) {
+        // Read for its rate (a --max-gap in seconds) and its own values.
+        Some(read_c3d_bytes(&config.data)?)
     } else {
         None
     };
-    let done = complete_with(run, &config, markers.as_ref().map(|(_, m)| m), device)?;
+    let done = complete_with(
+        run,
+        &config,
+        markers.as_ref().map(|(_, m)| m),
+        policy,
+        device,
+    )?;
     let (t, n) = (done.frames, done.points);
-    if let Some((original, _)) = &markers {
+    if let (true, Some((original, _))) = (to_c3d, &markers) {
         // The input file itself, with only the filled entries written: every group,
         // parameter, analog sample and event kept, and the frames outside the fitted clip
         // (or between its strided frames) as they were.
         let source_points: Vec<usize> = done.kept.clone().unwrap_or_else(|| (0..n).collect());
         let edits: Vec<PointEdit> = (0..t * n)
-            .filter(|&e| !done.observed[e])
+            .filter(|&e| done.filled[e])
             .map(|e| PointEdit {
                 frame: done.source_frames[e / n],
                 point: source_points[e % n],
@@ -107,13 +167,16 @@ pub fn complete_run(
     } else {
         write_npz(out, &done, layout)?;
     }
-    let observed = &done.observed;
-    let observed = observed.iter().filter(|&&o| o).count();
+    let count = |mask: &[bool]| mask.iter().filter(|&&o| o).count();
+    let (observed, filled) = (count(&done.observed), count(&done.filled));
+    let extrapolated = count(&done.extrapolated);
     Ok(Completion {
         frames: t,
         tracks: n,
         observed,
-        filled: t * n - observed,
+        filled: filled - extrapolated,
+        extrapolated,
+        unfilled: t * n - observed - filled,
         blend: done.blend,
     })
 }
@@ -126,10 +189,15 @@ pub struct CompletedTracks {
     pub frames: usize,
     /// `N`, the fitted tracks.
     pub points: usize,
-    /// `[T, N, 3]`: observed entries as the input holds them, the rest filled.
+    /// `[T, N, 3]`: observed entries as the input holds them, the filled ones filled, the
+    /// others NaN.
     pub tracks: Vec<f32>,
     /// `[T, N]`: the input's mask (held-out observations count as observed).
     pub observed: Vec<bool>,
+    /// `[T, N]`: the entries filled (the others unobserved are NaN in `tracks`).
+    pub filled: Vec<bool>,
+    /// `[T, N]`: the filled entries before a track's first observation or after its last.
+    pub extrapolated: Vec<bool>,
     /// The input's index of each track when the fit dropped tracks never observed.
     pub kept: Option<Vec<usize>>,
     /// The input's frame of each of the clip's frames.
@@ -138,11 +206,30 @@ pub struct CompletedTracks {
     pub blend: Blend,
 }
 
-/// The completion that [`complete_run`] writes, in memory: every track of the run in `run`
-/// at every frame of its clip, gaps filled by doma's fill ([`crate::gaps::blend`]).
-pub fn complete_tracks(run: &RunDir, device: &Device) -> Result<CompletedTracks> {
+/// The completion that [`complete_run_with`] writes, in memory: every track of the run in
+/// `run` at every frame of its clip, the gaps that `policy` asks for filled by doma's fill
+/// ([`crate::gaps::blend`]).
+pub fn complete_tracks(
+    run: &RunDir,
+    policy: FillPolicy,
+    device: &Device,
+) -> Result<CompletedTracks> {
     let config = run.load_config()?;
-    complete_with(run, &config, None, device)
+    let markers = is_c3d(&config.data)
+        .then(|| read_c3d_bytes(&config.data))
+        .transpose()?;
+    complete_with(
+        run,
+        &config,
+        markers.as_ref().map(|(_, m)| m),
+        policy,
+        device,
+    )
+}
+
+fn is_c3d(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("c3d"))
 }
 
 /// [`complete_tracks`] of the run's `config`, its input read from `markers` when given.
@@ -150,6 +237,7 @@ fn complete_with(
     run: &RunDir,
     config: &RunConfig,
     markers: Option<&C3d>,
+    policy: FillPolicy,
     device: &Device,
 ) -> Result<CompletedTracks> {
     let field = run.load_field(config, device)?;
@@ -197,29 +285,76 @@ fn complete_with(
     let predicted = field_everywhere(&field, data, device)?;
     let field = FieldPrediction::new(n, &predicted, data.canonical(), seen);
     let tracks = Marked::new(t, n, &normalised, seen);
-    let (filled, blend) = blended_fill(&tracks, &field, config.fit.seed);
+    let (values, blend) = blended_fill(&tracks, &field, config.fit.seed);
+    let stride = config.stride.max(1);
+    let source_frames: Vec<usize> = frame_range.step_by(stride).collect();
+    let rate = markers.map(|m| m.rate as f64);
+    let (filled, extrapolated) = chosen(&tracks, &source_frames, policy, rate, &config.data)?;
     // Observed entries exactly as the input holds them; filled ones back in its units.
     let tracks: Vec<f32> = input
         .positions()
         .iter()
-        .zip(&filled)
+        .zip(&values)
         .enumerate()
-        .map(
-            |(e, (&v, &f))| {
-                if seen[e / 3] { v } else { f * s + c[e % 3] }
-            },
-        )
+        .map(|(e, (&v, &f))| match (seen[e / 3], filled[e / 3]) {
+            (true, _) => v,
+            (false, true) => f * s + c[e % 3],
+            (false, false) => f32::NAN,
+        })
         .collect();
-    let stride = config.stride.max(1);
     Ok(CompletedTracks {
         frames: t,
         points: n,
         tracks,
         observed: seen.to_vec(),
+        filled,
+        extrapolated,
         kept: sequence.kept.clone(),
-        source_frames: frame_range.step_by(stride).collect(),
+        source_frames,
         blend,
     })
+}
+
+/// The unobserved entries `policy` fills, and those of them past a track's ends: `[T, N]`
+/// each. A gap's length is counted in the input's frames (`source_frames` maps the clip's),
+/// in seconds at `rate` for [`MaxGap::Seconds`].
+fn chosen(
+    tracks: &Marked,
+    source_frames: &[usize],
+    policy: FillPolicy,
+    rate: Option<f64>,
+    data: &Path,
+) -> Result<(Vec<bool>, Vec<bool>)> {
+    let longest = match policy.max_gap {
+        None => usize::MAX,
+        Some(MaxGap::Frames(f)) => f,
+        Some(MaxGap::Seconds(secs)) => match rate {
+            Some(rate) => (secs * rate).floor() as usize,
+            None => {
+                return Err(DomaError::Usage(format!(
+                    "--max-gap {secs}s: {} has no frame rate (a .c3d has); give the length \
+                     in frames",
+                    data.display()
+                )));
+            }
+        },
+    };
+    let n = tracks.points;
+    let mut filled = vec![false; tracks.frames * n];
+    let mut extrapolated = vec![false; tracks.frames * n];
+    for gap in crate::gaps::spans::gaps(tracks) {
+        let fill = match (gap.before, gap.after) {
+            (Some(a), Some(b)) => source_frames[b] - source_frames[a] - 1 <= longest,
+            _ => policy.extrapolate,
+        };
+        if fill {
+            for k in gap.frames.clone() {
+                filled[k * n + gap.track] = true;
+                extrapolated[k * n + gap.track] = !gap.is_interior();
+            }
+        }
+    }
+    Ok((filled, extrapolated))
 }
 
 /// The completion as a `.npz`, in the keys of `layout` ([`complete_run`]).
@@ -227,7 +362,10 @@ fn write_npz(out: &Path, done: &CompletedTracks, layout: Option<Layout>) -> Resu
     let (t, n) = (done.frames, done.points);
     let (tracks, observed, kept) = (&done.tracks, &done.observed, done.kept.as_deref());
     let kept: Option<Vec<i64>> = kept.map(|k| k.iter().map(|&i| i as i64).collect());
-    let all_valid = vec![true; t * n];
+    // PointOdyssey's `valids`: every entry that holds a point.
+    let all_valid: Vec<bool> = (0..t * n)
+        .map(|e| done.observed[e] || done.filled[e])
+        .collect();
     let (tracks_key, mask_key) = match layout {
         Some(Layout::PointOdyssey) => ("trajs_3d", "visibs"),
         Some(Layout::TapVid3d) => ("tracks_XYZ", "visibility"),

@@ -30,7 +30,10 @@ mod spec;
 mod warp;
 
 pub use claim::Claim;
-pub use complete::{CompletedTracks, Completion, complete_run, complete_tracks};
+pub use complete::{
+    CompletedTracks, Completion, FillPolicy, MaxGap, complete_run, complete_run_with,
+    complete_tracks,
+};
 pub use eval::{eval_run, eval_run_as, evaluate, field_everywhere};
 pub use fit::{FitOutcome, fit_run, fit_run_locked};
 pub use gap_report::{GapErrors, GapReport, gap_report};

@@ -15,7 +15,10 @@ use doma::data::tracker::TrackerView;
 use doma::data::traj::write_traj;
 use doma::field::{DomaFieldConfig, Variant};
 use doma::jacobian::JacobianKind;
-use doma::run::{FitOutcome, Report, RunConfig, RunDir, complete_run, eval_run, fit_run};
+use doma::run::{
+    FillPolicy, FitOutcome, MaxGap, Report, RunConfig, RunDir, complete_run, complete_run_with,
+    eval_run, fit_run,
+};
 use doma::siren::WithSirenShape;
 use doma::train::{Convergence, FitConfig, WithSchedule};
 use doma_formats::npy::NpyValues;
@@ -104,11 +107,23 @@ fn frames_where_nothing_is_observed_add_nothing_and_never_panic() {
     }
     // The completion fills the empty frames too, every value finite.
     let out = dir.join("complete.npz");
-    let done = complete_run(&RunDir::new(dir.join("r2")), &out, None, &Device::flex()).unwrap();
+    let done = complete_run_with(
+        &RunDir::new(dir.join("r2")),
+        &out,
+        None,
+        EVERY_ENTRY,
+        &Device::flex(),
+    )
+    .unwrap();
     let (filled, _) = doma::data::sequence::read_tracks(&out, &TrackFile::default()).unwrap();
     assert_eq!(done.frames, t);
     assert!(filled.positions().iter().all(|v| v.is_finite()));
-    assert_eq!(done.observed + done.filled, t * done.tracks);
+    assert_eq!(
+        done.observed + done.filled + done.extrapolated,
+        t * done.tracks
+    );
+    // The last frame sees nothing: every track's run past its last observation.
+    assert!(done.extrapolated >= done.tracks && done.unfilled == 0);
 }
 
 #[test]
@@ -158,6 +173,68 @@ fn held_out_observations_are_reported_beside_every_baseline_and_eval_repeats_the
     );
 }
 
+/// A completion of every unobserved entry, past the tracks' ends too.
+const EVERY_ENTRY: FillPolicy = FillPolicy {
+    max_gap: None,
+    extrapolate: true,
+};
+
+/// By default a completion fills the gaps with observations on both sides and nothing past
+/// a track's ends; `max_gap` leaves longer gaps; seconds need a rate.
+#[test]
+fn a_completion_fills_what_its_policy_asks_for() {
+    let v = view();
+    let dir = common::scratch("doma-policy");
+    let npz = dir.join("clip.npz");
+    v.write(&npz, Layout::TapVid3d).unwrap();
+    let run = RunDir::new(dir.join("run"));
+    fit(&npz, &run, |c| c.drop_unobserved = true);
+    let read = |policy: FillPolicy| {
+        let out = dir.join("done.npz");
+        let done = complete_run_with(&run, &out, None, policy, &Device::flex()).unwrap();
+        let (tracks, _) = doma::data::sequence::read_tracks(&out, &TrackFile::default()).unwrap();
+        (done, tracks)
+    };
+    let (every, all) = read(EVERY_ENTRY);
+    let (inner, some) = read(FillPolicy::default());
+    let (t, n) = (all.frames(), all.points());
+    assert_eq!((inner.filled, inner.extrapolated), (every.filled, 0));
+    assert_eq!(inner.unfilled, every.extrapolated);
+    assert!(inner.unfilled > 0 && inner.filled > 0);
+    let seen = all.observed();
+    for i in 0..n {
+        let first = (0..t).find(|&k| seen[k * n + i]);
+        let last = (0..t).rev().find(|&k| seen[k * n + i]);
+        for k in 0..t {
+            let e = 3 * (k * n + i);
+            let edge = first.is_none_or(|f| k < f) || last.is_none_or(|l| k > l);
+            if edge {
+                assert!(some.positions()[e].is_nan(), "frame {k}, track {i}");
+            } else {
+                assert_eq!(some.positions()[e..e + 3], all.positions()[e..e + 3]);
+            }
+        }
+    }
+    let (none, _) = read(FillPolicy {
+        max_gap: Some(MaxGap::Frames(0)),
+        extrapolate: false,
+    });
+    assert_eq!((none.filled, none.extrapolated), (0, 0));
+    let seconds = FillPolicy {
+        max_gap: Some(MaxGap::Seconds(0.5)),
+        extrapolate: false,
+    };
+    let refused = complete_run_with(&run, &dir.join("x.npz"), None, seconds, &Device::flex());
+    assert!(
+        matches!(&refused, Err(doma::DomaError::Usage(m)) if m.contains("no frame rate")),
+        "{refused:?}"
+    );
+    assert!(!dir.join("x.npz").exists());
+    assert_eq!("12".parse(), Ok(MaxGap::Frames(12)));
+    assert_eq!("0.25s".parse(), Ok(MaxGap::Seconds(0.25)));
+    assert!("-1s".parse::<MaxGap>().is_err() && "a".parse::<MaxGap>().is_err());
+}
+
 #[test]
 fn a_completed_file_has_the_input_s_shape_order_and_observations() {
     let v = view();
@@ -169,7 +246,7 @@ fn a_completed_file_has_the_input_s_shape_order_and_observations() {
     let input = read_npz_tracks(&npz, &TrackFile::default()).unwrap();
     let (t, n) = (input.frames(), input.points());
     let out = dir.join("done.npz");
-    let done = complete_run(&run, &out, None, &Device::flex()).unwrap();
+    let done = complete_run_with(&run, &out, None, EVERY_ENTRY, &Device::flex()).unwrap();
     let members = read_npz(&out).unwrap();
     let get = |k: &str| members.iter().find(|m| m.0 == k).unwrap().1.clone();
     let kept: Vec<usize> = get("kept").data.iter().map(|&i| i as usize).collect();
@@ -195,7 +272,7 @@ fn a_completed_file_has_the_input_s_shape_order_and_observations() {
         }
     }
     assert_eq!(
-        done.filled,
+        done.filled + done.extrapolated,
         observed.data.iter().filter(|&&o| o == 0.0).count()
     );
     // The default keys are the masked layout, so the completed file is data for a new fit.
@@ -210,7 +287,8 @@ fn a_completed_file_has_the_input_s_shape_order_and_observations() {
     );
     // In PointOdyssey's layout the file reads back as tracks whose every entry is valid.
     let po = dir.join("done_po.npz");
-    complete_run(&run, &po, Some(Layout::PointOdyssey), &Device::flex()).unwrap();
+    let po_layout = Some(Layout::PointOdyssey);
+    complete_run_with(&run, &po, po_layout, EVERY_ENTRY, &Device::flex()).unwrap();
     let back = read_npz_tracks(&po, &TrackFile::default()).unwrap();
     assert_eq!(back.positions(), &tracks.data[..]);
     let counted = read_npz_tracks(
@@ -384,7 +462,7 @@ fn a_c3d_clip_completes_into_the_input_file_with_only_the_fitted_gaps_filled() {
         c.drop_unobserved = true;
     });
     let out = dir.join("filled.c3d");
-    let done = complete_run(&run, &out, None, &Device::flex()).unwrap();
+    let done = complete_run_with(&run, &out, None, EVERY_ENTRY, &Device::flex()).unwrap();
     let (back, given) = (read_c3d(&out).unwrap(), read_c3d(&input).unwrap());
     let kept = run.load_data(&run.load_config().unwrap()).unwrap().kept;
     let kept = kept.unwrap_or_else(|| (0..n).collect());
@@ -419,7 +497,7 @@ fn a_c3d_clip_completes_into_the_input_file_with_only_the_fitted_gaps_filled() {
         }
     }
     assert!(filled > 0);
-    assert_eq!(done.filled, filled);
+    assert_eq!(done.filled + done.extrapolated, filled);
     // A .c3d takes no tracker keys, and needs a C3D input for its labels and rate.
     let refused = complete_run(&run, &out, Some(Layout::TapVid3d), &Device::flex());
     assert!(
