@@ -53,6 +53,7 @@ pub fn kernel_launches() -> usize {
 trait Launch {
     fn id(self) -> &'static str;
     fn out_shape(self, rows: usize, d: usize) -> Shape;
+    fn threads(self, rows: usize, d: usize) -> (usize, usize);
     fn launch(self, inputs: Vec<CubeTensor>, omega: f64) -> CubeTensor;
 }
 
@@ -79,6 +80,18 @@ impl Launch for SineKernel {
         }
     }
 
+    /// The vector width along a row and the threads, one per vector of the value block,
+    /// for inputs `[rows, d]`: vectors of 4 when rows split into them (d = 128 in doma's
+    /// SIRENs).
+    fn threads(self, rows: usize, d: usize) -> (usize, usize) {
+        let vector: usize = if d % 4 == 0 { 4 } else { 1 };
+        let threads = match self {
+            SineKernel::DualForward | SineKernel::DualBackward => rows / 4 * d,
+            _ => rows * d,
+        } / vector;
+        (vector, threads)
+    }
+
     /// Launches the kernel on `inputs`: `zs` (`z_v` for the input layer's), `bias`, then
     /// `g` for a backward, then `W` for the input layer's.
     fn launch(self, inputs: Vec<CubeTensor>, omega: f64) -> CubeTensor {
@@ -99,13 +112,7 @@ impl Launch for SineKernel {
             self.out_shape(rows, d),
             dtype,
         );
-        // Vectors of 4 along a row when rows split into them (d = 128 in doma's SIRENs).
-        let vector: usize = if d % 4 == 0 { 4 } else { 1 };
-        // One thread per vector of the value block.
-        let threads = match self {
-            SineKernel::DualForward | SineKernel::DualBackward => rows / 4 * d,
-            _ => rows * d,
-        } / vector;
+        let (vector, threads) = self.threads(rows, d);
         if threads == 0 {
             return out;
         }
