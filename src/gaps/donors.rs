@@ -237,12 +237,15 @@ mod tests {
             .map(|p| std::array::from_fn(|i| (0..3).map(|c| r[i][c] * p[c]).sum::<f64>() + t[i]))
             .collect();
         let m = rigid_motion(&from, &to);
-        for i in 0..3 {
-            for j in 0..3 {
-                assert!((m.r[i][j] - r[i][j]).abs() < 1e-12, "{m:?}");
-            }
-            assert!((m.t[i] - t[i]).abs() < 1e-12, "{m:?}");
-        }
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+        assert!(
+            m.r.iter()
+                .flatten()
+                .zip(r.iter().flatten())
+                .all(|(&a, &b)| close(a, b)),
+            "{m:?}"
+        );
+        assert!(m.t.iter().zip(&t).all(|(&a, &b)| close(a, b)), "{m:?}");
         // A reflection is not a rotation: the best proper one is returned (det = +1).
         let mirrored: Vec<[f64; 3]> = from.iter().map(|p| [p[0], p[1], -p[2]]).collect();
         let r = rigid_motion(&from, &mirrored).r;

@@ -84,7 +84,7 @@ impl Launch for SineKernel {
     /// for inputs `[rows, d]`: vectors of 4 when rows split into them (d = 128 in doma's
     /// SIRENs).
     fn threads(self, rows: usize, d: usize) -> (usize, usize) {
-        let vector: usize = if d % 4 == 0 { 4 } else { 1 };
+        let vector: usize = if d.is_multiple_of(4) { 4 } else { 1 };
         let threads = match self {
             SineKernel::DualForward | SineKernel::DualBackward => rows / 4 * d,
             _ => rows * d,
