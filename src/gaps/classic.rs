@@ -15,25 +15,35 @@ impl Marked<'_> {
     /// observed entries are read; a track never observed is left as it is.
     pub fn linear(&self) -> Vec<f32> {
         let mut out = self.positions.to_vec();
-        let n = self.points;
         for gap in gaps(self) {
-            let i = gap.track;
             for k in gap.frames.clone() {
-                for c in 0..3 {
-                    let at = |j: usize| self.positions[3 * (j * n + i) + c];
-                    out[3 * (k * n + i) + c] = match (gap.before, gap.after) {
-                        (Some(a), Some(b)) => {
-                            let w = (k - a) as f32 / (b - a) as f32;
-                            at(a) + w * (at(b) - at(a))
-                        }
-                        (Some(a), None) => at(a),
-                        (None, Some(b)) => at(b),
-                        (None, None) => unreachable!("a gap borders an observation"),
-                    };
-                }
+                let e = 3 * (k * self.points + gap.track);
+                out[e..e + 3].copy_from_slice(&self.linear_at(k, gap.track, gap.before, gap.after));
             }
         }
         out
+    }
+
+    /// [`Marked::linear`] at frame `k` of track `i`, between its observations at `before`
+    /// and `after` (`None` past an end; neither: the entry as it is).
+    pub(super) fn linear_at(
+        &self,
+        k: usize,
+        i: usize,
+        before: Option<usize>,
+        after: Option<usize>,
+    ) -> [f32; 3] {
+        let at = |j: usize| self.at(j, i);
+        match (before, after) {
+            (Some(a), Some(b)) => {
+                let w = (k - a) as f32 / (b - a) as f32;
+                let (p, q) = (at(a), at(b));
+                std::array::from_fn(|c| p[c] + w * (q[c] - p[c]))
+            }
+            (Some(a), None) => at(a),
+            (None, Some(b)) => at(b),
+            (None, None) => at(k),
+        }
     }
 
     /// Each track's natural cubic spline through its observed frames (per coordinate, in

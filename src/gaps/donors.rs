@@ -60,35 +60,32 @@ impl Marked<'_> {
     }
 
     /// `fill(gap, k)` at each entry of an interior gap with `count` donors; the linear
-    /// interpolation elsewhere. The donors are found once per gap.
+    /// interpolation elsewhere, computed at that entry alone. The donors are found once per
+    /// gap.
     fn by_donors(
         &self,
         entries: &[(usize, usize)],
         count: usize,
         fill: impl Fn(&DonorGap, usize) -> [f64; 3],
     ) -> Vec<[f32; 3]> {
-        let linear = self.linear();
         let mut gaps: HashMap<(usize, usize), Option<DonorGap>> = HashMap::new();
         entries
             .iter()
             .map(|&(k, i)| {
-                let e = 3 * (k * self.points + i);
-                let held = [linear[e], linear[e + 1], linear[e + 2]];
                 if self.seen(k, i) {
-                    return held;
+                    return self.at(k, i);
                 }
-                let (Some(a), Some(b)) = (
-                    (0..k).rev().find(|&f| self.seen(f, i)),
-                    (k + 1..self.frames).find(|&f| self.seen(f, i)),
-                ) else {
-                    return held;
+                let before = (0..k).rev().find(|&f| self.seen(f, i));
+                let after = (k + 1..self.frames).find(|&f| self.seen(f, i));
+                let (Some(a), Some(b)) = (before, after) else {
+                    return self.linear_at(k, i, before, after);
                 };
                 let gap = gaps
                     .entry((i, a))
                     .or_insert_with(|| self.donors(i, a, b, count));
                 match gap {
                     Some(gap) => fill(gap, k).map(|v| v as f32),
-                    None => held,
+                    None => self.linear_at(k, i, before, after),
                 }
             })
             .collect()
