@@ -127,7 +127,7 @@ impl Marked<'_> {
     /// [`LOW_RANK_ENERGY`] of its variance, until they change by less than 10⁻⁶ of the
     /// data's spread (at most [`LOW_RANK_ITERATIONS`] rounds): the iterative PCA fill of
     /// the gap-filling literature.
-    pub fn low_rank(&self) -> Vec<f32> {
+    pub fn iterative_pca(&self) -> Vec<f32> {
         let (t, n) = (self.frames, self.points);
         let mut out = self.linear();
         let tracks: Vec<usize> = (0..n)
@@ -179,10 +179,10 @@ impl Marked<'_> {
 /// The neighbours averaged by [`Marked::neighbours`].
 pub const MOTION_NEIGHBOURS: usize = 4;
 
-/// The share of the variance kept by [`Marked::low_rank`].
+/// The share of the variance kept by [`Marked::iterative_pca`].
 pub const LOW_RANK_ENERGY: f64 = 0.99;
 
-/// The most rounds of [`Marked::low_rank`].
+/// The most rounds of [`Marked::iterative_pca`].
 pub const LOW_RANK_ITERATIONS: usize = 100;
 
 /// `x` (`[t, d]`, row-major) projected onto its column means plus the principal components
@@ -361,7 +361,7 @@ mod tests {
     }
 
     #[test]
-    fn the_low_rank_fill_recovers_a_hidden_span_of_rank_one_motion() {
+    fn the_iterative_pca_fill_recovers_a_hidden_span_of_rank_one_motion() {
         // Every coordinate of every track is a multiple of one time signal plus an offset:
         // rank 1 after centring. A span of track 2 is hidden.
         let (t, n) = (30, 6);
@@ -380,7 +380,7 @@ mod tests {
             observed[k * n + 2] = false;
         }
         let marked = Marked::new(t, n, &positions, &observed);
-        let filled = marked.low_rank();
+        let filled = marked.iterative_pca();
         let linear = marked.linear();
         let err = |f: &[f32]| {
             (10..18)

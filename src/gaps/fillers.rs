@@ -75,8 +75,8 @@ pub enum Filler {
     Spline,
     /// The neighbours' motion ([`Marked::neighbours`]).
     Neighbours,
-    /// The low-rank (PCA) reconstruction ([`Marked::low_rank`]).
-    LowRank,
+    /// The iterative PCA fill ([`Marked::iterative_pca`]).
+    IterativePca,
     /// Each track's linear interpolation ([`Marked::linear`]).
     Linear,
     /// The field's fill with lenders chosen frame by frame among the tracks seen there
@@ -86,11 +86,14 @@ pub enum Filler {
     Pattern,
     /// Vicon Nexus's rigid-body fill: three donors' rigid motion ([`Marked::rigid_body`]).
     RigidBody,
+    /// Burke & Lasenby's low-dimensional Kalman smoother ([`Marked::kalman`]; the linear
+    /// fill where it cannot run).
+    Kalman,
 }
 
 impl Filler {
     /// The number of fillers.
-    pub const COUNT: usize = 8;
+    pub const COUNT: usize = 9;
 
     /// Every filler, in the order of a blend's weights: a tie in the blend goes to the
     /// earlier (the field's fill first).
@@ -98,11 +101,12 @@ impl Filler {
         Filler::FieldFill,
         Filler::Spline,
         Filler::Neighbours,
-        Filler::LowRank,
+        Filler::IterativePca,
         Filler::Linear,
         Filler::FieldFillFramewise,
         Filler::Pattern,
         Filler::RigidBody,
+        Filler::Kalman,
     ];
 
     /// Its place in [`Filler::ALL`].
@@ -116,11 +120,12 @@ impl Filler {
             Filler::FieldFill => "field_fill",
             Filler::Spline => "spline",
             Filler::Neighbours => "neighbours",
-            Filler::LowRank => "low_rank",
+            Filler::IterativePca => "iterative_pca",
             Filler::Linear => "linear",
             Filler::FieldFillFramewise => "field_fill_framewise",
             Filler::Pattern => "pattern",
             Filler::RigidBody => "rigid_body",
+            Filler::Kalman => "kalman",
         }
     }
 
@@ -130,20 +135,22 @@ impl Filler {
             Filler::FieldFill => "field's fill",
             Filler::Spline => "spline",
             Filler::Neighbours => "neighbours",
-            Filler::LowRank => "low rank",
+            Filler::IterativePca => "iterative PCA",
             Filler::Linear => "linear",
             Filler::FieldFillFramewise => "field's fill, lenders frame by frame",
             Filler::Pattern => "pattern",
             Filler::RigidBody => "rigid body",
+            Filler::Kalman => "Kalman smoother",
         }
     }
 
     /// The filler named `name` ([`Filler::name`], or the key reports written before these
-    /// names used: `carried` and `framewise`).
+    /// names used: `carried`, `framewise` and `low_rank`).
     pub fn from_name(name: &str) -> Option<Filler> {
         match name {
             "carried" => Some(Filler::FieldFill),
             "framewise" => Some(Filler::FieldFillFramewise),
+            "low_rank" => Some(Filler::IterativePca),
             _ => Filler::ALL.into_iter().find(|f| f.name() == name),
         }
     }
@@ -179,7 +186,8 @@ impl Filler {
         let whole = match self {
             Filler::FieldFill | Filler::FieldFillFramewise => return None,
             Filler::Spline => marked.spline(),
-            Filler::LowRank => marked.low_rank(),
+            Filler::IterativePca => marked.iterative_pca(),
+            Filler::Kalman => marked.kalman().unwrap_or_else(|| marked.linear()),
             Filler::Linear => marked.linear(),
             Filler::Neighbours => return Some(marked.neighbours(entries)),
             Filler::Pattern => return Some(marked.pattern(entries)),

@@ -143,13 +143,13 @@ mod tests {
         let e: GapErrors = serde_json::from_str(old).unwrap();
         assert_eq!((e.doma, e.field), (1.0, 2.0));
         assert_eq!(e.fillers[Filler::FieldFill], Some(3.0));
-        assert_eq!(e.fillers[Filler::LowRank], Some(7.0));
+        assert_eq!(e.fillers[Filler::IterativePca], Some(7.0));
         assert_eq!(e.fillers[Filler::FieldFillFramewise], None);
         // Written back under today's names, the missing one left out.
         let text = serde_json::to_string(&e).unwrap();
         assert_eq!(
             text,
-            r#"{"doma":1.0,"field":2.0,"field_fill":3.0,"spline":5.0,"neighbours":6.0,"low_rank":7.0,"linear":4.0}"#
+            r#"{"doma":1.0,"field":2.0,"field_fill":3.0,"spline":5.0,"neighbours":6.0,"iterative_pca":7.0,"linear":4.0}"#
         );
         assert_eq!(serde_json::from_str::<GapErrors>(&text).unwrap(), e);
         // A blend's weights of before `framewise` existed read it as 0.
