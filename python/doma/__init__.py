@@ -324,7 +324,9 @@ class Field:
         self._native.jacobian_into(x, _times(frames), out)
         return out[0] if one else out
 
-    def complete(self, *, max_gap: Union[None, int, str] = None, extrapolate: bool = False) -> "Tracks":
+    def complete(
+        self, *, max_gap: Union[None, int, str] = None, extrapolate: bool = False, method: Optional[str] = None
+    ) -> "Tracks":
         """Every track at every frame of the fitted clip, gaps filled: what ``doma complete``
         writes, to the last bit (with ``--max-gap`` and ``--extrapolate`` as given here).
 
@@ -332,11 +334,14 @@ class Field:
         track's first observation or after its last (``extrapolate=True`` fills those).
         ``max_gap``: fill only gaps of at most that many frames of the input (an int), or
         seconds at a C3D input's rate (``"0.5s"``). An entry left unfilled is NaN.
+        ``method``: fill with one filler alone instead of doma's blend: ``"field_fill"``
+        (the field's fill), ``"field_fill_framewise"``, or one of :data:`FILLERS`.
 
         Returns a :class:`Tracks` in the input's units, frame and track order: ``tracks``
         [T, N, 3] float32 (an observed entry as the input holds it, every other filled by
         doma's fill: the field corrected by its nearest tracks' residuals at that frame
-        and by the track's own residual carried across the gap, blended with the spline, neighbours', low-rank and linear fills by weights learned
+        and by the track's own residual carried across the gap, blended with the classic
+        fillers (:data:`FILLERS`) by weights learned
         on this data's own observations, as ``doma complete`` prints them), ``observed`` the
         input's mask, and ``kept`` the input's index of each track when the fit dropped
         tracks never observed (else None).
@@ -344,7 +349,9 @@ class Field:
         if max_gap is not None and not isinstance(max_gap, (int, str)):
             raise ValueError(f"max_gap must be frames (an int) or seconds ('0.5s'), not {max_gap!r}")
         gap = None if max_gap is None else str(max_gap)
-        positions, (t, n), observed, kept = self._native.complete(gap, bool(extrapolate))
+        if method is not None and not isinstance(method, str):
+            raise ValueError(f"method must be a filler's name, not {method!r}")
+        positions, (t, n), observed, kept = self._native.complete(gap, bool(extrapolate), method)
         return Tracks(
             tracks=np.frombuffer(positions, dtype=np.float32).reshape(t, n, 3),
             observed=np.frombuffer(observed, dtype=np.bool_).reshape(t, n),
@@ -484,8 +491,10 @@ def fill(tracks: Any, observed: Any, method: str = "rigid_body", *, time_axis: O
     Methods (:data:`FILLERS`): ``rigid_body`` (Vicon Nexus's: the three nearest markers
     seen through the gap moved as a rigid body, from both borders), ``pattern`` (Nexus's:
     one donor's motion), ``spline`` (natural cubic), ``linear``, ``neighbours`` (the mean
-    motion of the 4 nearest), ``low_rank`` (an iterative PCA). Where a gap is not interior
-    or has too few donors, ``rigid_body`` and ``pattern`` give the linear fill.
+    motion of the 4 nearest), ``iterative_pca``, ``kalman`` (Burke & Lasenby's
+    low-dimensional Kalman smoother, as pyCGM2 runs it). Where a gap is not interior or has
+    too few donors, ``rigid_body`` and ``pattern`` give the linear fill; where no two
+    frames see every marker, so does ``kalman``.
 
     Returns a new [T, N, 3] float32 array: the observed entries as given, every unobserved
     entry of a track observed somewhere filled, a track never observed as given.
@@ -553,6 +562,9 @@ def fit(
             (default 0: every track is fitted; the paper's Tab. 1 holds out 0.75).
         points_per_step, frames_per_step: a random subset of K training points per step;
             B frames per Adam step (defaults: all points, one frame: the paper's protocol).
+        frames_per_iteration: a random subset of F frames per iteration, so that a fit
+            costs ``iters * F`` steps whatever the recording's length (default: every
+            frame; tracks with gaps: 100).
         reference_frame: the frame whose positions are the input ``x`` (default: the most
             observed one).
         drop_unobserved: go on without tracks never observed rather than refuse them.

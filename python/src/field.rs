@@ -294,14 +294,16 @@ impl Field {
     /// Every track at every frame of the clip, as `doma complete` writes it with
     /// `--max-gap` (`N` frames or `Xs` seconds) and `--extrapolate`: `(tracks bytes
     /// [T, N, 3] f32 in the input's units, NaN where left unfilled, [T, N], observed bytes
-    /// [T, N], the input's index of each track or None)`.
+    /// [T, N], the input's index of each track or None)`; `method` fills with that filler
+    /// alone instead of doma's blend.
     #[allow(clippy::type_complexity)]
-    #[pyo3(signature = (max_gap=None, extrapolate=false))]
+    #[pyo3(signature = (max_gap=None, extrapolate=false, method=None))]
     fn complete<'py>(
         &self,
         py: Python<'py>,
         max_gap: Option<String>,
         extrapolate: bool,
+        method: Option<String>,
     ) -> PyResult<(
         Bound<'py, pyo3::types::PyByteArray>,
         (usize, usize),
@@ -313,9 +315,17 @@ impl Field {
                 .map(|g| g.parse::<doma::run::MaxGap>())
                 .transpose()
                 .map_err(|e| PyValueError::new_err(format!("max_gap: {e}")))?;
+            let method = method
+                .map(|m| {
+                    doma::gaps::Filler::from_name(&m).ok_or_else(|| {
+                        PyValueError::new_err(format!("method: `{m}` is not a filler"))
+                    })
+                })
+                .transpose()?;
             let policy = doma::run::FillPolicy {
                 max_gap,
                 extrapolate,
+                method,
             };
             let done = py
                 .detach(|| doma::run::complete_tracks(&self.run, policy, &self.device))

@@ -64,7 +64,7 @@ def test_every_method_fills_every_gap_and_refuses_what_it_cannot_read():
         assert filled.dtype == np.float32 and filled.shape == tracks.shape
         assert np.isfinite(filled[a + 1 : b, i]).all(), method
         assert np.array_equal(filled[observed], tracks[observed]), method
-    assert set(doma.FILLERS) >= {"rigid_body", "pattern", "spline", "linear", "low_rank"}
+    assert set(doma.FILLERS) >= {"rigid_body", "pattern", "spline", "linear", "iterative_pca", "kalman"}
     with pytest.raises(ValueError, match="method 'field_fill' is not one of"):
         doma.fill(tracks, observed, "field_fill")
     poisoned = tracks.copy()
@@ -73,3 +73,21 @@ def test_every_method_fills_every_gap_and_refuses_what_it_cannot_read():
         doma.fill(poisoned, observed, "spline")
     with pytest.raises(ValueError, match="bool array"):
         doma.fill(tracks, observed.astype(np.uint8), "spline")
+
+
+def test_complete_with_one_method_is_that_filler_through_the_field_s_coordinates(tmp_path):
+    """`Field.complete(method=...)` writes one filler alone: a classic one equals
+    `doma.fill` (up to the round trip through the fit's normalised coordinates), the
+    field's fill differs from doma's blend only where the blend moved away from it."""
+    tracks, observed, i, a, b = hidden_gap()
+    clip = slice(a - 40, b + 40)
+    tracks, observed = tracks[clip], observed[clip]
+    field = doma.fit(tracks, observed, iters=2, progress=False, out=tmp_path / "run", drop_unobserved=True)
+    gap = ~observed & observed.any(axis=0)
+    for method in ["rigid_body", "kalman", "spline"]:
+        ours = field.complete(method=method).tracks
+        np.testing.assert_allclose(ours[gap], doma.fill(tracks, observed, method)[gap], atol=1e-3)
+        assert np.array_equal(ours[observed], tracks[observed])
+    assert np.isfinite(field.complete(method="field_fill").tracks[gap]).all()
+    with pytest.raises(ValueError, match="not a filler"):
+        field.complete(method="nearest")

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use crate::Result;
 use crate::cli::DeviceArgs;
 use crate::data::layout::Layout;
+use crate::gaps::Filler;
 use crate::run::{FillPolicy, MaxGap, RunDir, complete_run_with};
 
 /// The flags of `doma complete`.
@@ -32,9 +33,22 @@ pub struct CompleteArgs {
     /// gaps with observations on both sides are filled); the count is printed.
     #[arg(long)]
     pub extrapolate: bool,
+    /// Fill with one filler alone instead of doma's fill (the blend): field_fill,
+    /// field_fill_framewise, spline, linear, neighbours, iterative_pca, pattern,
+    /// rigid_body or kalman.
+    #[arg(long, value_name = "FILLER", value_parser = filler)]
+    pub method: Option<Filler>,
     /// The device.
     #[command(flatten)]
     pub device: DeviceArgs,
+}
+
+/// A filler by its name ([`Filler::name`]).
+fn filler(s: &str) -> std::result::Result<Filler, String> {
+    Filler::from_name(s).ok_or_else(|| {
+        let names: Vec<&str> = Filler::ALL.iter().map(|f| f.name()).collect();
+        format!("`{s}` is not a filler: {}", names.join(", "))
+    })
 }
 
 /// Writes the completed tracks.
@@ -43,6 +57,7 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
     let policy = FillPolicy {
         max_gap: args.max_gap,
         extrapolate: args.extrapolate,
+        method: args.method,
     };
     let c = complete_run_with(
         &RunDir::new(&args.run),

@@ -10,8 +10,8 @@ use super::{RunConfig, RunDir, field_everywhere};
 use crate::data::c3d::{C3d, c3d_tracks, read_c3d_bytes, write_c3d_patched};
 use crate::data::layout::Layout;
 use crate::data::sequence::read_tracks;
-use crate::gaps::blend::{Blend, blended_fill};
-use crate::gaps::{FieldPrediction, Marked};
+use crate::gaps::blend::{Blend, Weights, blended_fill};
+use crate::gaps::{FieldPrediction, Filler, Marked, Sources};
 use crate::io::write_atomic;
 use crate::{DomaError, Result};
 use doma_formats::c3d::PointEdit;
@@ -46,6 +46,9 @@ pub struct FillPolicy {
     pub max_gap: Option<MaxGap>,
     /// Also fill before a track's first observation and after its last.
     pub extrapolate: bool,
+    /// Fill with this filler alone (`None`: doma's fill, the blend), e.g. the field's
+    /// fill alone, or rigid-body fill written into the input's C3D.
+    pub method: Option<Filler>,
 }
 
 /// A gap length: frames of the input (`--stride` does not change it), or seconds at the
@@ -285,7 +288,28 @@ fn complete_with(
     let predicted = field_everywhere(&field, data, device)?;
     let field = FieldPrediction::new(n, &predicted, data.canonical(), seen);
     let tracks = Marked::new(t, n, &normalised, seen);
-    let (values, blend) = blended_fill(&tracks, &field, config.fit.seed);
+    let (values, blend) = match policy.method {
+        None => blended_fill(&tracks, &field, config.fit.seed),
+        Some(filler) => {
+            let gaps: Vec<(usize, usize)> = (0..t * n)
+                .filter(|&e| !seen[e])
+                .map(|e| (e / n, e % n))
+                .collect();
+            let fill = filler.fill_at(&Sources::new(tracks, &field), &gaps);
+            let mut values = normalised.clone();
+            for (&(k, i), v) in gaps.iter().zip(fill) {
+                values[3 * (k * n + i)..3 * (k * n + i) + 3].copy_from_slice(&v);
+            }
+            let only = Weights::only(filler);
+            let blend = Blend {
+                short: only,
+                long: only,
+                validated: [0, 0],
+                cross_fitted: [false, false],
+            };
+            (values, blend)
+        }
+    };
     let stride = config.stride.max(1);
     let source_frames: Vec<usize> = frame_range.step_by(stride).collect();
     let rate = markers.map(|m| m.rate as f64);

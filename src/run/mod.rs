@@ -41,7 +41,8 @@ pub use info::{RunInfo, info};
 pub use lock::RunLock;
 pub use plot::plot_run;
 pub use spec::{
-    GAP_FILLING_H_WEIGHT, GAP_FILLING_ITERATIONS, ModelChoice, NewFit, RunSpec, fraction,
+    GAP_FILLING_FRAMES_PER_ITERATION, GAP_FILLING_H_WEIGHT, GAP_FILLING_ITERATIONS, ModelChoice,
+    NewFit, RunSpec, fraction,
 };
 pub use warp::warp_run;
 

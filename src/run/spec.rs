@@ -61,7 +61,8 @@ crate::names::value_names!(ModelChoice);
 
 /// A new fit: the data and what differs from the default recipe (DOMA-Affinity, the
 /// analytic Jacobian, 1000 iterations, no `L_H`, every track fitted; tracks with gaps:
-/// [`GAP_FILLING_H_WEIGHT`] and [`GAP_FILLING_ITERATIONS`]).
+/// [`GAP_FILLING_H_WEIGHT`], [`GAP_FILLING_ITERATIONS`] and
+/// [`GAP_FILLING_FRAMES_PER_ITERATION`]).
 ///
 /// This one type is the fit's options everywhere: `doma fit`'s flags (clap, the doc line of
 /// each field is its `--help`), a batch manifest's entry (serde, the same names with `_`)
@@ -161,6 +162,13 @@ pub struct RunSpec {
     #[arg(long, value_name = "B", value_parser = at_least_one, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frames_per_step: Option<usize>,
+    /// Frames per iteration: each iteration visits a fresh random subset of F frames, so
+    /// that the fit costs `iterations × F` frame visits whatever the recording's length
+    /// (default: every frame, the paper's protocol; tracks with gaps:
+    /// 100, [`GAP_FILLING_FRAMES_PER_ITERATION`]).
+    #[arg(long, value_name = "F", value_parser = at_least_one, help_heading = "Training")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames_per_iteration: Option<usize>,
     /// The layout of a tracker's .npz (default: detected from its keys).
     #[arg(long, help_heading = "Tracker files")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -187,7 +195,8 @@ pub struct RunSpec {
     pub drop_unobserved: Option<bool>,
     /// Hide this fraction of the observations from the fit, in spans inside each track's
     /// observations, and report the error of doma's fill on them beside the field alone and
-    /// every filler (the field's fill, spline, linear, the neighbours' motion, low rank).
+    /// every filler (the field's fill, spline, linear, the neighbours' motion, iterative PCA,
+    /// pattern and rigid-body fill, the Kalman smoother).
     #[arg(long, value_name = "F", value_parser = fraction, help_heading = "Gap filling")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout_observations: Option<f64>,
@@ -269,6 +278,12 @@ pub const GAP_FILLING_H_WEIGHT: f64 = 0.1;
 /// recordings the fill at 300 iterations was as good as at the paper's 1000 or better, in
 /// under a third of the time (docs/results.md, real markers).
 pub const GAP_FILLING_ITERATIONS: usize = 300;
+
+/// The frames per iteration of a fit of tracks with gaps whose options set none: the
+/// 100-frame clips of docs/results.md are fitted as before, and a recording at its native
+/// rate (thousands of frames) costs the same budget of steps, not an epoch per frame
+/// (docs/speed.md, native rate).
+pub const GAP_FILLING_FRAMES_PER_ITERATION: usize = 100;
 
 /// A fraction of at least 0 and below 1 (0: nothing held out).
 pub fn held_fraction(s: &str) -> std::result::Result<f64, String> {

@@ -169,6 +169,11 @@ pub struct FitConfig {
     /// iteration takes `⌈T / frames⌉` steps (`None`: one frame per step, the paper's
     /// protocol).
     pub frames_per_step: Option<usize>,
+    /// Frames per iteration: each iteration takes a fresh random subset of this many
+    /// frames, so that a fit's cost is a budget of steps that does not grow with the
+    /// frame count (`None`, or a count of at least the frames: every frame once per
+    /// iteration, the paper's protocol).
+    pub frames_per_iteration: Option<usize>,
     /// Stop early once the EPE on held-back training tracks stops improving (`None`: run
     /// the whole budget, the paper's protocol).
     pub until_converged: Option<Convergence>,
@@ -211,6 +216,11 @@ impl FitConfig {
         if self.frames_per_step == Some(0) {
             return Err(DomaError::InvalidConfig(
                 "frames per step must be at least 1".into(),
+            ));
+        }
+        if self.frames_per_iteration == Some(0) {
+            return Err(DomaError::InvalidConfig(
+                "frames per iteration must be at least 1".into(),
             ));
         }
         if let Some(c) = &self.until_converged {

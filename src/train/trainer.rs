@@ -44,6 +44,8 @@ pub struct Trainer<M, O> {
     device: Option<Device>,
     /// Frames per Adam step (1: the paper's one frame per step).
     frames_per_step: usize,
+    /// Frames per iteration (`None`: all of them, the paper's protocol).
+    frames_per_iteration: Option<usize>,
     /// When to stop before the budget, on the objective's held-back tracks.
     convergence: Option<Convergence>,
 }
@@ -67,6 +69,7 @@ impl<'a, M: MotionField + Module> Trainer<M, TrajectoryObjective<'a>> {
             rng,
         )
         .frames_per_step(config.frames_per_step.unwrap_or(1));
+        trainer.frames_per_iteration = config.frames_per_iteration;
         trainer.convergence = config.until_converged.clone();
         Ok(trainer)
     }
@@ -109,6 +112,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
             progress: false,
             clock: None,
             frames_per_step: 1,
+            frames_per_iteration: None,
             convergence: None,
         }
     }
@@ -181,7 +185,16 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         Ok(losses)
     }
 
-    /// The next iteration: every frame once, in a fresh random order. Reads the losses
+    /// The frames an iteration visits: all of them, or at most `frames_per_iteration`.
+    fn iteration_frames(&self) -> usize {
+        let frames = self.objective.frames();
+        self.frames_per_iteration.map_or(frames, |n| n.min(frames))
+    }
+
+    /// The next iteration: every frame once, in a fresh random order, or the first
+    /// `frames_per_iteration` frames of that order (the whole permutation is drawn either
+    /// way, so a budget of at least the frame count is the paper's iteration, bit for
+    /// bit). Reads the losses
     /// back once, stops with [`DomaError::NonFiniteLoss`] if any step's loss is not
     /// finite, and records the iteration.
     pub fn iteration(&mut self) -> Result<&IterationRecord> {
@@ -191,6 +204,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         let lr = self.learning_rate_at(iteration);
         let mut order: Vec<usize> = (0..self.objective.frames()).collect();
         order.shuffle(&mut self.rng);
+        order.truncate(self.iteration_frames());
         self.objective.prepare_iteration(&order, &mut self.rng);
         let mut step_losses = Vec::with_capacity(order.len());
         let mut first_frames = Vec::with_capacity(order.len());
@@ -331,7 +345,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         }
         bar.finish_and_clear();
         let field = self.field.take().expect("the field is always put back");
-        let frames = self.objective.frames();
+        let frames = self.iteration_frames();
         let canonical = self.objective.learned_canonical()?;
         Ok(Outcome::Finished(Fitted {
             canonical,

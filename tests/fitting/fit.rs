@@ -53,6 +53,32 @@ fn a_fit_reduces_the_loss_and_counts_its_steps() {
     assert!(last < 0.5 * first, "L1 went from {first} to {last}");
 }
 
+/// A budget of frames per iteration: at least the frame count is the paper's iteration,
+/// bit for bit; fewer visits that many frames an iteration (and counts them as steps).
+#[test]
+fn frames_per_iteration_caps_the_steps_and_keeps_the_paper_s_iteration_above_the_frames() {
+    let _g = backward_lock();
+    let (train, test) = small_data();
+    let device = Device::flex();
+    let run = |f: Option<usize>| {
+        let mut c = config(Variant::Trans, 6).with_learning_rate(1e-3);
+        c.frames_per_iteration = f;
+        fit(&c, &train, &device).unwrap()
+    };
+    let (all, above, two) = (run(None), run(Some(50)), run(Some(2)));
+    let warp =
+        |f: &doma::train::Fitted<doma::field::model::Model>| predictions(&f.field, &test, &device);
+    assert_eq!(warp(&all), warp(&above));
+    assert_eq!((all.steps, above.steps, two.steps), (6 * 5, 6 * 5, 6 * 2));
+    assert_ne!(warp(&all), warp(&two));
+    let mut bad = config(Variant::Trans, 1);
+    bad.frames_per_iteration = Some(0);
+    assert!(matches!(
+        fit(&bad, &train, &device),
+        Err(DomaError::InvalidConfig(m)) if m.contains("frames per iteration")
+    ));
+}
+
 #[test]
 fn the_smoothness_term_is_added_to_the_loss() {
     let _g = backward_lock();

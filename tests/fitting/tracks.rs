@@ -177,6 +177,7 @@ fn held_out_observations_are_reported_beside_every_baseline_and_eval_repeats_the
 const EVERY_ENTRY: FillPolicy = FillPolicy {
     max_gap: None,
     extrapolate: true,
+    method: None,
 };
 
 /// By default a completion fills the gaps with observations on both sides and nothing past
@@ -218,11 +219,13 @@ fn a_completion_fills_what_its_policy_asks_for() {
     let (none, _) = read(FillPolicy {
         max_gap: Some(MaxGap::Frames(0)),
         extrapolate: false,
+        method: None,
     });
     assert_eq!((none.filled, none.extrapolated), (0, 0));
     let seconds = FillPolicy {
         max_gap: Some(MaxGap::Seconds(0.5)),
         extrapolate: false,
+        method: None,
     };
     let refused = complete_run_with(&run, &dir.join("x.npz"), None, seconds, &Device::flex());
     assert!(
@@ -322,7 +325,12 @@ fn a_run_config_written_before_tracker_support_still_opens() {
         assert!(top.remove(key).is_some(), "{key}");
     }
     let fit = top["fit"].as_object_mut().unwrap();
-    for key in ["frames_per_step", "until_converged", "recipe"] {
+    for key in [
+        "frames_per_step",
+        "frames_per_iteration",
+        "until_converged",
+        "recipe",
+    ] {
         assert!(fit.remove(key).is_some(), "{key}");
     }
     let schedule = fit["schedule"].as_object_mut().unwrap();

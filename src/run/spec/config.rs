@@ -5,8 +5,8 @@
 use std::path::{Path, PathBuf};
 
 use super::{
-    GAP_FILLING_H_WEIGHT, GAP_FILLING_ITERATIONS, ModelChoice, RunSpec, check_fraction,
-    check_held_fraction,
+    GAP_FILLING_FRAMES_PER_ITERATION, GAP_FILLING_H_WEIGHT, GAP_FILLING_ITERATIONS, ModelChoice,
+    RunSpec, check_fraction, check_held_fraction,
 };
 use crate::backend::BackendKind;
 use crate::data::layout::TrackFile;
@@ -46,6 +46,7 @@ impl RunSpec {
             ("checkpoint_every", self.checkpoint_every),
             ("points_per_step", self.points_per_step),
             ("frames_per_step", self.frames_per_step),
+            ("frames_per_iteration", self.frames_per_iteration),
             ("until_converged", self.until_converged),
         ];
         if let Some((name, Some(n))) = counts.iter().find(|(_, n)| *n == Some(0)) {
@@ -157,6 +158,9 @@ impl RunSpec {
         if self.frames_per_step.is_some() {
             fit.frames_per_step = self.frames_per_step;
         }
+        if self.frames_per_iteration.is_some() {
+            fit.frames_per_iteration = self.frames_per_iteration;
+        }
         if let Some(p) = self.robust {
             fit.loss.data_penalty = (p != DataPenalty::L1).then_some(p);
         }
@@ -244,6 +248,9 @@ impl RunSpec {
             if self.iterations.is_none() && self.recipe.is_none() && self.until_converged.is_none()
             {
                 config.fit.schedule.iterations = GAP_FILLING_ITERATIONS;
+            }
+            if self.frames_per_iteration.is_none() {
+                config.fit.frames_per_iteration = Some(GAP_FILLING_FRAMES_PER_ITERATION);
             }
         }
         let mut fit = NewFit { config, sequence };
