@@ -202,15 +202,28 @@ fn low_rank_projection(x: &[f64], t: usize, d: usize, energy: f64) -> Vec<f64> {
     let by_frames = t <= d;
     let g_size = if by_frames { t } else { d };
     let mut g = vec![0f64; g_size * g_size];
+    if by_frames {
+        for a in 0..g_size {
+            for b in a..g_size {
+                g[a * g_size + b] = (0..d).map(|j| c[a * d + j] * c[b * d + j]).sum();
+            }
+        }
+    } else {
+        // Row by row, so that the frames are read in order (a recording at its native rate
+        // is far larger than a cache); each entry sums over the frames in the same order
+        // as a column-by-column dot product would.
+        for row in c.chunks(d) {
+            for a in 0..d {
+                let ra = row[a];
+                for (entry, &rb) in g[a * d + a..(a + 1) * d].iter_mut().zip(&row[a..]) {
+                    *entry += ra * rb;
+                }
+            }
+        }
+    }
     for a in 0..g_size {
-        for b in a..g_size {
-            let v: f64 = if by_frames {
-                (0..d).map(|j| c[a * d + j] * c[b * d + j]).sum()
-            } else {
-                (0..t).map(|k| c[k * d + a] * c[k * d + b]).sum()
-            };
-            g[a * g_size + b] = v;
-            g[b * g_size + a] = v;
+        for b in 0..a {
+            g[a * g_size + b] = g[b * g_size + a];
         }
     }
     let (values, vectors) = symmetric_eigen(g, g_size);

@@ -46,6 +46,14 @@ fn bad_flags_are_refused_with_a_message() {
             vec!["fit", "x.traj", "--out", "r", "--points-per-step", "0"],
             "--points-per-step",
         ),
+        (
+            vec!["fit", "x.traj", "--out", "r", "--frames-per-iteration", "0"],
+            "--frames-per-iteration",
+        ),
+        (
+            vec!["complete", "r", "--out", "f.npz", "--method", "nearest"],
+            "rigid_body",
+        ),
     ] {
         let (ok, _, err) = doma(&args);
         assert!(!ok, "{args:?} was accepted");
