@@ -1,0 +1,189 @@
+"""Gap filling at the native rate, on the protocol of the gap-filling literature
+(docs/results.md, "Gap filling at the native rate").
+
+Each recording is read whole from its C3D, at its own rate. For 1 and for 3 markers at once
+and each gap length (0.1, 0.25, 0.5, 1 and 2 s), DRAWS events are drawn: a start frame and
+the markers (the same start for all of them), such that the markers are seen from the frame
+before the gap to the frame after it (so every hidden entry has its truth, and the gap has
+observations on both sides). The events of one marker count are drawn into as few draw
+sets as they fit (a marker's events in one set at least 0.5 s apart, at most 20 % of the
+entries hidden), and each set is fitted once, at `doma fit`'s defaults. Every method fills
+the same set's mask: doma's fill (`Field.complete()`), the field's fill alone, and the
+classic fillers (`doma.fill`): spline, linear, pattern and rigid-body fill (Vicon Nexus's),
+the Kalman smoother (Burke & Lasenby, as pyCGM2 runs it) and iterative PCA. The error of an
+event is the mean Euclidean distance over its hidden entries, in the file's units (mm);
+a case's figure is the mean over its events.
+
+    python scripts/native_rate_gaps.py MOCAP_DIR [--draws 20] [--recordings A,B] [--out DIR]
+
+Needs the doma wheel (scripts/build_wheel.sh), numpy and `c3d` (for the rate). Writes one
+JSON per recording to --out (default results/native) and prints the table.
+"""
+
+import argparse
+import json
+import pathlib
+import sys
+import time
+
+import numpy as np
+
+import doma
+
+LENGTHS = [0.1, 0.25, 0.5, 1.0, 2.0]
+COUNTS = [1, 3]
+METHODS = ["spline", "linear", "pattern", "rigid_body", "kalman", "iterative_pca"]
+RECORDINGS = ["85_12", "Qualisys", "right_knee", "codamotion_gaitwands_20150204", "Walking_Hybrid_1_5"]
+MARGIN_S = 0.5
+MAX_HIDDEN = 0.2
+
+
+def rate_of(path):
+    import c3d
+
+    with open(path, "rb") as f:
+        return float(c3d.Reader(f).header.frame_rate)
+
+
+def draw_sets(observed, rate, count, draws, rng):
+    """Draw sets, each a list of events (length_s, start, gap_frames, markers): DRAWS events
+    per gap length, drawn into a set while one fits (its markers seen from the frame before
+    the gap to the frame after it, and not hidden by the set within MARGIN_S of it; the
+    set hiding at most MAX_HIDDEN of the entries), else into a new set."""
+    t, n = observed.shape
+    margin = int(round(MARGIN_S * rate))
+    # A gap needs a seen frame on each side: lengths the recording cannot hold are left out.
+    left = {length: draws if max(1, round(length * rate)) + 2 <= t else 0 for length in LENGTHS}
+    sets = []
+    while any(left.values()):
+        busy = np.zeros((t, n), bool)
+        hidden, events = 0, []
+        for length in sorted(LENGTHS, reverse=True):
+            g = max(1, int(round(length * rate)))
+            while left[length] > 0:
+                placed = False
+                for _ in range(500):
+                    s = int(rng.integers(1, t - g))
+                    window = slice(max(0, s - 1 - margin), min(t, s + g + 1 + margin))
+                    free = observed[s - 1 : s + g + 1].all(axis=0) & ~busy[window].any(axis=0)
+                    candidates = np.flatnonzero(free)
+                    if len(candidates) < count or hidden + g * count > MAX_HIDDEN * observed.sum():
+                        continue
+                    markers = sorted(rng.choice(candidates, size=count, replace=False).tolist())
+                    busy[window, markers] = True
+                    hidden += g * count
+                    events.append((length, s, g, markers))
+                    left[length] -= 1
+                    placed = True
+                    break
+                if not placed:
+                    break
+        if not events:
+            raise SystemExit(f"no event of {[l for l, k in left.items() if k]} s fits the recording")
+        sets.append(events)
+    return sets
+
+
+def event_errors(filled, truth, event):
+    _, s, g, markers = event
+    d = np.linalg.norm(filled[s : s + g][:, markers].astype(np.float64) - truth[s : s + g][:, markers], axis=2)
+    return float(d.mean())
+
+
+def run_recording(path, draws, seed):
+    seq = doma.read_tracks(path)
+    tracks, observed = seq.tracks, seq.observed
+    truth = tracks.astype(np.float64)
+    rate = rate_of(path)
+    rng = np.random.default_rng(seed)
+    out = {"recording": path.stem, "rate": rate, "frames": int(tracks.shape[0]), "markers": int(tracks.shape[1]),
+           "cases": {}, "fits": []}
+    for count in COUNTS:
+        errors = {}
+        for events_of_set in draw_sets(observed, rate, count, draws, rng):
+            mask = observed.copy()
+            for _, s, g, markers in events_of_set:
+                mask[s : s + g, markers] = False
+            started = time.time()
+            field = doma.fit(tracks, mask, drop_unobserved=True, seed=seed, progress=False)
+            fit_s = time.time() - started
+            started = time.time()
+            done = field.complete()
+            fills = {"doma": done.tracks}
+            complete_s = time.time() - started
+            fills["field_fill"] = field.complete(method="field_fill").tracks
+            filler_s = {}
+            for m in METHODS:
+                started = time.time()
+                fills[m] = doma.fill(tracks, mask, m)
+                filler_s[m] = time.time() - started
+            kept = done.kept
+            if kept is not None:
+                # A fit drops the tracks never seen: put its fills back in the input's order.
+                for name in ("doma", "field_fill"):
+                    full = np.full(tracks.shape, np.nan, np.float32)
+                    full[:, kept] = fills[name]
+                    fills[name] = full
+            for e in events_of_set:
+                key = f"{count}x{e[0]}"
+                for name, f in fills.items():
+                    errors.setdefault(key, {}).setdefault(name, []).append(event_errors(f, truth, e))
+            out["fits"].append({"markers_at_once": count, "events": len(events_of_set), "hidden": int((~mask & observed).sum()),
+                                "fit_s": round(fit_s, 1), "complete_s": round(complete_s, 1),
+                                "filler_s": {k: round(v, 2) for k, v in filler_s.items()}})
+            print(f"  {path.stem}: {count} at once, {len(events_of_set)} events, fit {fit_s:.0f} s, complete {complete_s:.0f} s",
+                  file=sys.stderr, flush=True)
+        for key, per in errors.items():
+            out["cases"][key] = {name: float(np.mean(v)) for name, v in per.items()}
+            out["cases"][key]["events"] = len(per["doma"])
+    # Where the Kalman smoother could not run (no two frames see every marker), doma.fill
+    # gives the linear fill: the table shows "–" there.
+    seen_all = observed[:, observed.any(axis=0)].all(axis=1).sum()
+    out["kalman_runs"] = bool(seen_all >= 2)
+    return out
+
+
+def table(results):
+    cols = ["doma", "field_fill"] + METHODS
+    lines = ["| recording | rate | at once | gap | " + " | ".join(cols) + " | doma / best named |",
+             "|---" * (5 + len(cols)) + "|"]
+    named = ["spline", "pattern", "rigid_body", "kalman"]
+    for r in results:
+        order = sorted(r["cases"], key=lambda k: (int(k.split("x")[0]), float(k.split("x")[1])))
+        for key in order:
+            case = r["cases"][key]
+            count, length = key.split("x")
+            cells = []
+            for c in cols:
+                v = case[c]
+                cells.append("–" if c == "kalman" and not r["kalman_runs"] else (f"{v:.1f}" if v >= 10 else f"{v:.2f}"))
+            best = min(case[c] for c in named if c != "kalman" or r["kalman_runs"])
+            lines.append(f"| `{r['recording']}` | {r['rate']:.0f} Hz | {count} | {length} s | " + " | ".join(cells)
+                         + f" | {case['doma'] / best:.2f} |")
+    return "\n".join(lines)
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("mocap_dir", type=pathlib.Path)
+    p.add_argument("--draws", type=int, default=20)
+    p.add_argument("--recordings", default=",".join(RECORDINGS))
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", type=pathlib.Path, default=pathlib.Path("results/native"))
+    args = p.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    results = []
+    for name in args.recordings.split(","):
+        path = args.mocap_dir / f"{name}.c3d"
+        report = args.out / f"{name}.json"
+        if report.exists():
+            results.append(json.loads(report.read_text()))
+            continue
+        r = run_recording(path, args.draws, args.seed)
+        report.write_text(json.dumps(r, indent=1))
+        results.append(r)
+    print(table(results))
+
+
+if __name__ == "__main__":
+    main()

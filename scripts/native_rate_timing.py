@@ -1,0 +1,132 @@
+"""The cost of a lab's trial (docs/speed.md, "A minute at 200 Hz"): `doma fit` plus
+`doma complete` of a 60 s, 200 Hz recording of 60 markers (12,000 frames), with the peak
+memory of each, and the fill of the same gaps beside a 5 s excerpt's.
+
+The recording is built from a real one (right_knee.c3d, shipped in data/mocap/): its first
+60 markers played forward, backward, forward... (so the motion stays continuous) up to
+12,000 frames, and given a rate of 200 Hz. 3 markers at once are hidden for 0.5 s, 20 times
+in the excerpt (its first 1,000 frames) and 240 times in the whole (the same density).
+
+    python scripts/native_rate_timing.py [DOMA_BINARY] [--out DIR]
+
+Needs numpy and the doma binary (default $CARGO_TARGET_DIR/release/doma); /usr/bin/time
+for the peak memory.
+"""
+
+import argparse
+import os
+import pathlib
+import re
+import subprocess
+import tempfile
+import time
+
+import numpy as np
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+RATE = 200.0
+FRAMES = 12_000
+MARKERS = 60
+GAP_S = 0.5
+
+
+def source_tracks():
+    """right_knee's tracks (mm) and mask: with the doma wheel's reader where it is
+    installed, else with the `c3d` package."""
+    path = ROOT / "data" / "mocap" / "right_knee.c3d"
+    try:
+        import doma as py
+
+        seq = py.read_tracks(path)
+        return seq.tracks, seq.observed
+    except ImportError:
+        import c3d
+
+        with open(path, "rb") as f:
+            frames = [points for _, points, _ in c3d.Reader(f).read_frames()]
+        p = np.stack(frames)
+        return p[:, :, :3].astype(np.float32), p[:, :, 3] >= 0
+
+
+def ping_pong(tracks, frames):
+    t = len(tracks)
+    order = []
+    forward = True
+    while len(order) < frames:
+        order.extend(range(t) if forward else range(t - 2, 0, -1))
+        forward = not forward
+    return tracks[np.array(order[:frames])]
+
+
+def hide(observed, events, rng):
+    g = int(GAP_S * RATE)
+    mask = observed.copy()
+    busy = np.zeros_like(observed)
+    hidden = []
+    t, n = observed.shape
+    while len(hidden) < events:
+        s = int(rng.integers(1, t - g))
+        seen = observed[s - 1 : s + g + 1].all(axis=0) & ~busy[max(0, s - 101) : s + g + 101].any(axis=0)
+        candidates = np.flatnonzero(seen)
+        if len(candidates) < 3:
+            continue
+        markers = sorted(rng.choice(candidates, 3, replace=False).tolist())
+        mask[s : s + g, markers] = False
+        busy[s : s + g, markers] = True
+        hidden.append((s, g, markers))
+    return mask, hidden
+
+
+def timed(cmd):
+    """Seconds and peak resident MB of `cmd`."""
+    started = time.time()
+    done = subprocess.run(["/usr/bin/time", "-v", *cmd], capture_output=True, text=True)
+    seconds = time.time() - started
+    if done.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed:\n{done.stderr[-2000:]}")
+    peak = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", done.stderr).group(1)) / 1024
+    return seconds, peak
+
+
+def case(doma, work, name, tracks, observed, events, seed):
+    mask, hidden = hide(observed, events, np.random.default_rng(seed))
+    data = work / f"{name}.npz"
+    np.savez(data, tracks=np.where(mask[..., None], tracks, np.nan).astype(np.float32), observed=mask)
+    run = work / f"{name}-run"
+    fit_s, fit_mb = timed([doma, "fit", str(data), "--out", str(run), "--quiet", "--seed", str(seed)])
+    out = work / f"{name}-filled.npz"
+    complete_s, complete_mb = timed([doma, "complete", str(run), "--out", str(out)])
+    filled = np.load(out)["tracks"].astype(np.float64)
+    errors = [np.linalg.norm(filled[s : s + g][:, m] - tracks[s : s + g][:, m], axis=2).mean() for s, g, m in hidden]
+    return {
+        "frames": len(tracks), "fit_s": fit_s, "fit_mb": fit_mb, "complete_s": complete_s,
+        "complete_mb": complete_mb, "events": len(hidden), "error_mm": float(np.mean(errors)),
+        "data_mb": tracks.nbytes / 2**20,
+    }
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    target = os.environ.get("CARGO_TARGET_DIR", str(ROOT / "target"))
+    p.add_argument("doma", nargs="?", default=f"{target}/release/doma")
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args()
+    tracks, observed = source_tracks()
+    tracks, observed = tracks[:, :MARKERS], observed[:, :MARKERS]
+    whole_t = ping_pong(tracks, FRAMES).astype(np.float64)
+    whole_o = ping_pong(observed, FRAMES)
+    with tempfile.TemporaryDirectory() as tmp:
+        work = pathlib.Path(tmp)
+        rows = [
+            ("5 s excerpt", case(args.doma, work, "excerpt", whole_t[:1000], whole_o[:1000], 20, args.seed)),
+            ("60 s", case(args.doma, work, "whole", whole_t, whole_o, 240, args.seed)),
+        ]
+    print("| recording | frames × markers | fit (s) | fit peak (MB) | complete (s) | complete peak (MB) | data (MB) | 0.5 s gaps, 3 markers | error (mm) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name, r in rows:
+        print(f"| {name} | {r['frames']} × {MARKERS} | {r['fit_s']:.0f} | {r['fit_mb']:.0f} | {r['complete_s']:.0f} | "
+              f"{r['complete_mb']:.0f} | {r['data_mb']:.1f} | {r['events']} | {r['error_mm']:.2f} |")
+
+
+if __name__ == "__main__":
+    main()
