@@ -6,7 +6,7 @@
 //! the gaps filled from the observed entries alone.
 
 use super::fillers::Marked;
-use super::linalg::{natural_second_derivatives, spline_at, symmetric_eigen};
+use super::linalg::{column_gram, natural_second_derivatives, spline_at, symmetric_eigen};
 use super::spans::gaps;
 
 impl Marked<'_> {
@@ -201,31 +201,19 @@ fn low_rank_projection(x: &[f64], t: usize, d: usize, energy: f64) -> Vec<f64> {
     // The components from the smaller Gram matrix: frames × frames or columns × columns.
     let by_frames = t <= d;
     let g_size = if by_frames { t } else { d };
-    let mut g = vec![0f64; g_size * g_size];
-    if by_frames {
+    let g = if by_frames {
+        let mut g = vec![0f64; g_size * g_size];
         for a in 0..g_size {
             for b in a..g_size {
-                g[a * g_size + b] = (0..d).map(|j| c[a * d + j] * c[b * d + j]).sum();
+                let v: f64 = (0..d).map(|j| c[a * d + j] * c[b * d + j]).sum();
+                g[a * g_size + b] = v;
+                g[b * g_size + a] = v;
             }
         }
+        g
     } else {
-        // Row by row, so that the frames are read in order (a recording at its native rate
-        // is far larger than a cache); each entry sums over the frames in the same order
-        // as a column-by-column dot product would.
-        for row in c.chunks(d) {
-            for a in 0..d {
-                let ra = row[a];
-                for (entry, &rb) in g[a * d + a..(a + 1) * d].iter_mut().zip(&row[a..]) {
-                    *entry += ra * rb;
-                }
-            }
-        }
-    }
-    for a in 0..g_size {
-        for b in 0..a {
-            g[a * g_size + b] = g[b * g_size + a];
-        }
-    }
+        column_gram(c.chunks(d), d)
+    };
     let (values, vectors) = symmetric_eigen(g, g_size);
     let mut order: Vec<usize> = (0..g_size).collect();
     order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));

@@ -13,7 +13,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::fillers::Marked;
-use super::linalg::symmetric_eigen_to;
+use super::linalg::{column_gram, symmetric_eigen_to};
 
 /// The share of the singular values' sum that the components leave out (pyCGM2's `tol`).
 pub const KALMAN_TOLERANCE: f64 = 1e-2;
@@ -56,20 +56,12 @@ impl Marked<'_> {
                 mean[c] += value(k, c) / full.len() as f64;
             }
         }
-        let mut gram = vec![0f64; cols * cols];
-        for &k in &full {
-            let row: Vec<f64> = (0..cols).map(|c| value(k, c) - mean[c]).collect();
-            for a in 0..cols {
-                for b in a..cols {
-                    gram[a * cols + b] += row[a] * row[b];
-                }
-            }
-        }
-        for a in 0..cols {
-            for b in 0..a {
-                gram[a * cols + b] = gram[b * cols + a];
-            }
-        }
+        let centred: Vec<f64> = full
+            .iter()
+            .flat_map(|&k| (0..cols).map(move |c| (k, c)))
+            .map(|(k, c)| value(k, c) - mean[c])
+            .collect();
+        let gram = column_gram(centred.chunks(cols), cols);
         // To rounding: the components kept reach down to singular values ~10³ times
         // smaller than the first, whose vectors a looser stop leaves ~10⁻⁴ off.
         let (values, vectors) = symmetric_eigen_to(gram, cols, 1e-32);
@@ -98,21 +90,21 @@ impl Marked<'_> {
         let q = random_walk_covariance(&full, &value, &v, cols);
         let sigma = KALMAN_OBSERVATION_NOISE_MM2;
 
-        // Forward: the filtered states and covariances, and the inverse of each predicted
-        // covariance (which the smoother needs).
+        // Forward: the filtered states, and the smoother's gain at each frame,
+        // `P_k P⁻_k⁻¹`, as pyCGM2 smooths (the textbook Rauch–Tung–Striebel gain has
+        // `P⁻_{k+1}`; the two differ by ~10⁻⁴ mm on the shipped knee recording, and this
+        // follows the implementation users run).
         let mut states = Vec::with_capacity(t);
-        let mut covariances = Vec::with_capacity(t);
-        let mut predicted_inverses = Vec::with_capacity(t);
+        let mut gains = Vec::with_capacity(t);
         let mut state = vec![0f64; d];
         let mut cov = scaled_identity(d, INITIAL_COVARIANCE);
         for k in 0..t {
             let predicted: Vec<f64> = cov.iter().zip(&q).map(|(p, q)| p + q).collect();
             let inverse = spd_inverse(&predicted, d)?;
-            let seen: Vec<usize> = (0..cols).filter(|&c| self.seen(k, tracks[c / 3])).collect();
             // A = P⁻¹ + Hᵀ H / σ and b = Hᵀ (z − H x − m) / σ.
             let mut a = inverse.clone();
             let mut b = vec![0f64; d];
-            for &c in &seen {
+            for c in (0..cols).filter(|&c| self.seen(k, tracks[c / 3])) {
                 let innovation =
                     value(k, c) - mean[c] - (0..d).map(|j| v[j][c] * state[j]).sum::<f64>();
                 for i in 0..d {
@@ -127,25 +119,20 @@ impl Marked<'_> {
                 state[i] += (0..d).map(|j| cov[i * d + j] * b[j]).sum::<f64>();
             }
             states.push(state.clone());
-            covariances.push(cov.clone());
-            predicted_inverses.push(inverse);
+            gains.push(mat_mul(&cov, &inverse, d));
         }
-        // Backward, from the second-to-last frame to the first, as pyCGM2 smooths:
-        // x_k += P_k P⁻_k⁻¹ (x_{k+1} − x̂_k), the prediction of k + 1 being the filtered
-        // x̂_k. The textbook Rauch–Tung–Striebel gain has P⁻_{k+1} where pyCGM2 has P⁻_k;
-        // the two differ by ~10⁻⁴ mm on the shipped knee recording, and this follows the
-        // implementation users run.
+        // Backward, from the second-to-last frame to the first:
+        // x_k += G_k (x_{k+1} − x̂_k), the prediction of k + 1 being the filtered x̂_k.
         let mut smoothed = states.clone();
         for k in (0..t.saturating_sub(1)).rev() {
-            let gain = mat_mul(&covariances[k], &predicted_inverses[k], d);
             let step: Vec<f64> = (0..d).map(|j| smoothed[k + 1][j] - states[k][j]).collect();
             for i in 0..d {
-                smoothed[k][i] += (0..d).map(|j| gain[i * d + j] * step[j]).sum::<f64>();
+                smoothed[k][i] += (0..d).map(|j| gains[k][i * d + j] * step[j]).sum::<f64>();
             }
         }
         let mut out = self.positions.to_vec();
         for k in 0..t {
-            for (c, _) in (0..cols).enumerate() {
+            for c in 0..cols {
                 let i = tracks[c / 3];
                 if self.seen(k, i) {
                     continue;

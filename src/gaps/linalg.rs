@@ -39,6 +39,27 @@ pub fn spline_at(x: &[f64], y: &[f64], m: &[f64], j: usize, v: f64) -> f64 {
     a * y[j] + b * y[j + 1] + ((a * a * a - a) * m[j] + (b * b * b - b) * m[j + 1]) * h * h / 6.0
 }
 
+/// `Xᵀ X` (`[d, d]`, row-major) of the rows of `x` (each `d` long), summed row by row so
+/// that a matrix far larger than a cache is read in order; each entry sums over the rows
+/// in their order.
+pub fn column_gram<'a>(rows: impl IntoIterator<Item = &'a [f64]>, d: usize) -> Vec<f64> {
+    let mut g = vec![0f64; d * d];
+    for row in rows {
+        for a in 0..d {
+            let ra = row[a];
+            for (entry, &rb) in g[a * d + a..(a + 1) * d].iter_mut().zip(&row[a..]) {
+                *entry += ra * rb;
+            }
+        }
+    }
+    for a in 0..d {
+        for b in 0..a {
+            g[a * d + b] = g[b * d + a];
+        }
+    }
+    g
+}
+
 /// The eigenvalues and eigenvectors (columns of the returned `[n, n]`) of the symmetric
 /// `a` (`[n, n]`, row-major), by cyclic Jacobi rotations, until the off-diagonal squares
 /// sum to at most 10⁻²⁴ of all squares.
