@@ -316,12 +316,9 @@ impl Field {
                 .transpose()
                 .map_err(|e| PyValueError::new_err(format!("max_gap: {e}")))?;
             let method = method
-                .map(|m| {
-                    doma::gaps::Filler::from_name(&m).ok_or_else(|| {
-                        PyValueError::new_err(format!("method: `{m}` is not a filler"))
-                    })
-                })
-                .transpose()?;
+                .map(|m| doma::gaps::Filler::parse(&m))
+                .transpose()
+                .map_err(|e| PyValueError::new_err(format!("method: {e}")))?;
             let policy = doma::run::FillPolicy {
                 max_gap,
                 extrapolate,

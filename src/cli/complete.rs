@@ -36,19 +36,11 @@ pub struct CompleteArgs {
     /// Fill with one filler alone instead of doma's fill (the blend): field_fill,
     /// field_fill_framewise, spline, linear, neighbours, iterative_pca, pattern,
     /// rigid_body or kalman.
-    #[arg(long, value_name = "FILLER", value_parser = filler)]
+    #[arg(long, value_name = "FILLER", value_parser = Filler::parse)]
     pub method: Option<Filler>,
     /// The device.
     #[command(flatten)]
     pub device: DeviceArgs,
-}
-
-/// A filler by its name ([`Filler::name`]).
-fn filler(s: &str) -> std::result::Result<Filler, String> {
-    Filler::from_name(s).ok_or_else(|| {
-        let names: Vec<&str> = Filler::ALL.iter().map(|f| f.name()).collect();
-        format!("`{s}` is not a filler: {}", names.join(", "))
-    })
 }
 
 /// Writes the completed tracks.

@@ -155,6 +155,14 @@ impl Filler {
         }
     }
 
+    /// The filler named `name` ([`Filler::from_name`]), or a message listing the names.
+    pub fn parse(name: &str) -> Result<Filler, String> {
+        Filler::from_name(name).ok_or_else(|| {
+            let names: Vec<&str> = Filler::ALL.iter().map(|f| f.name()).collect();
+            format!("`{name}` is not a filler: {}", names.join(", "))
+        })
+    }
+
     /// Whether it is one of the field's fills (the others are the classic fillers).
     pub fn is_field(self) -> bool {
         matches!(self, Filler::FieldFill | Filler::FieldFillFramewise)
