@@ -66,7 +66,7 @@ def hide(observed, events, rng):
     t, n = observed.shape
     while len(hidden) < events:
         s = int(rng.integers(1, t - g))
-        seen = observed[s - 1 : s + g + 1].all(axis=0) & ~busy[max(0, s - 101) : s + g + 101].any(axis=0)
+        seen = observed[s - 1 : s + g + 1].all(axis=0) & ~busy[max(0, s - g - 1) : s + 2 * g + 1].any(axis=0)
         candidates = np.flatnonzero(seen)
         if len(candidates) < 3:
             continue
