@@ -10,14 +10,18 @@ sets as they fit (a marker's events in one set at least 0.5 s apart, at most 20 
 entries hidden), and each set is fitted once, at `doma fit`'s defaults. Every method fills
 the same set's mask: doma's fill (`Field.complete()`), the field's fill alone, and the
 classic fillers (`doma.fill`): spline, linear, pattern and rigid-body fill (Vicon Nexus's),
-the Kalman smoother (Burke & Lasenby, as pyCGM2 runs it) and iterative PCA. The error of an
+the Kalman smoother (Burke & Lasenby, as pyCGM2 runs it), Gløersen & Federolf's PCA fill
+(strategy R2) and iterative PCA. The error of an
 event is the mean Euclidean distance over its hidden entries, in the file's units (mm);
 a case's figure is the mean over its events.
 
     python scripts/native_rate_gaps.py MOCAP_DIR [--draws 20] [--recordings A,B] [--out DIR]
+        [--add FILLER,...]
 
 Needs the doma wheel (scripts/build_wheel.sh), numpy and `c3d` (for the rate). Writes one
-JSON per recording to --out (default results/native) and prints the table.
+JSON per recording to --out (default results/native) and prints the table. A recording
+whose JSON exists is not run again; `--add` fills its draw sets (the same, drawn from the
+same seed) with the fillers named and adds their columns, without fitting.
 """
 
 import argparse
@@ -32,7 +36,11 @@ import doma
 
 LENGTHS = [0.1, 0.25, 0.5, 1.0, 2.0]
 COUNTS = [1, 3]
-METHODS = ["spline", "linear", "pattern", "rigid_body", "kalman", "iterative_pca"]
+METHODS = ["spline", "linear", "pattern", "rigid_body", "kalman", "gloersen", "iterative_pca"]
+# The named fillers of the literature, and those that give the linear fill where they cannot
+# run (Kalman: no two frames see every marker; Gløersen: every marker has a gap).
+NAMED = ["spline", "pattern", "rigid_body", "kalman", "gloersen"]
+FALLS_BACK = ["kalman", "gloersen"]
 RECORDINGS = ["85_12", "Qualisys", "right_knee", "codamotion_gaitwands_20150204", "Walking_Hybrid_1_5"]
 MARGIN_S = 0.5
 MAX_HIDDEN = 0.2
@@ -90,66 +98,94 @@ def event_errors(filled, truth, event):
     return float(d.mean())
 
 
+def masks(observed, rate, draws, seed):
+    """(count, events, mask) of every draw set, in the order a run fits them."""
+    rng = np.random.default_rng(seed)
+    for count in COUNTS:
+        for events_of_set in draw_sets(observed, rate, count, draws, rng):
+            mask = observed.copy()
+            for _, s, g, markers in events_of_set:
+                mask[s : s + g, markers] = False
+            yield count, events_of_set, mask
+
+
+def add_fillers(path, report, methods, draws, seed):
+    """Adds `methods`' columns to `report` (a run of `path`), on its draw sets."""
+    seq = doma.read_tracks(path)
+    tracks, observed = seq.tracks, seq.observed
+    truth = tracks.astype(np.float64)
+    errors = {}
+    for set_index, (count, events_of_set, mask) in enumerate(masks(observed, report["rate"], draws, seed)):
+        fit = report["fits"][set_index]
+        assert (fit["markers_at_once"], fit["events"]) == (count, len(events_of_set)), "not the report's draws"
+        for m in methods:
+            started = time.time()
+            filled = doma.fill(tracks, mask, m)
+            fit["filler_s"][m] = round(time.time() - started, 2)
+            for e in events_of_set:
+                errors.setdefault(f"{count}x{e[0]}", {}).setdefault(m, []).append(event_errors(filled, truth, e))
+        print(f"  {path.stem}: set {set_index + 1} of {len(report['fits'])}", file=sys.stderr, flush=True)
+    for key, per in errors.items():
+        for m, v in per.items():
+            report["cases"][key][m] = float(np.mean(v))
+    return report
+
+
 def run_recording(path, draws, seed):
     seq = doma.read_tracks(path)
     tracks, observed = seq.tracks, seq.observed
     truth = tracks.astype(np.float64)
     rate = rate_of(path)
-    rng = np.random.default_rng(seed)
     out = {"recording": path.stem, "rate": rate, "frames": int(tracks.shape[0]), "markers": int(tracks.shape[1]),
            "cases": {}, "fits": []}
-    for count in COUNTS:
-        errors = {}
-        for events_of_set in draw_sets(observed, rate, count, draws, rng):
-            mask = observed.copy()
-            for _, s, g, markers in events_of_set:
-                mask[s : s + g, markers] = False
+    errors = {}
+    for count, events_of_set, mask in masks(observed, rate, draws, seed):
+        started = time.time()
+        field = doma.fit(tracks, mask, drop_unobserved=True, seed=seed, progress=False)
+        fit_s = time.time() - started
+        started = time.time()
+        done = field.complete()
+        fills = {"doma": done.tracks}
+        complete_s = time.time() - started
+        fills["field_fill"] = field.complete(method="field_fill").tracks
+        filler_s = {}
+        for m in METHODS:
             started = time.time()
-            field = doma.fit(tracks, mask, drop_unobserved=True, seed=seed, progress=False)
-            fit_s = time.time() - started
-            started = time.time()
-            done = field.complete()
-            fills = {"doma": done.tracks}
-            complete_s = time.time() - started
-            fills["field_fill"] = field.complete(method="field_fill").tracks
-            filler_s = {}
-            for m in METHODS:
-                started = time.time()
-                fills[m] = doma.fill(tracks, mask, m)
-                filler_s[m] = time.time() - started
-            kept = done.kept
-            if kept is not None:
-                # A fit drops the tracks never seen: put its fills back in the input's order.
-                for name in ("doma", "field_fill"):
-                    full = np.full(tracks.shape, np.nan, np.float32)
-                    full[:, kept] = fills[name]
-                    fills[name] = full
-            for e in events_of_set:
-                key = f"{count}x{e[0]}"
-                for name, f in fills.items():
-                    errors.setdefault(key, {}).setdefault(name, []).append(event_errors(f, truth, e))
-            out["fits"].append({"markers_at_once": count, "events": len(events_of_set), "hidden": int((~mask & observed).sum()),
-                                "fit_s": round(fit_s, 1), "complete_s": round(complete_s, 1),
-                                "filler_s": {k: round(v, 2) for k, v in filler_s.items()}})
-            print(f"  {path.stem}: {count} at once, {len(events_of_set)} events, fit {fit_s:.0f} s, complete {complete_s:.0f} s",
-                  file=sys.stderr, flush=True)
-        for key, per in errors.items():
-            out["cases"][key] = {name: float(np.mean(v)) for name, v in per.items()}
-            out["cases"][key]["events"] = len(per["doma"])
+            fills[m] = doma.fill(tracks, mask, m)
+            filler_s[m] = time.time() - started
+        kept = done.kept
+        if kept is not None:
+            # A fit drops the tracks never seen: put its fills back in the input's order.
+            for name in ("doma", "field_fill"):
+                full = np.full(tracks.shape, np.nan, np.float32)
+                full[:, kept] = fills[name]
+                fills[name] = full
+        for e in events_of_set:
+            key = f"{count}x{e[0]}"
+            for name, f in fills.items():
+                errors.setdefault(key, {}).setdefault(name, []).append(event_errors(f, truth, e))
+        out["fits"].append({"markers_at_once": count, "events": len(events_of_set), "hidden": int((~mask & observed).sum()),
+                            "fit_s": round(fit_s, 1), "complete_s": round(complete_s, 1),
+                            "filler_s": {k: round(v, 2) for k, v in filler_s.items()}})
+        print(f"  {path.stem}: {count} at once, {len(events_of_set)} events, fit {fit_s:.0f} s, complete {complete_s:.0f} s",
+              file=sys.stderr, flush=True)
+    for key, per in errors.items():
+        out["cases"][key] = {name: float(np.mean(v)) for name, v in per.items()}
+        out["cases"][key]["events"] = len(per["doma"])
     return out
 
 
-def runs(case):
-    """Whether the Kalman smoother ran: where no two frames of a set see every marker,
-    doma.fill gives the linear fill, the same numbers to the last bit."""
-    return case["kalman"] != case["linear"]
+def runs(case, method):
+    """Whether `method` ran: where it cannot (FALLS_BACK), doma.fill gives the linear
+    fill, the same numbers to the last bit."""
+    return method not in FALLS_BACK or case[method] != case["linear"]
 
 
 def table(results):
-    cols = ["doma", "field_fill"] + METHODS
+    cols = ["doma", "field_fill"] + [m for m in METHODS if all(m in c for r in results for c in r["cases"].values())]
     lines = ["| recording | rate | at once | gap | " + " | ".join(cols) + " | doma / best named |",
              "|---" * (5 + len(cols)) + "|"]
-    named = ["spline", "pattern", "rigid_body", "kalman"]
+    named = [m for m in NAMED if m in cols]
     for r in results:
         order = sorted(r["cases"], key=lambda k: (int(k.split("x")[0]), float(k.split("x")[1])))
         for key in order:
@@ -158,8 +194,8 @@ def table(results):
             cells = []
             for c in cols:
                 v = case[c]
-                cells.append("–" if c == "kalman" and not runs(case) else (f"{v:.1f}" if v >= 10 else f"{v:.2f}"))
-            best = min(case[c] for c in named if c != "kalman" or runs(case))
+                cells.append("–" if not runs(case, c) else (f"{v:.1f}" if v >= 10 else f"{v:.2f}"))
+            best = min(case[c] for c in named if runs(case, c))
             lines.append(f"| `{r['recording']}` | {r['rate']:.0f} Hz | {count} | {length} s | " + " | ".join(cells)
                          + f" | {case['doma'] / best:.2f} |")
     return "\n".join(lines)
@@ -172,14 +208,23 @@ def main():
     p.add_argument("--recordings", default=",".join(RECORDINGS))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=pathlib.Path, default=pathlib.Path("results/native"))
+    p.add_argument("--add", default="", help="fillers to add to existing reports, comma-separated")
     args = p.parse_args()
+    added = [m for m in args.add.split(",") if m]
+    for m in added:
+        if m not in METHODS:
+            raise SystemExit(f"--add {m}: not one of {', '.join(METHODS)}")
     args.out.mkdir(parents=True, exist_ok=True)
     results = []
     for name in args.recordings.split(","):
         path = args.mocap_dir / f"{name}.c3d"
         report = args.out / f"{name}.json"
         if report.exists():
-            results.append(json.loads(report.read_text()))
+            r = json.loads(report.read_text())
+            if added:
+                r = add_fillers(path, r, added, args.draws, args.seed)
+                report.write_text(json.dumps(r, indent=1))
+            results.append(r)
             continue
         r = run_recording(path, args.draws, args.seed)
         report.write_text(json.dumps(r, indent=1))

@@ -492,9 +492,11 @@ def fill(tracks: Any, observed: Any, method: str = "rigid_body", *, time_axis: O
     seen through the gap moved as a rigid body, from both borders), ``pattern`` (Nexus's:
     one donor's motion), ``spline`` (natural cubic), ``linear``, ``neighbours`` (the mean
     motion of the 4 nearest), ``iterative_pca``, ``kalman`` (Burke & Lasenby's
-    low-dimensional Kalman smoother, as pyCGM2 runs it). Where a gap is not interior or has
-    too few donors, ``rigid_body`` and ``pattern`` give the linear fill; where no two
-    frames see every marker, so does ``kalman``.
+    low-dimensional Kalman smoother, as pyCGM2 runs it), ``gloersen`` (Gløersen &
+    Federolf's PCA fill, strategy R2 of their ``PredictMissingMarkers``). Where a gap is
+    not interior or has too few donors, ``rigid_body`` and ``pattern`` give the linear
+    fill; where no two frames see every marker, so does ``kalman``; where every marker has
+    a gap, so does ``gloersen``.
 
     Returns a new [T, N, 3] float32 array: the observed entries as given, every unobserved
     entry of a track observed somewhere filled, a track never observed as given.

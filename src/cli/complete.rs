@@ -35,7 +35,7 @@ pub struct CompleteArgs {
     pub extrapolate: bool,
     /// Fill with one filler alone instead of doma's fill (the blend): field_fill,
     /// field_fill_framewise, spline, linear, neighbours, iterative_pca, pattern,
-    /// rigid_body or kalman.
+    /// rigid_body, kalman or gloersen.
     #[arg(long, value_name = "FILLER", value_parser = Filler::parse)]
     pub method: Option<Filler>,
     /// The device.

@@ -89,11 +89,14 @@ pub enum Filler {
     /// Burke & Lasenby's low-dimensional Kalman smoother ([`Marked::kalman`]; the linear
     /// fill where it cannot run).
     Kalman,
+    /// Gløersen & Federolf's PCA fill, strategy R2 ([`Marked::gloersen`]; the linear fill
+    /// where it cannot run).
+    Gloersen,
 }
 
 impl Filler {
     /// The number of fillers.
-    pub const COUNT: usize = 9;
+    pub const COUNT: usize = 10;
 
     /// Every filler, in the order of a blend's weights: a tie in the blend goes to the
     /// earlier (the field's fill first).
@@ -107,6 +110,7 @@ impl Filler {
         Filler::Pattern,
         Filler::RigidBody,
         Filler::Kalman,
+        Filler::Gloersen,
     ];
 
     /// Its place in [`Filler::ALL`].
@@ -126,6 +130,7 @@ impl Filler {
             Filler::Pattern => "pattern",
             Filler::RigidBody => "rigid_body",
             Filler::Kalman => "kalman",
+            Filler::Gloersen => "gloersen",
         }
     }
 
@@ -141,6 +146,7 @@ impl Filler {
             Filler::Pattern => "pattern",
             Filler::RigidBody => "rigid body",
             Filler::Kalman => "Kalman smoother",
+            Filler::Gloersen => "Gløersen PCA",
         }
     }
 
@@ -196,6 +202,7 @@ impl Filler {
             Filler::Spline => marked.spline(),
             Filler::IterativePca => marked.iterative_pca(),
             Filler::Kalman => marked.kalman().unwrap_or_else(|| marked.linear()),
+            Filler::Gloersen => marked.gloersen().unwrap_or_else(|| marked.linear()),
             Filler::Linear => marked.linear(),
             Filler::Neighbours => return Some(marked.neighbours(entries)),
             Filler::Pattern => return Some(marked.pattern(entries)),

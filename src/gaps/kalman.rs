@@ -26,7 +26,7 @@ const INITIAL_COVARIANCE: f64 = 1e12;
 
 /// The largest spread (in the data's units) of tracks read as metres; tracks that spread
 /// further are read as millimetres, a C3D's usual unit. The smoother's `σ_R` is a length
-/// squared, so it needs the unit.
+/// squared and Gløersen's `σ` a length, so both need the unit.
 pub const METRES_UP_TO: f64 = 20.0;
 
 impl Marked<'_> {
@@ -47,7 +47,7 @@ impl Marked<'_> {
         if cols == 0 || full.len() < 2 {
             return None;
         }
-        let unit = self.kalman_unit();
+        let unit = self.millimetres_per_unit();
         let value = |k: usize, c: usize| self.at(k, tracks[c / 3])[c % 3] as f64 * unit;
         // The mean and principal components of the frames that see every track.
         let mut mean = vec![0f64; cols];
@@ -146,7 +146,7 @@ impl Marked<'_> {
 
     /// Millimetres per unit of the tracks: 1000 when they spread at most
     /// [`METRES_UP_TO`] (metres), else 1.
-    fn kalman_unit(&self) -> f64 {
+    pub(super) fn millimetres_per_unit(&self) -> f64 {
         let mut lo = [f64::INFINITY; 3];
         let mut hi = [f64::NEG_INFINITY; 3];
         for k in 0..self.frames {

@@ -14,7 +14,7 @@
 //! - A **filler** ([`Filler`]) fills every gap from the observations alone: the classic
 //!   ones (linear, spline, the neighbours' motion, iterative PCA), capture software's that
 //!   borrow *donor* markers' motion (pattern and rigid-body fill), Burke & Lasenby's
-//!   Kalman smoother, and the field's two.
+//!   Kalman smoother, Gløersen & Federolf's PCA fill, and the field's two.
 //! - The **field's fill** ([`field_fill::field_fill`]) is the field's prediction corrected
 //!   by the residual of the track's nearest tracks at that frame (its *lenders*), then by
 //!   the track's own residual carried across the gap ([`field_fill::carry_residuals`],
@@ -34,6 +34,7 @@
 //! | `fillers.rs` | [`Marked`], [`Filler`] (one variant and one arm each), [`Sources`], [`PerFiller`] |
 //! | `classic.rs` | linear, spline, the neighbours' motion, iterative PCA: methods of [`Marked`] |
 //! | `kalman.rs` | Burke & Lasenby's Kalman smoother: a method of [`Marked`] |
+//! | `gloersen.rs` | Gløersen & Federolf's PCA fill (R2): a method of [`Marked`] |
 //! | `donors.rs` | pattern and rigid-body fill: methods of [`Marked`] |
 //! | `field_fill.rs` | [`FieldPrediction`], the lenders ([`Lending`]), the residual carry |
 //! | `blend.rs` | [`blend::Weights`] (one per filler), learning and applying a blend |
@@ -50,6 +51,7 @@ pub mod classic;
 pub mod donors;
 pub mod field_fill;
 pub mod fillers;
+pub mod gloersen;
 pub mod kalman;
 pub mod linalg;
 pub mod spans;

@@ -196,7 +196,7 @@ pub struct RunSpec {
     /// Hide this fraction of the observations from the fit, in spans inside each track's
     /// observations, and report the error of doma's fill on them beside the field alone and
     /// every filler (the field's fill, spline, linear, the neighbours' motion, iterative PCA,
-    /// pattern and rigid-body fill, the Kalman smoother).
+    /// pattern and rigid-body fill, the Kalman smoother, Gløersen's PCA fill).
     #[arg(long, value_name = "F", value_parser = fraction, help_heading = "Gap filling")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout_observations: Option<f64>,
