@@ -6,7 +6,9 @@
 //! the gaps filled from the observed entries alone.
 
 use super::fillers::Marked;
-use super::linalg::{column_gram, natural_second_derivatives, spline_at, symmetric_eigen};
+use super::linalg::{
+    column_gram, natural_second_derivatives, spline_at, symmetric_eigen_householder,
+};
 use super::spans::gaps;
 
 impl Marked<'_> {
@@ -214,7 +216,7 @@ fn low_rank_projection(x: &[f64], t: usize, d: usize, energy: f64) -> Vec<f64> {
     } else {
         column_gram(c.chunks(d), d)
     };
-    let (values, vectors) = symmetric_eigen(g, g_size);
+    let (values, vectors) = symmetric_eigen_householder(g, g_size);
     let mut order: Vec<usize> = (0..g_size).collect();
     order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
     let total: f64 = values.iter().map(|v| v.max(0.0)).sum();

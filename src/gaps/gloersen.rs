@@ -26,7 +26,9 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::fillers::Marked;
-use super::linalg::{column_gram, symmetric_eigen_to};
+use std::ops::Range;
+
+use super::linalg::{column_gram, symmetric_eigen_householder};
 
 /// `σ` of the distance weights, in millimetres (the MATLAB's `WeightScale`).
 pub const GLOERSEN_WEIGHT_SCALE_MM: f64 = 200.0;
@@ -135,18 +137,9 @@ impl Marked<'_> {
                 .flat_map(|&k| (0..cols).map(move |c| (k, c)))
                 .map(|(k, c)| (value(k, c) - mean[c]) / deviation[c] * weight[c])
                 .collect();
-            // The SVD of N / √(n − 1) is the eigendecomposition of Nᵀ N / (n − 1); the
-            // zeroed marker's is the same Gram matrix with its rows and columns zeroed.
-            let gram = column_gram(scaled.chunks(cols), cols);
-            let mut zeroed = gram.clone();
-            for c in 3 * p..3 * p + 3 {
-                for o in 0..cols {
-                    zeroed[c * cols + o] = 0.0;
-                    zeroed[o * cols + c] = 0.0;
-                }
-            }
-            let whole = components(gram, cols, full.len());
-            let without = components(zeroed, cols, full.len());
+            let gapped = 3 * p..3 * p + 3;
+            let whole = components(&scaled, full.len(), cols, None);
+            let without = components(&scaled, full.len(), cols, Some(gapped));
             let kept_components = whole.kept().max(without.kept());
             let v = whole.vectors(kept_components);
             let v0 = without.aligned(v);
@@ -159,19 +152,21 @@ impl Marked<'_> {
                     transfer[u * kept_components + w] = (0..cols).map(|c| v[u][c] * v0[w][c]).sum();
                 }
             }
-            let mut back = vec![[0f64; 3]; cols];
-            for (c, row) in back.iter_mut().enumerate() {
-                for a in 0..3 {
-                    row[a] = (0..kept_components)
-                        .map(|u| {
-                            v0[u][c]
-                                * (0..kept_components)
-                                    .map(|w| transfer[u * kept_components + w] * v[w][3 * p + a])
-                                    .sum::<f64>()
-                        })
-                        .sum();
-                }
-            }
+            // y = T V_gᵀ (`[k, 3]`) first, then B = V₀ y.
+            let y: Vec<[f64; 3]> = (0..kept_components)
+                .map(|u| {
+                    std::array::from_fn(|a| {
+                        (0..kept_components)
+                            .map(|w| transfer[u * kept_components + w] * v[w][3 * p + a])
+                            .sum()
+                    })
+                })
+                .collect();
+            let back: Vec<[f64; 3]> = (0..cols)
+                .map(|c| {
+                    std::array::from_fn(|a| (0..kept_components).map(|u| v0[u][c] * y[u][a]).sum())
+                })
+                .collect();
             for &k in &gap_frames {
                 let mut filled = [0f64; 3];
                 for c in (0..cols).filter(|c| c / 3 != p) {
@@ -221,15 +216,56 @@ struct Components {
     vectors: Vec<Vec<f64>>,
 }
 
-/// The components of the `rows × cols` matrix whose Gram matrix is `gram`, as the
-/// MATLAB's `svd(N / sqrt(rows − 1), 'econ')`: `min(rows, cols)` of them.
-fn components(gram: Vec<f64>, cols: usize, rows: usize) -> Components {
-    // To rounding, as the Kalman smoother's: small components' vectors need it.
-    let (values, vectors) = symmetric_eigen_to(gram, cols, 1e-32);
-    let mut order: Vec<usize> = (0..cols).collect();
+/// The components of `x` (`rows × cols`, row-major) with the columns `zeroed` set to 0,
+/// as the MATLAB's `svd(N / sqrt(rows − 1), 'econ')`: `min(rows, cols)` of them. From
+/// the eigenvectors of `Xᵀ X`, or, for fewer rows than columns (a short clip of many
+/// markers), of the smaller `X Xᵀ`, each `u` giving the vector `Xᵀ u / ‖Xᵀ u‖`.
+fn components(x: &[f64], rows: usize, cols: usize, zeroed: Option<Range<usize>>) -> Components {
+    let zeroed = zeroed.unwrap_or(0..0);
+    let scale = (rows - 1) as f64;
+    let (n, values, vectors) = if rows >= cols {
+        let mut gram = column_gram(x.chunks(cols), cols);
+        for c in zeroed.clone() {
+            for o in 0..cols {
+                gram[c * cols + o] = 0.0;
+                gram[o * cols + c] = 0.0;
+            }
+        }
+        let (values, vectors) = symmetric_eigen_householder(gram, cols);
+        (cols, values, vectors)
+    } else {
+        let kept = |c: &usize| !zeroed.contains(c);
+        let mut gram = vec![0f64; rows * rows];
+        for a in 0..rows {
+            for b in 0..=a {
+                let (ra, rb) = (&x[a * cols..(a + 1) * cols], &x[b * cols..(b + 1) * cols]);
+                let dot: f64 = (0..cols).filter(kept).map(|c| ra[c] * rb[c]).sum();
+                gram[a * rows + b] = dot;
+                gram[b * rows + a] = dot;
+            }
+        }
+        let (values, u) = symmetric_eigen_householder(gram, rows);
+        // Column o of the result: Xᵀ u_o, normalised (0 for a null direction).
+        let mut vectors = vec![0f64; cols * rows];
+        for o in 0..rows {
+            let v: Vec<f64> = (0..cols)
+                .map(|c| match kept(&c) {
+                    true => (0..rows).map(|r| x[r * cols + c] * u[r * rows + o]).sum(),
+                    false => 0.0,
+                })
+                .collect();
+            let norm = v.iter().map(|a| a * a).sum::<f64>().sqrt();
+            if norm > 0.0 {
+                for c in 0..cols {
+                    vectors[c * rows + o] = v[c] / norm;
+                }
+            }
+        }
+        (rows, values, vectors)
+    };
+    let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
     order.truncate(rows.min(cols));
-    let scale = (rows - 1) as f64;
     Components {
         singular: order
             .iter()
@@ -237,7 +273,7 @@ fn components(gram: Vec<f64>, cols: usize, rows: usize) -> Components {
             .collect(),
         vectors: order
             .iter()
-            .map(|&o| (0..cols).map(|c| vectors[c * cols + o]).collect())
+            .map(|&o| (0..cols).map(|c| vectors[c * n + o]).collect())
             .collect(),
     }
 }
@@ -347,17 +383,55 @@ mod tests {
     /// The components keep the first that reach 99 % of the singular values' sum.
     #[test]
     fn components_keep_99_percent_of_the_singular_values() {
-        // A diagonal Gram matrix of 3 rows: singular values √(g / 2) = 10, 0.09, 0.01
+        // A diagonal matrix of 3 rows, Gram matrix g: singular values √(g / 2) = 10, 0.09, 0.01
         // (sum 10.1, 99 % 9.999): the first alone holds 10 ≥ 9.999.
-        let gram = vec![200.0, 0.0, 0.0, 0.0, 0.0162, 0.0, 0.0, 0.0, 0.0002];
-        let c = components(gram, 3, 3);
+        let c = components(&diagonal([200.0, 0.0162, 0.0002]), 3, 3, None);
         assert_eq!(c.kept(), 1);
         // 0.5, 0.4, 0.1 (sum 1): 0.9 < 0.99 ≤ 1.0, so all three.
-        let gram = vec![0.5, 0.0, 0.0, 0.0, 0.32, 0.0, 0.0, 0.0, 0.02];
-        let c = components(gram, 3, 3);
+        let c = components(&diagonal([0.5, 0.32, 0.02]), 3, 3, None);
         for (got, want) in c.singular.iter().zip([0.5, 0.4, 0.1]) {
             assert!((got - want).abs() < 1e-12, "{:?}", c.singular);
         }
         assert_eq!(c.kept(), 3);
+    }
+
+    /// `diag(√g)`, whose Gram matrix is `diag(g)`.
+    fn diagonal(g: [f64; 3]) -> Vec<f64> {
+        let mut x = vec![0f64; 9];
+        for i in 0..3 {
+            x[i * 4] = g[i].sqrt();
+        }
+        x
+    }
+
+    /// Fewer rows than columns: the components from `X Xᵀ` are those from `Xᵀ X`, up to
+    /// sign, with and without zeroed columns.
+    #[test]
+    fn components_of_a_wide_matrix_are_those_of_its_column_gram() {
+        let (rows, cols) = (4, 9);
+        let x: Vec<f64> = (0..rows * cols)
+            .map(|v| ((v * 7919) % 101) as f64 / 50.0 - 1.0)
+            .collect();
+        for zeroed in [None, Some(3..6)] {
+            let wide = components(&x, rows, cols, zeroed.clone());
+            // The same matrix padded with zero rows to be tall has the same components.
+            let mut tall = x.clone();
+            tall.resize(cols * cols, 0.0);
+            let reference = components(&tall, cols, cols, zeroed.clone());
+            let rescale = ((cols - 1) as f64 / (rows - 1) as f64).sqrt();
+            assert_eq!(wide.singular.len(), rows);
+            for o in 0..rows {
+                let (a, b) = (wide.singular[o], reference.singular[o] * rescale);
+                assert!((a - b).abs() < 1e-12 * b.max(1.0), "{o}: {a} {b}");
+                if b > 1e-9 {
+                    let dot: f64 = wide.vectors[o]
+                        .iter()
+                        .zip(&reference.vectors[o])
+                        .map(|(p, q)| p * q)
+                        .sum();
+                    assert!((dot.abs() - 1.0).abs() < 1e-9, "{o}: {dot}");
+                }
+            }
+        }
     }
 }
