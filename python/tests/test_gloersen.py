@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import doma
+from conftest import assert_published_fill
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 RIGHT_KNEE = ROOT / "data" / "mocap" / "right_knee.c3d"
@@ -129,15 +130,8 @@ CASES = {
 @pytest.mark.parametrize("case", CASES)
 def test_gloersen_fill_is_the_published_r2_to_float32_rounding(case):
     tracks, observed = hidden(CASES[case])
-    ours = doma.fill(tracks, observed, "gloersen")
-    theirs = reference(tracks, observed)
-    gap = ~observed
-    # doma.fill returns float32 (1 ulp is 6e-5 mm at 1 m); it computes in float64.
-    np.testing.assert_array_max_ulp(ours[gap], theirs[gap].astype(np.float32), maxulp=1)
-    assert np.array_equal(ours[observed], tracks[observed])
     truth = doma.read_tracks(RIGHT_KNEE).tracks
-    error = lambda f: np.linalg.norm(f[gap] - truth[gap], axis=1).mean()
-    assert error(ours) < 0.5 * error(doma.fill(tracks, observed, "linear"))
+    assert_published_fill("gloersen", reference(tracks, observed), tracks, observed, truth)
 
 
 def test_gloersen_fill_of_tracks_in_metres_weighs_distances_in_millimetres():

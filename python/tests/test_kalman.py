@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 import doma
+from conftest import assert_published_fill
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 RIGHT_KNEE = ROOT / "data" / "mocap" / "right_knee.c3d"
@@ -80,16 +81,8 @@ def reference(smooth, tracks, observed, scale=1.0):
 @pytest.mark.parametrize("markers", [[40], [3, 40, 60]])
 def test_kalman_fill_is_pycgm2_s_to_float32_rounding(pycgm2_smooth, markers):
     tracks, observed = hidden(markers)
-    ours = doma.fill(tracks, observed, "kalman")
-    theirs = reference(pycgm2_smooth, tracks, observed)
-    gap = ~observed
-    # doma.fill returns float32 (1 ulp is 6e-5 mm at 1 m); it computes in float64.
-    np.testing.assert_array_max_ulp(ours[gap], theirs[gap].astype(np.float32), maxulp=1)
-    assert np.array_equal(ours[observed], tracks[observed])
-    # The smoother follows the hidden markers far better than a line.
     truth = doma.read_tracks(RIGHT_KNEE).tracks
-    error = lambda f: np.linalg.norm(f[gap] - truth[gap], axis=1).mean()
-    assert error(ours) < 0.5 * error(doma.fill(tracks, observed, "linear"))
+    assert_published_fill("kalman", reference(pycgm2_smooth, tracks, observed), tracks, observed, truth)
 
 
 def test_kalman_fill_of_tracks_in_metres_runs_in_millimetres(pycgm2_smooth):

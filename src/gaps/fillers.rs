@@ -342,3 +342,24 @@ impl<'de, T: FillerValue + Deserialize<'de>> Deserialize<'de> for PerFiller<T> {
         d.deserialize_map(ByName(std::marker::PhantomData))
     }
 }
+
+/// The largest Euclidean error of `fill` against `truth` (both `[T, N, 3]`) over track
+/// `i`'s entries at `frames`: how a test reads one hidden marker's fill.
+#[cfg(test)]
+pub(super) fn worst_error(
+    fill: &[f32],
+    truth: &[f32],
+    n: usize,
+    i: usize,
+    frames: std::ops::Range<usize>,
+) -> f32 {
+    frames
+        .map(|k| {
+            let e = 3 * (k * n + i);
+            (0..3)
+                .map(|c| (fill[e + c] - truth[e + c]).powi(2))
+                .sum::<f32>()
+                .sqrt()
+        })
+        .fold(0f32, f32::max)
+}

@@ -317,6 +317,7 @@ impl Components {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gaps::fillers::worst_error;
 
     /// Five markers on one rigid body turning about z, a sixth (far) with a motion of its
     /// own: a hidden marker of the body is filled from the others to a few hundredths of
@@ -351,17 +352,7 @@ mod tests {
         let marked = Marked::new(t, n, &positions, &observed);
         let fill = marked.gloersen().unwrap();
         let line = marked.linear();
-        let error = |f: &[f32]| {
-            (30..50)
-                .map(|k| {
-                    let e = 3 * (k * n + 3);
-                    (0..3)
-                        .map(|c| (f[e + c] - positions[e + c]).powi(2))
-                        .sum::<f32>()
-                        .sqrt()
-                })
-                .fold(0f32, f32::max)
-        };
+        let error = |f: &[f32]| worst_error(f, &positions, n, 3, 30..50);
         // The published method with its defaults: 0.03 mm here (numpy's transcription of
         // the MATLAB agrees), where the line misses by 33 mm.
         assert!(error(&fill) < 0.1, "{}", error(&fill));

@@ -255,6 +255,7 @@ fn spd_inverse(a: &[f64], d: usize) -> Option<Vec<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gaps::fillers::worst_error;
 
     #[test]
     fn spd_inverse_inverts_a_hand_solved_matrix() {
@@ -299,17 +300,7 @@ mod tests {
         let marked = Marked::new(t, n, &positions, &observed);
         let fill = marked.kalman().unwrap();
         let line = marked.linear();
-        let error = |f: &[f32]| {
-            (20..35)
-                .map(|k| {
-                    let e = 3 * (k * n + 2);
-                    (0..3)
-                        .map(|c| (f[e + c] - positions[e + c]).powi(2))
-                        .sum::<f32>()
-                        .sqrt()
-                })
-                .fold(0f32, f32::max)
-        };
+        let error = |f: &[f32]| worst_error(f, &positions, n, 2, 20..35);
         assert!(error(&fill) < 0.005, "{}", error(&fill));
         assert!(error(&line) > 0.05, "{}", error(&line));
         // Seen entries are kept as they are.
