@@ -132,9 +132,7 @@ impl Marked<'_> {
     pub fn iterative_pca(&self) -> Vec<f32> {
         let (t, n) = (self.frames, self.points);
         let mut out = self.linear();
-        let tracks: Vec<usize> = (0..n)
-            .filter(|&i| (0..t).any(|k| self.seen(k, i)))
-            .collect();
+        let tracks = self.seen_tracks();
         let d = 3 * tracks.len();
         if t < 2 || d == 0 {
             return out;

@@ -53,6 +53,13 @@ impl<'a> Marked<'a> {
         self.observed[k * self.points + i]
     }
 
+    /// The tracks observed in at least one frame, in order: what the PCA fillers fill.
+    pub fn seen_tracks(&self) -> Vec<usize> {
+        (0..self.points)
+            .filter(|&i| (0..self.frames).any(|k| self.seen(k, i)))
+            .collect()
+    }
+
     /// Track `i`'s position at frame `k` (whatever it holds there).
     pub fn at(&self, k: usize, i: usize) -> [f32; 3] {
         let e = 3 * (k * self.points + i);

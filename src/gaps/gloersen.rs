@@ -26,9 +26,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::fillers::Marked;
-use std::ops::Range;
-
-use super::linalg::{column_gram, symmetric_eigen_householder};
+use super::linalg::{Components, principal_components};
 
 /// `σ` of the distance weights, in millimetres (the MATLAB's `WeightScale`).
 pub const GLOERSEN_WEIGHT_SCALE_MM: f64 = 200.0;
@@ -49,9 +47,7 @@ impl Marked<'_> {
     /// is their mean). Tracks never seen keep whatever they hold.
     pub fn gloersen(&self) -> Option<Vec<f32>> {
         let (t, n) = (self.frames, self.points);
-        let tracks: Vec<usize> = (0..n)
-            .filter(|&i| (0..t).any(|k| self.seen(k, i)))
-            .collect();
+        let tracks = self.seen_tracks();
         let complete: Vec<bool> = tracks
             .iter()
             .map(|&i| (0..t).all(|k| self.seen(k, i)))
@@ -104,7 +100,8 @@ impl Marked<'_> {
                 }
                 continue;
             }
-            let p = kept.iter().position(|&j| j == g).expect("kept holds g");
+            // g's place in `kept`, which is in order and holds it.
+            let p = kept.iter().filter(|&&j| j < g).count();
             let cols = 3 * kept.len();
             // Step 3: standardise (population deviation, 1 where a column is constant)
             // and weight each coordinate.
@@ -138,11 +135,11 @@ impl Marked<'_> {
                 .map(|(k, c)| (value(k, c) - mean[c]) / deviation[c] * weight[c])
                 .collect();
             let gapped = 3 * p..3 * p + 3;
-            let whole = components(&scaled, full.len(), cols, None);
-            let without = components(&scaled, full.len(), cols, Some(gapped));
-            let kept_components = whole.kept().max(without.kept());
-            let v = whole.vectors(kept_components);
-            let v0 = without.aligned(v);
+            let whole = principal_components(&scaled, full.len(), cols, None);
+            let without = principal_components(&scaled, full.len(), cols, Some(gapped));
+            let kept_components = reaching(&whole).max(reaching(&without));
+            let v = &whole.vectors[..kept_components];
+            let v0 = aligned(&without, v);
             // Step 4: B = V₀ T V_gᵀ (`[cols, 3]`), with T = Vᵀ V₀ and V_g the gapped
             // marker's rows of V, so that a frame's fill is its row of M₀ times B. T's
             // first index meets V₀'s components, as the published product has it.
@@ -209,109 +206,34 @@ impl Marked<'_> {
     }
 }
 
-/// A principal component analysis from a Gram matrix: its singular values, largest first,
-/// and their vectors.
-struct Components {
-    singular: Vec<f64>,
-    vectors: Vec<Vec<f64>>,
+/// How many components reach [`GLOERSEN_MIN_CUMULATIVE`] of the singular values' sum.
+fn reaching(c: &Components) -> usize {
+    let total: f64 = c.singular.iter().sum();
+    let mut held = 0f64;
+    c.singular
+        .iter()
+        .position(|s| {
+            held += s;
+            held >= GLOERSEN_MIN_CUMULATIVE * total
+        })
+        .map_or(c.singular.len(), |i| i + 1)
 }
 
-/// The components of `x` (`rows × cols`, row-major) with the columns `zeroed` set to 0,
-/// as the MATLAB's `svd(N / sqrt(rows − 1), 'econ')`: `min(rows, cols)` of them. From
-/// the eigenvectors of `Xᵀ X`, or, for fewer rows than columns (a short clip of many
-/// markers), of the smaller `X Xᵀ`, each `u` giving the vector `Xᵀ u / ‖Xᵀ u‖`.
-fn components(x: &[f64], rows: usize, cols: usize, zeroed: Option<Range<usize>>) -> Components {
-    let zeroed = zeroed.unwrap_or(0..0);
-    let scale = (rows - 1) as f64;
-    let (n, values, vectors) = if rows >= cols {
-        let mut gram = column_gram(x.chunks(cols), cols);
-        for c in zeroed.clone() {
-            for o in 0..cols {
-                gram[c * cols + o] = 0.0;
-                gram[o * cols + c] = 0.0;
-            }
-        }
-        let (values, vectors) = symmetric_eigen_householder(gram, cols);
-        (cols, values, vectors)
-    } else {
-        let kept = |c: &usize| !zeroed.contains(c);
-        let mut gram = vec![0f64; rows * rows];
-        for a in 0..rows {
-            for b in 0..=a {
-                let (ra, rb) = (&x[a * cols..(a + 1) * cols], &x[b * cols..(b + 1) * cols]);
-                let dot: f64 = (0..cols).filter(kept).map(|c| ra[c] * rb[c]).sum();
-                gram[a * rows + b] = dot;
-                gram[b * rows + a] = dot;
-            }
-        }
-        let (values, u) = symmetric_eigen_householder(gram, rows);
-        // Column o of the result: Xᵀ u_o, normalised (0 for a null direction).
-        let mut vectors = vec![0f64; cols * rows];
-        for o in 0..rows {
-            let v: Vec<f64> = (0..cols)
-                .map(|c| match kept(&c) {
-                    true => (0..rows).map(|r| x[r * cols + c] * u[r * rows + o]).sum(),
-                    false => 0.0,
-                })
-                .collect();
-            let norm = v.iter().map(|a| a * a).sum::<f64>().sqrt();
-            if norm > 0.0 {
-                for c in 0..cols {
-                    vectors[c * rows + o] = v[c] / norm;
-                }
-            }
-        }
-        (rows, values, vectors)
-    };
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
-    order.truncate(rows.min(cols));
-    Components {
-        singular: order
-            .iter()
-            .map(|&o| (values[o].max(0.0) / scale).sqrt())
-            .collect(),
-        vectors: order
-            .iter()
-            .map(|&o| (0..cols).map(|c| vectors[c * n + o]).collect())
-            .collect(),
-    }
-}
-
-impl Components {
-    /// How many components reach [`GLOERSEN_MIN_CUMULATIVE`] of the singular values' sum.
-    fn kept(&self) -> usize {
-        let total: f64 = self.singular.iter().sum();
-        let mut held = 0f64;
-        self.singular
-            .iter()
-            .position(|s| {
-                held += s;
-                held >= GLOERSEN_MIN_CUMULATIVE * total
-            })
-            .map_or(self.singular.len(), |i| i + 1)
-    }
-
-    /// The first `count` vectors.
-    fn vectors(&self, count: usize) -> &[Vec<f64>] {
-        &self.vectors[..count]
-    }
-
-    /// The first `reference.len()` vectors, each signed to point along its counterpart in
-    /// `reference`. The published product `V₀ (Vᵀ V₀) Vᵀ` changes when one vector of `V₀`
-    /// alone changes sign (it is unchanged when a vector and its counterpart both do), so
-    /// its value rests on the SVD's signs; LAPACK's, for two matrices this alike, agree.
-    fn aligned(&self, reference: &[Vec<f64>]) -> Vec<Vec<f64>> {
-        self.vectors
-            .iter()
-            .zip(reference)
-            .map(|(v, r)| {
-                let dot: f64 = v.iter().zip(r).map(|(a, b)| a * b).sum();
-                let sign = if dot < 0.0 { -1.0 } else { 1.0 };
-                v.iter().map(|x| sign * x).collect()
-            })
-            .collect()
-    }
+/// The first `reference.len()` vectors of `c`, each signed to point along its counterpart
+/// in `reference`. The published product `V₀ (Vᵀ V₀) Vᵀ` changes when one vector of `V₀`
+/// alone changes sign (not when a vector and its counterpart both do), so its value rests
+/// on the SVD's signs, which LAPACK leaves to its algorithm (numpy's move this fill by up
+/// to 0.18 mm on the shipped knee recording); doma fixes them.
+fn aligned(c: &Components, reference: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    c.vectors
+        .iter()
+        .zip(reference)
+        .map(|(v, r)| {
+            let dot: f64 = v.iter().zip(r).map(|(a, b)| a * b).sum();
+            let sign = if dot < 0.0 { -1.0 } else { 1.0 };
+            v.iter().map(|x| sign * x).collect()
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -376,14 +298,14 @@ mod tests {
     fn components_keep_99_percent_of_the_singular_values() {
         // A diagonal matrix of 3 rows, Gram matrix g: singular values √(g / 2) = 10, 0.09, 0.01
         // (sum 10.1, 99 % 9.999): the first alone holds 10 ≥ 9.999.
-        let c = components(&diagonal([200.0, 0.0162, 0.0002]), 3, 3, None);
-        assert_eq!(c.kept(), 1);
+        let c = principal_components(&diagonal([200.0, 0.0162, 0.0002]), 3, 3, None);
+        assert_eq!(reaching(&c), 1);
         // 0.5, 0.4, 0.1 (sum 1): 0.9 < 0.99 ≤ 1.0, so all three.
-        let c = components(&diagonal([0.5, 0.32, 0.02]), 3, 3, None);
+        let c = principal_components(&diagonal([0.5, 0.32, 0.02]), 3, 3, None);
         for (got, want) in c.singular.iter().zip([0.5, 0.4, 0.1]) {
             assert!((got - want).abs() < 1e-12, "{:?}", c.singular);
         }
-        assert_eq!(c.kept(), 3);
+        assert_eq!(reaching(&c), 3);
     }
 
     /// `diag(√g)`, whose Gram matrix is `diag(g)`.
@@ -393,36 +315,5 @@ mod tests {
             x[i * 4] = g[i].sqrt();
         }
         x
-    }
-
-    /// Fewer rows than columns: the components from `X Xᵀ` are those from `Xᵀ X`, up to
-    /// sign, with and without zeroed columns.
-    #[test]
-    fn components_of_a_wide_matrix_are_those_of_its_column_gram() {
-        let (rows, cols) = (4, 9);
-        let x: Vec<f64> = (0..rows * cols)
-            .map(|v| ((v * 7919) % 101) as f64 / 50.0 - 1.0)
-            .collect();
-        for zeroed in [None, Some(3..6)] {
-            let wide = components(&x, rows, cols, zeroed.clone());
-            // The same matrix padded with zero rows to be tall has the same components.
-            let mut tall = x.clone();
-            tall.resize(cols * cols, 0.0);
-            let reference = components(&tall, cols, cols, zeroed.clone());
-            let rescale = ((cols - 1) as f64 / (rows - 1) as f64).sqrt();
-            assert_eq!(wide.singular.len(), rows);
-            for o in 0..rows {
-                let (a, b) = (wide.singular[o], reference.singular[o] * rescale);
-                assert!((a - b).abs() < 1e-12 * b.max(1.0), "{o}: {a} {b}");
-                if b > 1e-9 {
-                    let dot: f64 = wide.vectors[o]
-                        .iter()
-                        .zip(&reference.vectors[o])
-                        .map(|(p, q)| p * q)
-                        .sum();
-                    assert!((dot.abs() - 1.0).abs() < 1e-9, "{o}: {dot}");
-                }
-            }
-        }
     }
 }

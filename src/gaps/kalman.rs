@@ -13,7 +13,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::fillers::Marked;
-use super::linalg::{column_gram, symmetric_eigen_householder};
+use super::linalg::principal_components;
 
 /// The share of the singular values' sum that the components leave out (pyCGM2's `tol`).
 pub const KALMAN_TOLERANCE: f64 = 1e-2;
@@ -37,9 +37,7 @@ impl Marked<'_> {
     /// hold.
     pub fn kalman(&self) -> Option<Vec<f32>> {
         let (t, n) = (self.frames, self.points);
-        let tracks: Vec<usize> = (0..n)
-            .filter(|&i| (0..t).any(|k| self.seen(k, i)))
-            .collect();
+        let tracks = self.seen_tracks();
         let cols = 3 * tracks.len();
         let full: Vec<usize> = (0..t)
             .filter(|&k| tracks.iter().all(|&i| self.seen(k, i)))
@@ -61,22 +59,13 @@ impl Marked<'_> {
             .flat_map(|&k| (0..cols).map(move |c| (k, c)))
             .map(|(k, c)| value(k, c) - mean[c])
             .collect();
-        let gram = column_gram(centred.chunks(cols), cols);
         // Householder and QL: to rounding (the components kept reach down to singular
         // values ~10³ times smaller than the first), in a fraction of Jacobi's time on
-        // hundreds of columns.
-        let (values, vectors) = symmetric_eigen_householder(gram, cols);
-        let mut order: Vec<usize> = (0..cols).collect();
-        order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
-        // numpy's singular values: at most min(frames, columns) of them.
-        let singular: Vec<f64> = order
-            .iter()
-            .take(full.len().min(cols))
-            .map(|&o| values[o].max(0.0).sqrt())
-            .collect();
-        let total: f64 = singular.iter().sum();
+        // hundreds of columns. numpy's singular values: at most min(frames, columns).
+        let pca = principal_components(&centred, full.len(), cols, None);
+        let total: f64 = pca.singular.iter().sum();
         let mut held = 0f64;
-        let d = singular.iter().position(|s| {
+        let d = pca.singular.iter().position(|s| {
             held += s;
             held / total > 1.0 - KALMAN_TOLERANCE
         })?;
@@ -84,11 +73,8 @@ impl Marked<'_> {
             return None;
         }
         // v[j][c]: component j's loading on column c.
-        let v: Vec<Vec<f64>> = order[..d]
-            .iter()
-            .map(|&o| (0..cols).map(|c| vectors[c * cols + o]).collect())
-            .collect();
-        let q = random_walk_covariance(&full, &value, &v, cols);
+        let v = &pca.vectors[..d];
+        let q = random_walk_covariance(&full, &value, v, cols);
         let sigma = KALMAN_OBSERVATION_NOISE_MM2;
 
         // Forward: the filtered states, and the smoother's gain at each frame,

@@ -5,6 +5,8 @@
 // Index loops over small matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
+use std::ops::Range;
+
 /// The second derivatives of the natural cubic spline through `(x, y)` (0 at both ends),
 /// by the tridiagonal (Thomas) solve.
 pub fn natural_second_derivatives(x: &[f64], y: &[f64]) -> Vec<f64> {
@@ -272,6 +274,83 @@ pub fn symmetric_eigen_householder(a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>
     (d, v)
 }
 
+/// A principal component analysis: the singular values of a matrix, largest first, and
+/// their right singular vectors.
+pub struct Components {
+    /// The singular values, largest first.
+    pub singular: Vec<f64>,
+    /// `vectors[j][c]`: component `j`'s loading on column `c`.
+    pub vectors: Vec<Vec<f64>>,
+}
+
+/// The components of `x` (`rows × cols`, row-major, `rows ≥ 2`) with the columns `zeroed`
+/// set to 0, as the SVD of `X / √(rows − 1)` (numpy's and MATLAB's economy SVD):
+/// `min(rows, cols)` of them. From
+/// the eigenvectors of `Xᵀ X`, or, for fewer rows than columns (a short clip of many
+/// markers), of the smaller `X Xᵀ`, each `u` giving the vector `Xᵀ u / ‖Xᵀ u‖`.
+pub fn principal_components(
+    x: &[f64],
+    rows: usize,
+    cols: usize,
+    zeroed: Option<Range<usize>>,
+) -> Components {
+    let zeroed = zeroed.unwrap_or(0..0);
+    let scale = (rows - 1) as f64;
+    let (n, values, vectors) = if rows >= cols {
+        let mut gram = column_gram(x.chunks(cols), cols);
+        for c in zeroed.clone() {
+            for o in 0..cols {
+                gram[c * cols + o] = 0.0;
+                gram[o * cols + c] = 0.0;
+            }
+        }
+        let (values, vectors) = symmetric_eigen_householder(gram, cols);
+        (cols, values, vectors)
+    } else {
+        let kept = |c: &usize| !zeroed.contains(c);
+        let mut gram = vec![0f64; rows * rows];
+        for a in 0..rows {
+            for b in 0..=a {
+                let (ra, rb) = (&x[a * cols..(a + 1) * cols], &x[b * cols..(b + 1) * cols]);
+                let dot: f64 = (0..cols).filter(kept).map(|c| ra[c] * rb[c]).sum();
+                gram[a * rows + b] = dot;
+                gram[b * rows + a] = dot;
+            }
+        }
+        let (values, u) = symmetric_eigen_householder(gram, rows);
+        // Column o of the result: Xᵀ u_o, normalised (0 for a null direction).
+        let mut vectors = vec![0f64; cols * rows];
+        for o in 0..rows {
+            let v: Vec<f64> = (0..cols)
+                .map(|c| match kept(&c) {
+                    true => (0..rows).map(|r| x[r * cols + c] * u[r * rows + o]).sum(),
+                    false => 0.0,
+                })
+                .collect();
+            let norm = v.iter().map(|a| a * a).sum::<f64>().sqrt();
+            if norm > 0.0 {
+                for c in 0..cols {
+                    vectors[c * rows + o] = v[c] / norm;
+                }
+            }
+        }
+        (rows, values, vectors)
+    };
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
+    order.truncate(rows.min(cols));
+    Components {
+        singular: order
+            .iter()
+            .map(|&o| (values[o].max(0.0) / scale).sqrt())
+            .collect(),
+        vectors: order
+            .iter()
+            .map(|&o| (0..cols).map(|c| vectors[c * n + o]).collect())
+            .collect(),
+    }
+}
+
 /// The weights `w ≥ 0`, `Σ w = 1` that minimise `wᵀ E w`, for `E` the Gram matrix of the
 /// fillers' errors: the exact minimum over every support (2^M − 1 of them), each solved
 /// with its equality constraint by the KKT system `[E_S 1; 1ᵀ 0] [w; λ] = [0; 1]`.
@@ -349,6 +428,36 @@ fn solve(mut a: Vec<Vec<f64>>) -> Option<Vec<f64>> {
 
 #[cfg(test)]
 mod tests {
+    /// Fewer rows than columns: the components from `X Xᵀ` are those from `Xᵀ X`, up to
+    /// sign, with and without zeroed columns.
+    #[test]
+    fn components_of_a_wide_matrix_are_those_of_its_column_gram() {
+        let (rows, cols) = (4, 9);
+        let x: Vec<f64> = (0..rows * cols)
+            .map(|v| ((v * 7919) % 101) as f64 / 50.0 - 1.0)
+            .collect();
+        for zeroed in [None, Some(3..6)] {
+            let wide = principal_components(&x, rows, cols, zeroed.clone());
+            // The same matrix padded with zero rows to be tall has the same components.
+            let mut tall = x.clone();
+            tall.resize(cols * cols, 0.0);
+            let reference = principal_components(&tall, cols, cols, zeroed.clone());
+            let rescale = ((cols - 1) as f64 / (rows - 1) as f64).sqrt();
+            assert_eq!(wide.singular.len(), rows);
+            for o in 0..rows {
+                let (a, b) = (wide.singular[o], reference.singular[o] * rescale);
+                assert!((a - b).abs() < 1e-12 * b.max(1.0), "{o}: {a} {b}");
+                if b > 1e-9 {
+                    let dot: f64 = wide.vectors[o]
+                        .iter()
+                        .zip(&reference.vectors[o])
+                        .map(|(p, q)| p * q)
+                        .sum();
+                    assert!((dot.abs() - 1.0).abs() < 1e-9, "{o}: {dot}");
+                }
+            }
+        }
+    }
 
     /// Householder and QL: `A v = λ v` with orthonormal vectors, and Jacobi's eigenvalues,
     /// on matrices of sizes 1 to 40 (one of them rank-deficient, as a Gram matrix of few
