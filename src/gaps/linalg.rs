@@ -1,5 +1,5 @@
 //! The small solvers of gap filling: the natural cubic spline's tridiagonal system, the
-//! symmetric eigenproblem of a PCA, and the least squares on the simplex that weighs a
+//! symmetric eigenproblem and the principal components of a PCA, and the least squares on the simplex that weighs a
 //! blend. Plain `f64` arithmetic on slices and fixed-size arrays, no tensors.
 
 // Index loops over small matrices read as the algebra they implement.

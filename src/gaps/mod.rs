@@ -39,7 +39,7 @@
 //! | `field_fill.rs` | [`FieldPrediction`], the lenders ([`Lending`]), the residual carry |
 //! | `blend.rs` | [`blend::Weights`] (one per filler), learning and applying a blend |
 //! | `spans.rs` | gaps and their classes and lengths, hidden and validation spans |
-//! | `linalg.rs` | the small solvers: the spline's system, Jacobi eigenvalues, simplex least squares |
+//! | `linalg.rs` | the small solvers: the spline's system, eigenproblems (Jacobi, Householder + QL), principal components, simplex least squares |
 //!
 //! Adding a filler: a variant of [`Filler`], its name and label, its arm in
 //! [`Filler::fill_at`] (its function in a file of its own or in `classic.rs`), and tests.
