@@ -1,6 +1,6 @@
 //! The small solvers of gap filling: the natural cubic spline's tridiagonal system, the
-//! symmetric eigenproblem and the principal components of a PCA, and the least squares on the simplex that weighs a
-//! blend. Plain `f64` arithmetic on slices and fixed-size arrays, no tensors.
+//! symmetric eigenproblem and the principal components of a PCA, and the least squares on
+//! the simplex that weighs a blend. Plain `f64` arithmetic on slices and fixed-size arrays, no tensors.
 
 // Index loops over small matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
