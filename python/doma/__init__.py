@@ -42,6 +42,7 @@ __all__ = [
     "FitProgress",
     "JACOBIANS",
     "RECIPES",
+    "STEPS",
     "SizeError",
     "Tracks",
     "VARIANTS",
@@ -65,6 +66,8 @@ BACKENDS = _CHOICES["backend"]
 JACOBIANS = _CHOICES["jacobian"]
 #: The named recipes of ``fit(recipe=...)``.
 RECIPES = _CHOICES["recipe"]
+#: How ``fit(step=...)`` computes a training step.
+STEPS = _CHOICES["step"]
 #: The methods of :func:`fill`: the gap fillers that need no field.
 FILLERS = _CHOICES["filler"]
 
@@ -117,7 +120,7 @@ def _check_size(what: str, count: int, frames: int, per_point: int) -> None:
 
 
 #: The string arguments that name a choice: read in any case, as ``reg`` is.
-_CHOICE_ARGUMENTS = ("variant", "backend", "jacobian", "recipe", "robust", "h_weight", "layout", "frame")
+_CHOICE_ARGUMENTS = ("variant", "backend", "jacobian", "recipe", "step", "robust", "h_weight", "layout", "frame")
 
 
 def _lower_choices(options: dict[str, Any]) -> dict[str, Any]:
@@ -559,6 +562,9 @@ def fit(
             rate falling to 0 (those tracks are then not fitted).
         backend: one of ``BACKENDS`` (default ``flex``).
         jacobian: ``analytic`` (fused, hand-derived; default) or ``autodiff``.
+        step: ``"composed"`` (Burn's operations; default), ``"fused"`` (the whole
+            training step as one CPU operation; refused where it does not apply) or
+            ``"auto"`` (fused where it applies; what ``recipe="fast"`` sets).
         seed: seed of the weights, the split and the frame order (default 0).
         test_fraction: the fraction of tracks held out of the fit for the report
             (default 0: every track is fitted; the paper's Tab. 1 holds out 0.75).

@@ -158,6 +158,13 @@ pub trait MotionField {
     /// models (DPF, MLP, DCT-NeRF); [`Variant::Affinity`] for BoneCloud's blended map.
     fn head(&self) -> Variant;
 
+    /// The model's one SIREN, when the model is a SIREN and a head (a DOMA field): what
+    /// the fused step ([`crate::train::StepKind::Fused`]) trains. `None` (the default) for
+    /// every other model.
+    fn siren(&self) -> Option<&Siren> {
+        None
+    }
+
     /// Whether the model's network is made of SIREN layers (the default), which every
     /// Jacobian method can differentiate.
     fn has_siren_layers(&self) -> bool {
@@ -319,6 +326,10 @@ impl MotionField for DomaField {
 
     fn head(&self) -> Variant {
         self.variant
+    }
+
+    fn siren(&self) -> Option<&Siren> {
+        Some(&self.siren)
     }
 
     fn param_count(&self) -> usize {

@@ -377,6 +377,10 @@ impl MotionField for Model {
         self.as_field().has_siren_layers()
     }
 
+    fn siren(&self) -> Option<&crate::siren::Siren> {
+        self.as_field().siren()
+    }
+
     fn param_count(&self) -> usize {
         self.as_field().param_count()
     }

@@ -94,6 +94,12 @@ pub struct RunSpec {
     #[arg(long, help_heading = "Model")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub jacobian: Option<JacobianKind>,
+    /// How each training step is computed: `composed` (Burn's operations; the default),
+    /// `fused` (the whole step as one CPU op; refused where it does not apply) or `auto`
+    /// (fused where it applies; what `--recipe fast` sets).
+    #[arg(long, help_heading = "Training")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step: Option<crate::train::StepKind>,
     /// Iterations (passes over all frames; default 1000, or 300 for tracks with gaps).
     #[arg(long = "iters", value_name = "N", value_parser = at_least_one, help_heading = "Training")]
     #[serde(default, alias = "iters", skip_serializing_if = "Option::is_none")]

@@ -177,6 +177,9 @@ pub struct FitConfig {
     /// Stop early once the EPE on held-back training tracks stops improving (`None`: run
     /// the whole budget, the paper's protocol).
     pub until_converged: Option<Convergence>,
+    /// How each step is computed: Burn's operations around the Jacobian method, or the
+    /// whole step as one CPU operation ([`super::StepKind`]; `None`: composed).
+    pub step: Option<super::StepKind>,
     /// The name of the recipe the settings came from ([`super::Recipe`]); a label only:
     /// the settings themselves are the other fields.
     pub recipe: Option<super::Recipe>,

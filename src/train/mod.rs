@@ -9,6 +9,7 @@
 //! ([`ScheduleConfig`]).
 
 mod config;
+pub(crate) mod fused;
 mod hooks;
 mod learned;
 mod objective;
@@ -22,6 +23,7 @@ mod trainer;
 mod trajectory;
 
 pub use config::{FitConfig, LossConfig, SmoothnessSampling, WithSchedule, check_weights};
+pub use fused::StepKind;
 pub use hooks::{EachFn, Hooks, Progress};
 pub use objective::Objective;
 pub use recipe::{

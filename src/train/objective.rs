@@ -36,6 +36,23 @@ pub trait Objective<M>: Send {
         rng: &mut ChaCha8Rng,
     ) -> Result<(Tensor<1>, Tensor<1>)>;
 
+    /// Switches the objective to host batches for the fused step
+    /// ([`super::fused::FusedStep`]): from now on [`Objective::prepare_iteration`] keeps
+    /// its draws on the host and [`Objective::host_batch`] gives each step's inputs. The
+    /// reason when the objective has no such form (the default).
+    fn use_host_batches(&mut self) -> std::result::Result<(), String> {
+        Err("this objective is not a trajectory fit".into())
+    }
+
+    /// Goes back to device batches (a resumed fit whose Adam state is Burn's).
+    fn stop_host_batches(&mut self) {}
+
+    /// The fused step's inputs on frame `k`, drawn from `rng` as [`Objective::step_loss`]
+    /// would draw them; `None` unless [`Objective::use_host_batches`] succeeded.
+    fn host_batch(&mut self, _k: usize, _rng: &mut ChaCha8Rng) -> Option<super::fused::HostBatch> {
+        None
+    }
+
     /// Called after each step's backward pass with its gradients and learning rate: an
     /// objective with parameters of its own updates them here. The default has none.
     fn after_backward(&mut self, _grads: &Gradients, _lr: f64) {}

@@ -7,13 +7,14 @@ use std::time::Instant;
 
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};
-use burn::tensor::{Device, Tensor};
+use burn::tensor::{Device, Tensor, TensorData};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
 use super::config::FitConfig;
+use super::fused::{self, FusedStep, StepKind};
 use super::hooks::Hooks;
 use super::objective::Objective;
 use super::record::{Fitted, IterationRecord, Outcome, read_step_losses};
@@ -48,6 +49,9 @@ pub struct Trainer<M, O> {
     frames_per_iteration: Option<usize>,
     /// When to stop before the budget, on the objective's held-back tracks.
     convergence: Option<Convergence>,
+    /// The whole step as one CPU operation, when the fit takes it ([`StepKind`]); it holds
+    /// the parameters during an iteration and writes them into `field` after it.
+    fused: Option<FusedStep<f32>>,
 }
 
 impl<'a, M: MotionField + Module> Trainer<M, TrajectoryObjective<'a>> {
@@ -71,7 +75,40 @@ impl<'a, M: MotionField + Module> Trainer<M, TrajectoryObjective<'a>> {
         .frames_per_step(config.frames_per_step.unwrap_or(1));
         trainer.frames_per_iteration = config.frames_per_iteration;
         trainer.convergence = config.until_converged.clone();
+        match (
+            config.step.unwrap_or(StepKind::Composed),
+            trainer.start_fused(config, device),
+        ) {
+            (StepKind::Composed, _) | (StepKind::Auto, _) | (StepKind::Fused, Ok(())) => {}
+            (StepKind::Fused, Err(e)) => return Err(e),
+        }
         Ok(trainer)
+    }
+
+    /// Hands the steps to the fused step when `config` asks for it and it applies; else
+    /// the reason, and nothing changed.
+    fn start_fused(&mut self, config: &FitConfig, device: &Device) -> Result<()> {
+        if config.step.unwrap_or(StepKind::Composed) == StepKind::Composed {
+            return Ok(());
+        }
+        fused::check(config, device)?;
+        let refuse = |why: String| {
+            DomaError::InvalidConfig(format!("the fused step cannot run this fit: {why}"))
+        };
+        let field = self.field();
+        let siren = field
+            .siren()
+            .ok_or_else(|| refuse("the model is not one SIREN with a head".into()))?;
+        let adam = fused::adam_settings(&config.optimizer).map_err(refuse)?;
+        let loss = fused::StepLoss {
+            penalty: config.loss.penalty(),
+            smoothness_weight: config.loss.smoothness_weight,
+            smoothness_norm: config.loss.smoothness_norm,
+        };
+        let step = FusedStep::from_siren(siren, field.head(), loss, adam)?;
+        Objective::<M>::use_host_batches(&mut self.objective).map_err(refuse)?;
+        self.fused = Some(step);
+        Ok(())
     }
 }
 
@@ -114,6 +151,23 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
             frames_per_step: 1,
             frames_per_iteration: None,
             convergence: None,
+            fused: None,
+        }
+    }
+
+    /// Whether the fused step takes this fit's steps ([`StepKind`]).
+    pub fn is_fused(&self) -> bool {
+        self.fused.is_some()
+    }
+
+    /// Writes the fused step's parameters into the field, so that [`Trainer::field`] is
+    /// current after steps taken one by one ([`Trainer::step`]); [`Trainer::iteration`]
+    /// does it after its steps. Nothing to do for the composed step.
+    pub fn sync_field(&mut self) {
+        if let Some(fused) = &self.fused
+            && let Some(field) = self.field.take()
+        {
+            self.field = Some(fused.write_back(field));
         }
     }
 
@@ -151,6 +205,18 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
     }
 
     fn step_frames_here(&mut self, frames: &[usize], lr: f64) -> Result<Tensor<1>> {
+        if let (Some(fused), [k]) = (self.fused.as_mut(), frames) {
+            let batch = self
+                .objective
+                .host_batch(*k, &mut self.rng)
+                .ok_or_else(|| {
+                    DomaError::InvalidConfig("the objective gives no host batches".into())
+                })?;
+            let losses = fused.step(&batch.batch(), lr);
+            let device = self.device.clone().unwrap_or_default();
+            let values = vec![losses.data as f32, losses.total as f32];
+            return Ok(Tensor::from_data(TensorData::new(values, [2]), &device));
+        }
         let field = self.field.take().expect("the field is always put back");
         let iteration = self.history.len();
         let mut sums: Option<(Tensor<1>, Tensor<1>)> = None;
@@ -212,6 +278,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
             step_losses.push(self.step_frames(frames, lr)?);
             first_frames.push(frames[0]);
         }
+        self.sync_field();
         let (trajectory_loss, total_loss) =
             read_step_losses(step_losses, &first_frames, order.len(), iteration)?;
         self.history.push(IterationRecord {

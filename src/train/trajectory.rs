@@ -11,6 +11,7 @@ use burn::tensor::{Device, Gradients, Tensor, TensorData};
 use rand_chacha::ChaCha8Rng;
 
 use super::config::{FitConfig, LossConfig};
+use super::fused::HostBatch;
 use super::learned::LearnedPositions;
 use super::objective::Objective;
 use super::rows::{StepRows, TrainingRows};
@@ -49,6 +50,8 @@ pub struct TrajectoryObjective<'a> {
     /// points, or for elasticity).
     warp_needs_jacobian: bool,
     learned: Option<LearnedPositions>,
+    /// The draws of host batches, when the fused step takes the steps.
+    host: Option<host::HostDraws>,
 }
 
 impl<'a> TrajectoryObjective<'a> {
@@ -122,6 +125,7 @@ impl<'a> TrajectoryObjective<'a> {
             ad,
             frame_weights,
             samples,
+            host: None,
         })
     }
 
@@ -291,6 +295,9 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
     /// its samples, as `step_loss` would draw them), and uploads them in one transfer each,
     /// so that no step moves data to the device.
     fn prepare_iteration(&mut self, order: &[usize], rng: &mut ChaCha8Rng) {
+        if self.host.is_some() {
+            return self.prepare_host(order, rng);
+        }
         self.rows.clear();
         if let Some(s) = self.samples.as_mut() {
             s.clear();
@@ -319,6 +326,26 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
         if subset.is_some() {
             self.rows.prepare(rows, spans);
         }
+    }
+
+    fn use_host_batches(&mut self) -> std::result::Result<(), String> {
+        match self.host_refusal() {
+            Some(why) => Err(why.into()),
+            None => {
+                self.host = Some(host::HostDraws::default());
+                Ok(())
+            }
+        }
+    }
+
+    fn stop_host_batches(&mut self) {
+        self.host = None;
+    }
+
+    fn host_batch(&mut self, k: usize, rng: &mut ChaCha8Rng) -> Option<HostBatch> {
+        self.host
+            .is_some()
+            .then(|| TrajectoryObjective::host_batch(self, k, rng))
     }
 
     fn after_backward(&mut self, grads: &Gradients, lr: f64) {
@@ -393,5 +420,6 @@ fn held_back(data: &Trajectories, c: &Convergence, seed: u64) -> Result<(Vec<usi
     Ok((fit, held))
 }
 
+mod host;
 #[cfg(test)]
 mod tests;

@@ -22,7 +22,7 @@
 #![allow(deprecated)] // `NdArray` stays selectable although Burn deprecates it.
 
 mod autodiff;
-mod cpu;
+pub(crate) mod cpu;
 mod reference;
 #[cfg(feature = "wgpu")]
 mod wgpu;

@@ -137,6 +137,9 @@ impl RunSpec {
         if let Some(j) = self.jacobian {
             fit.jacobian = j;
         }
+        if self.step.is_some() {
+            fit.step = self.step;
+        }
         if let Some(i) = self.iterations {
             fit.schedule.iterations = i;
         }

@@ -5,6 +5,7 @@ use burn::optim::AdamConfig;
 
 use super::Trainer;
 use crate::field::MotionField;
+use crate::train::fused::AdamState;
 use crate::train::objective::Objective;
 use crate::train::record::{RngState, TrainerSnapshot};
 use crate::{DomaError, Result};
@@ -13,11 +14,15 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
     /// Everything a resumed fit needs besides the config and the data: the field's
     /// parameters, Adam's state, the random stream's position and the history.
     pub fn snapshot(&self) -> Result<TrainerSnapshot> {
-        let optimizer = self
-            .optim
-            .into_bytes()
-            .map_err(|e| DomaError::Device(format!("cannot serialise Adam's state: {e}")))?
-            .to_vec();
+        // The fused step keeps Adam's moments on the host, in its own record.
+        let optimizer = match &self.fused {
+            Some(fused) => fused.adam().to_bytes(),
+            None => self
+                .optim
+                .into_bytes()
+                .map_err(|e| DomaError::Device(format!("cannot serialise Adam's state: {e}")))?
+                .to_vec(),
+        };
         Ok(TrainerSnapshot {
             model: crate::checkpoint::encode_checkpoint(
                 self.field().clone(),
@@ -41,6 +46,13 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
                 snapshot.history.len()
             )));
         }
+        if AdamState::is_fused(&snapshot.optimizer) && self.fused.is_none() {
+            return Err(DomaError::InvalidData(
+                "the checkpoint's Adam state was written by the fused step, and this fit takes \
+                 composed steps: resume it with the same --step on a CPU device"
+                    .into(),
+            ));
+        }
         let field = self.field.take().expect("the field is always put back");
         let loaded = crate::checkpoint::decode_checkpoint(field.clone(), &snapshot.model);
         self.field = Some(match loaded {
@@ -50,14 +62,28 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
                 return Err(e);
             }
         });
-        let optim = std::mem::replace(&mut self.optim, AdamConfig::new().init());
-        self.optim = optim
-            .from_bytes(burn::tensor::Bytes::from_bytes_vec(
-                snapshot.optimizer.clone(),
-            ))
-            .map_err(|e| {
-                DomaError::InvalidData(format!("the saved Adam state is unreadable: {e}"))
-            })?;
+        if !AdamState::is_fused(&snapshot.optimizer) && self.fused.is_some() {
+            // A composed fit's checkpoint (Burn's Adam record): the rest is composed too.
+            self.fused = None;
+            self.objective.stop_host_batches();
+        }
+        if let Some(fused) = self.fused.as_mut() {
+            let adam = AdamState::from_bytes(&snapshot.optimizer, fused.adam().settings())
+                .map_err(DomaError::InvalidData)?;
+            fused.set_adam(adam)?;
+            if let Some(siren) = self.field.as_ref().and_then(|f| f.siren()) {
+                fused.reload(siren)?;
+            }
+        } else {
+            let optim = std::mem::replace(&mut self.optim, AdamConfig::new().init());
+            self.optim = optim
+                .from_bytes(burn::tensor::Bytes::from_bytes_vec(
+                    snapshot.optimizer.clone(),
+                ))
+                .map_err(|e| {
+                    DomaError::InvalidData(format!("the saved Adam state is unreadable: {e}"))
+                })?;
+        }
         self.objective.restore_state(&snapshot.objective)?;
         self.rng = snapshot.rng.restore();
         self.history = snapshot.history.clone();

@@ -14,3 +14,6 @@ mod host;
 mod net;
 mod real;
 mod rows;
+
+pub(crate) use net::Net;
+pub(crate) use real::Real;

@@ -1,0 +1,528 @@
+//! The whole training step of a trajectory fit as one operation on raw CPU buffers
+//! (docs/design.md §2.4): the SIREN forward with its spatial Jacobian (Eq. 1, 6), the
+//! head `(A, u)` and the warp `y = A x + u` (Eq. 4, 10–12), the trajectory loss, `L_H`
+//! (Eq. 13), their backward pass and Adam's update, with no autodiff graph and no tensor
+//! dispatch in between.
+//!
+//! The composed step builds each of these from Burn's operations around the fused SIREN
+//! op, some sixty small operations a step; on the CPU their dispatch costs as much as the
+//! network itself. This step calls the same network code (`jacobian::analytic::cpu`) and
+//! does the rest in loops over the step's few hundred rows.
+//!
+//! Burn stays the owner of the parameters: [`FusedStep::from_siren`] reads them, the
+//! trainer writes them back after each iteration ([`FusedStep::write_back`]), and every
+//! other path (evaluation, checkpoints, autodiff, wgpu, the baselines) is unchanged.
+//! Where the step does not apply (another model, a GPU, a loss term it does not
+//! compute), [`StepKind::Fused`] is refused with the reason ([`check`]).
+//!
+//! | file | what it holds |
+//! |---|---|
+//! | `head.rs` | the four heads and their backward on rows |
+//! | `adam.rs` | Adam's update as Burn computes it |
+//! | `tests.rs` | against Burn's autodiff step, and finite differences in f64 |
+
+mod adam;
+mod head;
+#[cfg(test)]
+mod tests;
+
+pub use adam::{AdamSettings, AdamState};
+
+use burn::module::{Module, ModuleMapper, Param};
+use burn::optim::AdamConfig;
+use burn::tensor::{Device, Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+
+use super::config::FitConfig;
+use crate::field::Variant;
+use crate::jacobian::JacobianKind;
+use crate::jacobian::analytic::OpSpec;
+use crate::jacobian::analytic::cpu::{Net, Real};
+use crate::loss::{DataPenalty, SmoothnessNorm};
+use crate::siren::Siren;
+use crate::{DomaError, Result};
+
+/// How a training step is computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum StepKind {
+    /// Burn's operations around the Jacobian method, differentiated by Burn's autodiff:
+    /// every model, backend and loss.
+    Composed,
+    /// The whole step as one operation on the CPU ([`FusedStep`]): a DOMA field, the
+    /// analytic Jacobian, flex or ndarray, the trajectory loss and `L_H`; refused, with
+    /// the reason, for any other fit.
+    Fused,
+    /// The fused step where it applies, the composed step elsewhere.
+    Auto,
+}
+
+crate::names::value_names!(StepKind);
+
+/// The float operations the step needs beyond the network's ([`Real`]).
+pub(crate) trait Float: Real + std::ops::Div<Output = Self> + PartialOrd {
+    fn sqrt(self) -> Self;
+    fn exp(self) -> Self;
+    fn ln_1p(self) -> Self;
+    fn abs(self) -> Self;
+    fn recip(self) -> Self;
+    fn max(self, other: Self) -> Self;
+    fn to_f64(self) -> f64;
+}
+
+macro_rules! float_impl {
+    ($t:ty) => {
+        impl Float for $t {
+            fn sqrt(self) -> Self {
+                <$t>::sqrt(self)
+            }
+            fn exp(self) -> Self {
+                <$t>::exp(self)
+            }
+            fn ln_1p(self) -> Self {
+                <$t>::ln_1p(self)
+            }
+            fn abs(self) -> Self {
+                <$t>::abs(self)
+            }
+            fn recip(self) -> Self {
+                <$t>::recip(self)
+            }
+            fn max(self, other: Self) -> Self {
+                <$t>::max(self, other)
+            }
+            fn to_f64(self) -> f64 {
+                self as f64
+            }
+        }
+    };
+}
+float_impl!(f32);
+float_impl!(f64);
+
+/// Why the fused step cannot run a fit of `config` on `device`, if it cannot.
+pub fn check(config: &FitConfig, device: &Device) -> Result<()> {
+    let refuse = |why: &str| {
+        Err(DomaError::InvalidConfig(format!(
+            "the fused step cannot run this fit: {why}; use --step composed"
+        )))
+    };
+    if !matches!(config.model, crate::field::model::ModelConfig::Doma(_)) {
+        return refuse(&format!(
+            "it computes DOMA fields only, not {}",
+            config.model.paper_name()
+        ));
+    }
+    if config.jacobian != JacobianKind::Analytic {
+        return refuse("it uses the analytic Jacobian, and the fit asks for autodiff");
+    }
+    if !crate::backend::runs_on_cpu(device) {
+        return refuse("it runs on the CPU backends (flex, ndarray) only");
+    }
+    let loss = &config.loss;
+    if loss.elasticity_weight > 0.0 {
+        return refuse("it does not compute the elasticity loss");
+    }
+    if loss.temporal_weight() > 0.0 {
+        return refuse("it does not compute the temporal loss L_T");
+    }
+    if config.frames_per_step.is_some_and(|f| f > 1) {
+        return refuse("it takes one frame per step");
+    }
+    adam_settings(&config.optimizer)
+        .map(|_| ())
+        .or_else(|e| refuse(&e))
+}
+
+/// Adam's `β₁, β₂, ε`, or why the fused update cannot reproduce `config`.
+pub fn adam_settings(config: &AdamConfig) -> std::result::Result<AdamSettings, String> {
+    // Burn's config keeps its fields private; its serialised form names them.
+    let value = serde_json::to_value(config).map_err(|e| e.to_string())?;
+    let get = |k: &str| value.get(k).filter(|v| !v.is_null());
+    if get("weight_decay").is_some() || get("grad_clipping").is_some() {
+        return Err("Adam with weight decay or gradient clipping is not fused".into());
+    }
+    if get("amsgrad").and_then(|v| v.as_bool()) == Some(true) {
+        return Err("AMSGrad is not fused".into());
+    }
+    let f = |k: &str| {
+        get(k)
+            .and_then(|v| v.as_f64())
+            .map(|v| v as f32)
+            .ok_or_else(|| format!("Adam's config has no `{k}`"))
+    };
+    Ok(AdamSettings {
+        beta_1: f("beta_1")?,
+        beta_2: f("beta_2")?,
+        epsilon: f("epsilon")?,
+    })
+}
+
+/// What one step reads, on the host: the frame's time, the training rows' canonical
+/// positions and targets, their confidence weights, and `L_H`'s own sample points.
+#[derive(Clone, Copy, Debug)]
+pub struct StepBatch<'a, E> {
+    /// The frame's normalised time.
+    pub time: f64,
+    /// The training rows' canonical positions, `[n, 3]` (`n` may be 0).
+    pub x0: &'a [E],
+    /// Their positions in the frame, `[n, 3]`.
+    pub target: &'a [E],
+    /// Their weights, `[n]`, when the data has confidences.
+    pub weights: Option<&'a [E]>,
+    /// `L_H`'s sample points `[p, 3]`; `None` evaluates `L_H` on the training rows.
+    pub samples: Option<&'a [E]>,
+}
+
+/// The losses of a step: the data term (reported) and the total (minimised).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepLosses {
+    /// The trajectory loss.
+    pub data: f64,
+    /// The trajectory loss plus `w_H · L_H`.
+    pub total: f64,
+}
+
+/// The loss terms the step computes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepLoss {
+    /// The per-coordinate penalty of the trajectory loss.
+    pub penalty: DataPenalty,
+    /// `w_H`; 0 leaves `L_H` out.
+    pub smoothness_weight: f64,
+    /// How `L_H` treats each Jacobian entry.
+    pub smoothness_norm: SmoothnessNorm,
+}
+
+/// A DOMA field's SIREN, its head and Adam's state on flat host buffers, and the step.
+#[derive(Clone, Debug)]
+pub struct FusedStep<E> {
+    variant: Variant,
+    shapes: Vec<[usize; 2]>,
+    omega: f64,
+    loss: StepLoss,
+    /// `[W_0, b_0, …, W_o, b_o]`, the layout of the analytic op.
+    params: Vec<E>,
+    adam: AdamState<E>,
+}
+
+impl<E: Float> FusedStep<E> {
+    /// The step over `siren`'s current parameters (read back from the device), with
+    /// `variant`'s head, `loss`'s terms and a fresh Adam.
+    pub fn from_siren(
+        siren: &Siren,
+        variant: Variant,
+        loss: StepLoss,
+        adam: AdamSettings,
+    ) -> Result<Self> {
+        let spec = OpSpec::of(siren, false);
+        let params = read_params(siren)?;
+        let len = params.len();
+        Ok(FusedStep {
+            variant,
+            shapes: spec.shapes,
+            omega: spec.omega,
+            loss,
+            params,
+            adam: AdamState::new(adam, len),
+        })
+    }
+
+    /// The flat parameters `[W_0, b_0, …, W_o, b_o]`.
+    #[cfg(test)]
+    pub fn params(&self) -> &[E] {
+        &self.params
+    }
+
+    /// Replaces the flat parameters (same length).
+    #[cfg(test)]
+    pub fn set_params(&mut self, params: &[E]) {
+        self.params.copy_from_slice(params);
+    }
+
+    /// Reads the parameters again from `siren` (after a checkpoint put them back).
+    pub fn reload(&mut self, siren: &Siren) -> Result<()> {
+        self.params = read_params(siren)?;
+        Ok(())
+    }
+
+    /// Adam's state.
+    pub fn adam(&self) -> &AdamState<E> {
+        &self.adam
+    }
+
+    /// Puts an Adam state back (a resumed fit's).
+    pub fn set_adam(&mut self, adam: AdamState<E>) -> Result<()> {
+        if adam.moment_1.len() != self.params.len() || adam.moment_2.len() != self.params.len() {
+            return Err(DomaError::InvalidData(format!(
+                "the saved Adam state holds {} moments for {} parameters",
+                adam.moment_1.len(),
+                self.params.len()
+            )));
+        }
+        self.adam = adam;
+        Ok(())
+    }
+
+    fn spec(&self, dual: bool) -> OpSpec {
+        OpSpec {
+            shapes: self.shapes.clone(),
+            omega: self.omega,
+            dual,
+        }
+    }
+
+    /// The step's losses and the gradient of the total with respect to the flat
+    /// parameters; no gradient when the step has no term (a frame without a training row
+    /// and without `L_H`), so that Adam moves nothing, as Burn's optimiser skips a
+    /// parameter without a gradient.
+    pub fn gradients(&self, batch: &StepBatch<'_, E>) -> (StepLosses, Option<Vec<E>>) {
+        // The two network calls are independent until their gradients are summed: each
+        // runs on its own thread, so that the second thread has work for the whole step
+        // instead of being woken for each parallel region.
+        let (rows, samples) = rayon::join(|| self.rows_term(batch), || self.samples_term(batch));
+        let mut losses = StepLosses {
+            data: 0.0,
+            total: 0.0,
+        };
+        let mut grad: Option<Vec<E>> = None;
+        if let Some((data, total, g)) = rows {
+            losses = StepLosses { data, total };
+            grad = Some(g);
+        }
+        if let Some((h, g)) = samples {
+            losses.total += h;
+            grad = Some(match grad {
+                None => g,
+                Some(mut acc) => {
+                    acc.iter_mut().zip(&g).for_each(|(a, b)| *a = *a + *b);
+                    acc
+                }
+            });
+        }
+        (losses, grad)
+    }
+
+    /// The data term on the training rows (and `w_H · L_H` there, when it has no samples
+    /// of its own): the data term, the total, and their gradient. `None` without rows.
+    fn rows_term(&self, batch: &StepBatch<'_, E>) -> Option<(f64, f64, Vec<E>)> {
+        let n = batch.x0.len() / 3;
+        if n == 0 {
+            return None;
+        }
+        let o = self.variant.outputs();
+        let h_on_rows = self.loss.smoothness_weight > 0.0 && batch.samples.is_none();
+        let net_spec = self.spec(h_on_rows);
+        let net = Net::new(&self.params, &net_spec);
+        let input = with_time(batch.x0, batch.time);
+        let (out, acts) = net.forward(&input);
+        let values = &out[..n * o];
+        let mut y = vec![E::zero(); n * 3];
+        head::warp(self.variant, values, batch.x0, &mut y);
+        let (data, g_y) = data_term(&y, batch.target, batch.weights, self.loss.penalty);
+        let mut g_out = vec![E::zero(); out.len()];
+        head::warp_backward(self.variant, values, batch.x0, &g_y, &mut g_out[..n * o]);
+        let mut total = data;
+        if h_on_rows {
+            total += smoothness(&out[n * o..], n, self.loss, &mut g_out[n * o..]);
+        }
+        let mut g = vec![E::zero(); self.params.len()];
+        net.backward(&acts, &input, &g_out, false, &mut g);
+        Some((data, total, g))
+    }
+
+    /// `w_H · L_H` on the step's own samples, and its gradient. `None` without them.
+    fn samples_term(&self, batch: &StepBatch<'_, E>) -> Option<(f64, Vec<E>)> {
+        let samples = batch
+            .samples
+            .filter(|s| self.loss.smoothness_weight > 0.0 && !s.is_empty())?;
+        let (p, o) = (samples.len() / 3, self.variant.outputs());
+        let net_spec = self.spec(true);
+        let net = Net::new(&self.params, &net_spec);
+        let input = with_time(samples, batch.time);
+        let (out, acts) = net.forward(&input);
+        let mut g_out = vec![E::zero(); out.len()];
+        let h = smoothness(&out[p * o..], p, self.loss, &mut g_out[p * o..]);
+        let mut g = vec![E::zero(); self.params.len()];
+        net.backward(&acts, &input, &g_out, false, &mut g);
+        Some((h, g))
+    }
+
+    /// One step: the gradients of [`FusedStep::gradients`], then Adam's update at `lr`.
+    pub fn step(&mut self, batch: &StepBatch<'_, E>, lr: f64) -> StepLosses {
+        let (losses, grad) = self.gradients(batch);
+        if let Some(g) = grad {
+            self.adam.update(&mut self.params, &g, lr);
+        }
+        losses
+    }
+}
+
+impl FusedStep<f32> {
+    /// Writes the flat parameters into `field`'s float parameters, in the order the
+    /// module visits them (the analytic op's layout), keeping their ids (which key a
+    /// checkpoint's Adam state) and their `require_grad`.
+    pub fn write_back<M: Module>(&self, field: M) -> M {
+        let mut writer = Writer {
+            flat: &self.params,
+            offset: 0,
+        };
+        let field = field.map(&mut writer);
+        debug_assert_eq!(writer.offset, self.params.len());
+        field
+    }
+}
+
+/// The SIREN's parameters in the analytic op's flat layout, read back from the device.
+fn read_params<E: Float>(siren: &Siren) -> Result<Vec<E>> {
+    let mut flat = Vec::with_capacity(OpSpec::of(siren, false).param_count());
+    for layer in siren.sine.iter().chain(std::iter::once(&siren.output)) {
+        let w = crate::readback::to_vec::<f64, 2, _>(layer.weight.val())?;
+        flat.extend(w.into_iter().map(E::from_f64));
+        if let Some(b) = &layer.bias {
+            let b = crate::readback::to_vec::<f64, 1, _>(b.val())?;
+            flat.extend(b.into_iter().map(E::from_f64));
+        }
+    }
+    Ok(flat)
+}
+
+/// Writes consecutive slices of a flat buffer into every float parameter it visits.
+struct Writer<'a> {
+    flat: &'a [f32],
+    offset: usize,
+}
+
+impl ModuleMapper for Writer<'_> {
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        param.map(|tensor| {
+            let shape = tensor.shape();
+            let len = shape.num_elements();
+            let values = self.flat[self.offset..self.offset + len].to_vec();
+            self.offset += len;
+            let device = tensor.device();
+            let fresh = Tensor::<D>::from_data(TensorData::new(values, shape), &device);
+            if tensor.is_require_grad() {
+                fresh.require_grad()
+            } else {
+                fresh
+            }
+        })
+    }
+}
+
+/// `[x, y, z, t]` rows from `[x, y, z]` rows.
+fn with_time<E: Float>(x: &[E], t: f64) -> Vec<E> {
+    // Burn's `Tensor::full` casts the f64 time to the element type.
+    let t = E::from_f64(t as f32 as f64);
+    x.chunks_exact(3)
+        .flat_map(|p| [p[0], p[1], p[2], t])
+        .collect()
+}
+
+/// The trajectory loss ([`crate::loss::trajectory_loss`]) of the warped rows `y` against
+/// `target`, and its gradient with respect to `y`.
+fn data_term<E: Float>(
+    y: &[E],
+    target: &[E],
+    weights: Option<&[E]>,
+    penalty: DataPenalty,
+) -> (f64, Vec<E>) {
+    // ρ(r) and ρ'(r) per coordinate.
+    let rho = |r: E| -> (E, E) {
+        let zero = E::zero();
+        let sign = if r > zero {
+            E::one()
+        } else if r < zero {
+            zero - E::one()
+        } else {
+            zero
+        };
+        match penalty {
+            DataPenalty::L1 => (r.abs(), sign),
+            DataPenalty::Huber { delta } => {
+                let (a, d) = (r.abs(), E::from_f64(delta));
+                let c = if a > d { d } else { a };
+                let two = E::from_f64(2.0);
+                (c * (a - c / two) / d, sign * c / d)
+            }
+            DataPenalty::Charbonnier { epsilon } => {
+                let e = E::from_f64(epsilon);
+                let root = (r * r + e * e).sqrt();
+                (root - e, r / root)
+            }
+        }
+    };
+    let n = y.len() / 3;
+    // Each row's share: 1 / 3n, or w_i / (3 Σ w).
+    let (norm, w_of): (E, Box<dyn Fn(usize) -> E>) = match weights {
+        None => (E::from_f64((3 * n) as f64), Box::new(|_| E::one())),
+        Some(w) => {
+            let total = w.iter().fold(E::zero(), |a, b| a + *b) * E::from_f64(3.0);
+            let total = total.max(E::from_f64(f32::MIN_POSITIVE as f64));
+            (total, Box::new(move |i| w[i]))
+        }
+    };
+    let mut loss = E::zero();
+    let mut g = vec![E::zero(); y.len()];
+    for i in 0..n {
+        let w = w_of(i);
+        for c in 0..3 {
+            let (value, slope) = rho(y[3 * i + c] - target[3 * i + c]);
+            loss = loss + value * w;
+            g[3 * i + c] = slope * w / norm;
+        }
+    }
+    ((loss / norm).to_f64(), g)
+}
+
+/// `w_H · L_H` (Eq. 13; [`crate::loss::smoothness`]) of the tangent rows (`[3p, O]`, the
+/// dual output's rows after the values) over `p` points; its gradient is written into
+/// `g` (same shape).
+fn smoothness<E: Float>(tangents: &[E], p: usize, loss: StepLoss, g: &mut [E]) -> f64 {
+    let scale = E::from_f64(loss.smoothness_weight) / E::from_f64(p as f64);
+    let mut sum = E::zero();
+    for (j, gj) in tangents.iter().zip(g.iter_mut()) {
+        let sq = *j * *j;
+        match loss.smoothness_norm {
+            SmoothnessNorm::Squared => {
+                sum = sum + sq;
+                *gj = E::from_f64(2.0) * *j * scale;
+            }
+            SmoothnessNorm::Charbonnier => {
+                let root = (sq + E::one()).sqrt();
+                sum = sum + (root - E::one());
+                *gj = *j / root * scale;
+            }
+        }
+    }
+    (sum.to_f64() / p as f64) * loss.smoothness_weight
+}
+
+/// A step's inputs, owned ([`StepBatch`] borrows them).
+#[derive(Clone, Debug, PartialEq)]
+pub struct HostBatch {
+    /// The frame's normalised time.
+    pub time: f64,
+    /// The training rows' canonical positions, `[n, 3]`.
+    pub x0: Vec<f32>,
+    /// Their positions in the frame, `[n, 3]`.
+    pub target: Vec<f32>,
+    /// Their weights, `[n]`.
+    pub weights: Option<Vec<f32>>,
+    /// `L_H`'s own sample points, `[p, 3]`.
+    pub samples: Option<Vec<f32>>,
+}
+
+impl HostBatch {
+    /// The batch, borrowed.
+    pub fn batch(&self) -> StepBatch<'_, f32> {
+        StepBatch {
+            time: self.time,
+            x0: &self.x0,
+            target: &self.target,
+            weights: self.weights.as_deref(),
+            samples: self.samples.as_deref(),
+        }
+    }
+}
