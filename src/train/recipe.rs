@@ -36,8 +36,9 @@ impl Recipe {
     /// [`Recipe::Fast`] keeps the budget, multiplies the learning rate by
     /// [`FAST_LR_FACTOR`], warms up for [`FAST_WARMUP`] iterations then decays on a
     /// cosine, fits at most [`FAST_POINTS_PER_STEP`] training points per step, and caps a
-    /// capped `L_H` sampling (the authors' Affinity one) at [`FAST_SMOOTHNESS_POINTS`]. The
-    /// model, the loss weights and the seed are kept.
+    /// capped `L_H` sampling (the authors' Affinity one) at [`FAST_SMOOTHNESS_POINTS`], and
+    /// takes the whole step as one CPU op where it applies ([`super::StepKind::Auto`],
+    /// unless the config names a step). The model, the loss weights and the seed are kept.
     pub fn apply(self, mut config: FitConfig) -> FitConfig {
         if self == Recipe::Fast {
             let s = &mut config.schedule;
@@ -48,6 +49,8 @@ impl Recipe {
             *m = m.map(|m| m.min(FAST_SMOOTHNESS_POINTS));
             let k = config.points_per_step.unwrap_or(FAST_POINTS_PER_STEP);
             config.points_per_step = Some(k.min(FAST_POINTS_PER_STEP));
+            // Its steps are mostly fixed cost: the whole step as one op, where it applies.
+            config.step = Some(config.step.unwrap_or(super::StepKind::Auto));
         }
         config.recipe = Some(self);
         config
