@@ -50,6 +50,11 @@ pub struct BenchArgs {
     /// training-step rows also time the methods' steps in turn within a round.)
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub rounds: Option<u64>,
+    /// Instead of the table: the composed training step against the fused one (the
+    /// protocol's Affinity-H and L1 steps, and `--recipe fast`'s), timed in turn on the
+    /// first --backend, with the paired speed-up.
+    #[arg(long, conflicts_with_all = ["compare_torch", "scaling"])]
+    pub fused: bool,
     /// Instead of the table: time per training step and peak memory for N ∈ {10³, 10⁴,
     /// 10⁵} training points and T ∈ {20, 100} frames (each cell in a fresh process, on
     /// flex), and checkpoint bytes against T for DOMA and DPF.
@@ -270,6 +275,21 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
     if args.scaling {
         return scaling(args);
+    }
+    if args.fused {
+        let backend = args
+            .backend
+            .items
+            .first()
+            .copied()
+            .unwrap_or(BackendKind::Flex);
+        let rows = speed::fused_rows(backend, args.warmup as usize, args.steps as usize)?;
+        print!("{}", speed::fused_table(&rows));
+        if let Some(path) = &args.json {
+            crate::io::save_json(&rows, path)?;
+            eprintln!("wrote {}", path.display());
+        }
+        return Ok(());
     }
     if let Some(python) = &args.compare_torch {
         let rows = speed::compare_torch(

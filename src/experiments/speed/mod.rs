@@ -7,9 +7,11 @@
 //! themselves are [`JacobianStep`], [`FitStep`] and [`WarpStep`], the PyTorch side is
 //! [`compare_torch`]; docs/speed.md says how the figures are read.
 
+mod fused;
 mod steps;
 mod torch;
 
+pub use fused::{FusedRow, fused_rows, fused_table};
 pub use steps::{FitStep, JacobianStep, WarpStep, synthetic_config};
 pub use torch::{
     Comparison, TorchRow, compare_torch, comparison_table, parse_torch_rows, torch_rows,

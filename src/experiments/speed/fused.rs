@@ -1,0 +1,110 @@
+//! The composed training step against the fused one (`doma bench --fused`): the same
+//! fits, one trainer per step kind, their steps timed in turn.
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::{FitStep, median, synthetic_config};
+use crate::Result;
+use crate::backend::BackendKind;
+use crate::data::synthetic::{Motion, benchmark_sequence};
+use crate::jacobian::JacobianKind;
+use crate::train::{FitConfig, Recipe, StepKind};
+
+/// One fit's step, composed and fused.
+#[derive(Clone, Debug, Serialize)]
+pub struct FusedRow {
+    /// `protocol Affinity-H`, `protocol L1` or `fast Affinity-H`.
+    pub step: String,
+    /// Training points per step.
+    pub points: usize,
+    /// `L_H` samples per step (0 without `L_H`).
+    pub samples: usize,
+    /// The composed step's median, ms.
+    pub composed_ms: f64,
+    /// The fused step's median, ms.
+    pub fused_ms: f64,
+    /// The median over steps of composed / fused, each pair timed back to back.
+    pub speedup: f64,
+}
+
+/// The three steps (the synthetic protocol's Affinity-H and L1 steps, and `--recipe
+/// fast`'s Affinity-H step) on `backend`, each composed and fused in turn: `warmup`
+/// untimed pairs, then `steps` timed.
+pub fn fused_rows(backend: BackendKind, warmup: usize, steps: usize) -> Result<Vec<FusedRow>> {
+    let device = backend.device()?;
+    let seq = benchmark_sequence(Motion::Rotation, 0)?;
+    let n = seq.train.points();
+    let cases = [
+        (
+            "protocol Affinity-H",
+            synthetic_config(JacobianKind::Analytic, true),
+        ),
+        (
+            "protocol L1",
+            synthetic_config(JacobianKind::Analytic, false),
+        ),
+        (
+            "fast Affinity-H",
+            Recipe::Fast.apply(synthetic_config(JacobianKind::Analytic, true)),
+        ),
+    ];
+    let mut rows = Vec::new();
+    for (name, config) in cases {
+        let kinds = [StepKind::Composed, StepKind::Fused];
+        let mut trainers = kinds
+            .iter()
+            .map(|&k| FitStep::new(&config.clone().with_step(Some(k)), &seq.train, &device))
+            .collect::<Result<Vec<_>>>()?;
+        let mut times = [Vec::new(), Vec::new()];
+        for i in 0..warmup + steps.max(1) {
+            for (trainer, times) in trainers.iter_mut().zip(&mut times) {
+                let start = Instant::now();
+                trainer.run()?;
+                if i >= warmup {
+                    times.push(start.elapsed().as_secs_f64() * 1e3);
+                }
+            }
+        }
+        let ratios = times[0].iter().zip(&times[1]).map(|(c, f)| c / f).collect();
+        rows.push(FusedRow {
+            step: name.into(),
+            points: config.points_per_step.map_or(n, |k| k.min(n)),
+            samples: samples(&config, n),
+            composed_ms: median(times[0].clone()),
+            fused_ms: median(times[1].clone()),
+            speedup: median(ratios),
+        });
+    }
+    Ok(rows)
+}
+
+/// `L_H`'s samples per step of `config` on `n` training points.
+fn samples(config: &FitConfig, n: usize) -> usize {
+    if config.loss.smoothness_weight > 0.0 {
+        config
+            .smoothness_sampling
+            .max_points
+            .map_or(n, |m| m.min(n))
+    } else {
+        0
+    }
+}
+
+/// The rows as a fixed-width table.
+pub fn fused_table(rows: &[FusedRow]) -> String {
+    let mut s = format!(
+        "{:<20} {:>6} {:>7} {:>12} {:>9} {:>9}\n",
+        "step", "points", "samples", "composed ms", "fused ms", "speed-up"
+    );
+    s += &"-".repeat(68);
+    s += "\n";
+    for r in rows {
+        s += &format!(
+            "{:<20} {:>6} {:>7} {:>12.3} {:>9.3} {:>8.2}×\n",
+            r.step, r.points, r.samples, r.composed_ms, r.fused_ms, r.speedup
+        );
+    }
+    s
+}
