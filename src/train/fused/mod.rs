@@ -37,7 +37,7 @@ use super::config::FitConfig;
 use crate::field::Variant;
 use crate::jacobian::JacobianKind;
 use crate::jacobian::analytic::OpSpec;
-use crate::jacobian::analytic::cpu::{Net, Real};
+use crate::jacobian::analytic::cpu::{Net, Real, serial};
 use crate::loss::{DataPenalty, SmoothnessNorm};
 use crate::siren::Siren;
 use crate::{DomaError, Result};
@@ -279,8 +279,20 @@ impl<E: Float> FusedStep<E> {
     pub fn gradients(&self, batch: &StepBatch<'_, E>) -> (StepLosses, Option<Vec<E>>) {
         // The two network calls are independent until their gradients are summed: each
         // runs on its own thread, so that the second thread has work for the whole step
-        // instead of being woken for each parallel region.
-        let (rows, samples) = rayon::join(|| self.rows_term(batch), || self.samples_term(batch));
+        // instead of being woken for each parallel region. When their sizes are close
+        // (the fast recipe's 256 rows and 64 samples: 256 stacked rows each), each runs
+        // whole on its thread; otherwise the smaller one's thread helps the larger.
+        let rows = (batch.x0.len() / 3) * if self.rows_dual(batch) { 4 } else { 1 };
+        let samples = if self.loss.smoothness_weight > 0.0 {
+            batch.samples.map_or(0, |s| 4 * (s.len() / 3))
+        } else {
+            0
+        };
+        let balanced = rows.min(samples) > 0 && rows.max(samples) <= 2 * rows.min(samples);
+        let (rows, samples) = rayon::join(
+            || serial_if(balanced, || self.rows_term(batch)),
+            || serial_if(balanced, || self.samples_term(batch)),
+        );
         let mut losses = StepLosses {
             data: 0.0,
             total: 0.0,
@@ -311,7 +323,7 @@ impl<E: Float> FusedStep<E> {
             return None;
         }
         let o = self.variant.outputs();
-        let h_on_rows = self.loss.smoothness_weight > 0.0 && batch.samples.is_none();
+        let h_on_rows = self.rows_dual(batch);
         let net_spec = self.spec(h_on_rows);
         let net = Net::new(&self.params, &net_spec);
         let input = with_time(batch.x0, batch.time);
@@ -329,6 +341,11 @@ impl<E: Float> FusedStep<E> {
         let mut g = vec![E::zero(); self.params.len()];
         net.backward(&acts, &input, &g_out, false, &mut g);
         Some((data, total, g))
+    }
+
+    /// Whether the training rows carry tangents (`L_H` on them, without samples).
+    fn rows_dual(&self, batch: &StepBatch<'_, E>) -> bool {
+        self.loss.smoothness_weight > 0.0 && batch.samples.is_none()
     }
 
     /// `w_H · L_H` on the step's own samples, and its gradient. `None` without them.
@@ -409,6 +426,11 @@ impl ModuleMapper for Writer<'_> {
             }
         })
     }
+}
+
+/// `f`, inside [`serial`] when `whole`.
+fn serial_if<R>(whole: bool, f: impl FnOnce() -> R) -> R {
+    if whole { serial(f) } else { f() }
 }
 
 /// `[x, y, z, t]` rows from `[x, y, z]` rows.

@@ -18,6 +18,26 @@ const PARALLEL_GEMM: usize = 1 << 21;
 /// the partial products summed (0.07 ms). Used from this inner length on.
 const SPLIT_K_FROM: usize = 512;
 
+thread_local! {
+    /// Whether this thread runs the op's GEMMs and row passes without splitting them.
+    static SERIAL: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs `f` with every GEMM and row pass it calls on this thread alone: for work that is
+/// already split across the threads (the fused training step runs its two network calls
+/// side by side), where splitting each GEMM again only adds scheduling.
+pub(crate) fn serial<R>(f: impl FnOnce() -> R) -> R {
+    let before = SERIAL.with(|s| s.replace(true));
+    let out = f();
+    SERIAL.with(|s| s.set(before));
+    out
+}
+
+/// Whether this thread is inside [`serial`].
+pub(crate) fn is_serial() -> bool {
+    SERIAL.with(|s| s.get())
+}
+
 /// A row-major matrix, or a transposed view of one, as the GEMM reads it.
 #[derive(Clone, Copy)]
 pub(crate) struct Mat<'a, E> {
@@ -71,6 +91,9 @@ pub(crate) fn gemm<E: Real>(dst: &mut [E], a: Mat<E>, b: Mat<E>, accumulate: boo
             dst[..m * n].fill(E::zero());
         }
         return;
+    }
+    if is_serial() {
+        return serial_or_rayon_gemm(dst, a, b, accumulate, gemm::Parallelism::None);
     }
     let work = m.saturating_mul(n).saturating_mul(k);
     let threads = rayon::current_num_threads();

@@ -337,6 +337,33 @@ mod tests {
         }
     }
 
+    /// Inside `serial` the op runs on the calling thread without splitting its GEMMs: the
+    /// same outputs and gradients as the parallel op, up to the order of the split-K sums.
+    #[test]
+    fn the_serial_op_agrees_with_the_parallel_one() {
+        let (n, shapes) = (700, [[4, 32], [32, 32], [32, 12]]);
+        let flat: Vec<f32> = noise(shapes.iter().map(|[i, o]| i * o + o).sum(), 7)
+            .iter()
+            .map(|&v| 0.1 * v as f32)
+            .collect();
+        let net = Net::new(&flat, &spec(&shapes, 30.0, true));
+        let x: Vec<f32> = noise(n * 4, 8).iter().map(|&v| v as f32).collect();
+        let g: Vec<f32> = noise(4 * n * 12, 9).iter().map(|&v| v as f32).collect();
+        let run = || {
+            let (out, acts) = net.forward(&x);
+            let mut g_params = vec![0.0f32; flat.len()];
+            net.backward(&acts, &x, &g, false, &mut g_params);
+            (out, g_params)
+        };
+        let (out, grad) = run();
+        let (out_s, grad_s) = super::super::gemm::serial(run);
+        assert_eq!(out, out_s, "the forward does not split its sums");
+        let scale = grad.iter().fold(0f32, |m, v| m.max(v.abs()));
+        for (a, b) in grad.iter().zip(&grad_s) {
+            assert!((a - b).abs() <= 1e-5 * scale, "{a} vs {b}");
+        }
+    }
+
     #[test]
     fn no_points_give_empty_outputs_and_zero_gradients() {
         let shapes = [[4, 8], [8, 8], [8, 3]];

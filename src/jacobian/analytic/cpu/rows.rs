@@ -11,6 +11,7 @@
 
 use rayon::prelude::*;
 
+use super::gemm::is_serial;
 use super::real::Real;
 
 /// Rows per parallel task: large enough that splitting costs nothing measurable.
@@ -167,7 +168,9 @@ fn block_chunks<E: Send>(
             items[c].push(part);
         }
     }
-    items.into_par_iter().enumerate()
+    // Inside `serial`, one task: no split, so the chunks run on the calling thread.
+    let min_len = if is_serial() { usize::MAX } else { 1 };
+    items.into_par_iter().enumerate().with_min_len(min_len)
 }
 
 /// The sine activation of one layer: `S = [sin z; ω cos z ⊙ Z_k]` with `z = ω(Z_0 + b)`
