@@ -295,35 +295,20 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
     /// its samples, as `step_loss` would draw them), and uploads them in one transfer each,
     /// so that no step moves data to the device.
     fn prepare_iteration(&mut self, order: &[usize], rng: &mut ChaCha8Rng) {
+        let draws = self.draw_iteration(order, rng);
         if self.host.is_some() {
-            return self.prepare_host(order, rng);
+            // The fused step reads them on the host.
+            self.host = Some(draws);
+            return;
         }
         self.rows.clear();
         if let Some(s) = self.samples.as_mut() {
             s.clear();
         }
-        let subset = self.rows.subset();
-        if (self.samples.is_none() && subset.is_none()) || order.is_empty() {
-            return;
-        }
-        let (mut points, mut rows, mut spans, mut per_step) =
-            (Vec::new(), Vec::new(), Vec::new(), 0);
-        for &k in order {
-            if let Some(take) = subset {
-                let start = rows.len();
-                rows.extend(self.rows.draw(&self.data, k, take, rng));
-                spans.push((start, rows.len() - start));
-            }
-            if let Some(s) = &self.samples {
-                let (p, n) = s.draw(rng);
-                points.extend(p);
-                per_step = n;
-            }
-        }
-        if let Some(s) = self.samples.as_mut() {
+        if let (Some(s), Some((points, per_step))) = (self.samples.as_mut(), draws.samples) {
             s.prepare(points, order.len(), per_step);
         }
-        if subset.is_some() {
+        if let Some((rows, spans)) = draws.rows {
             self.rows.prepare(rows, spans);
         }
     }

@@ -101,24 +101,45 @@ fn flat_grad(field: &DomaField, grads: &burn::tensor::Gradients) -> Vec<f32> {
     out
 }
 
-const CASES: [(DataPenalty, f64, SmoothnessNorm, bool, usize); 4] = [
-    (DataPenalty::L1, 0.0, SmoothnessNorm::Squared, false, 0),
-    (DataPenalty::L1, 0.05, SmoothnessNorm::Squared, false, 16),
-    (
-        DataPenalty::Huber { delta: 0.05 },
-        0.05,
-        SmoothnessNorm::Charbonnier,
-        true,
-        0,
-    ),
-    (
-        DataPenalty::Charbonnier { epsilon: 0.02 },
-        0.05,
-        SmoothnessNorm::Charbonnier,
-        true,
-        16,
-    ),
-];
+/// The loss terms of each case, with whether the rows carry weights and how many `L_H`
+/// samples the batch has (0: `L_H`, when on, on the training rows).
+fn cases() -> [(StepLoss, bool, usize); 4] {
+    let loss = |penalty, smoothness_weight, smoothness_norm| StepLoss {
+        penalty,
+        smoothness_weight,
+        smoothness_norm,
+    };
+    [
+        (
+            loss(DataPenalty::L1, 0.0, SmoothnessNorm::Squared),
+            false,
+            0,
+        ),
+        (
+            loss(DataPenalty::L1, 0.05, SmoothnessNorm::Squared),
+            false,
+            16,
+        ),
+        (
+            loss(
+                DataPenalty::Huber { delta: 0.05 },
+                0.05,
+                SmoothnessNorm::Charbonnier,
+            ),
+            true,
+            0,
+        ),
+        (
+            loss(
+                DataPenalty::Charbonnier { epsilon: 0.02 },
+                0.05,
+                SmoothnessNorm::Charbonnier,
+            ),
+            true,
+            16,
+        ),
+    ]
+}
 
 /// 100 steps of every variant and every case: each step from the same weights and the
 /// same draws, the fused step's losses, gradient and updated parameters equal Burn's
@@ -130,12 +151,7 @@ fn every_variant_steps_as_burns_autodiff_step_for_100_steps() {
     let ad = Device::flex().autodiff();
     let lr = 1e-3;
     for variant in Variant::ALL {
-        for (case, &(penalty, w_h, norm, weighted, p)) in CASES.iter().enumerate() {
-            let loss = StepLoss {
-                penalty,
-                smoothness_weight: w_h,
-                smoothness_norm: norm,
-            };
+        for (case, &(loss, weighted, p)) in cases().iter().enumerate() {
             let mut burn_field = field(variant, &ad);
             let adam = adam_settings(&default_adam()).unwrap();
             let mut fused =
@@ -190,12 +206,7 @@ fn every_variant_steps_as_burns_autodiff_step_for_100_steps() {
 fn the_gradient_matches_finite_differences_in_f64() {
     let ad = Device::flex().autodiff();
     for variant in Variant::ALL {
-        for (case, &(penalty, w_h, norm, weighted, p)) in CASES.iter().enumerate() {
-            let loss = StepLoss {
-                penalty,
-                smoothness_weight: w_h,
-                smoothness_norm: norm,
-            };
+        for (case, &(loss, weighted, p)) in cases().iter().enumerate() {
             let burn_field = field(variant, &ad);
             let adam = adam_settings(&default_adam()).unwrap();
             let mut fused =

@@ -15,8 +15,8 @@ type Spans = Vec<(usize, usize)>;
 /// `L_H` samples (when `L_H` has its own), and the next step's index.
 #[derive(Debug, Default)]
 pub(super) struct HostDraws {
-    rows: Option<(Vec<i64>, Spans)>,
-    samples: Option<(Vec<f32>, usize)>,
+    pub(super) rows: Option<(Vec<i64>, Spans)>,
+    pub(super) samples: Option<(Vec<f32>, usize)>,
     next: usize,
 }
 
@@ -31,29 +31,32 @@ impl TrajectoryObjective<'_> {
         None
     }
 
-    /// [`super::Objective::prepare_iteration`] for host batches: the same draws, kept.
-    pub(super) fn prepare_host(&mut self, order: &[usize], rng: &mut ChaCha8Rng) {
+    /// One iteration's draws for the steps of `order`, in step order: each step's rows,
+    /// then its samples, as the steps would draw them one by one. Nothing is drawn when
+    /// the steps draw nothing (all rows, no `L_H` samples).
+    pub(super) fn draw_iteration(&self, order: &[usize], rng: &mut ChaCha8Rng) -> HostDraws {
         let subset = self.rows.subset();
         let mut draws = HostDraws::default();
-        if (self.samples.is_some() || subset.is_some()) && !order.is_empty() {
-            let (mut rows, mut spans, mut points, mut per_step) =
-                (Vec::new(), Vec::new(), Vec::new(), 0);
-            for &k in order {
-                if let Some(take) = subset {
-                    let start = rows.len();
-                    rows.extend(self.rows.draw(&self.data, k, take, rng));
-                    spans.push((start, rows.len() - start));
-                }
-                if let Some(s) = &self.samples {
-                    let (p, n) = s.draw(rng);
-                    points.extend(p);
-                    per_step = n;
-                }
-            }
-            draws.rows = subset.map(|_| (rows, spans));
-            draws.samples = self.samples.as_ref().map(|_| (points, per_step));
+        if (self.samples.is_none() && subset.is_none()) || order.is_empty() {
+            return draws;
         }
-        self.host = Some(draws);
+        let (mut rows, mut spans, mut points, mut per_step) =
+            (Vec::new(), Vec::new(), Vec::new(), 0);
+        for &k in order {
+            if let Some(take) = subset {
+                let start = rows.len();
+                rows.extend(self.rows.draw(&self.data, k, take, rng));
+                spans.push((start, rows.len() - start));
+            }
+            if let Some(s) = &self.samples {
+                let (p, n) = s.draw(rng);
+                points.extend(p);
+                per_step = n;
+            }
+        }
+        draws.rows = subset.map(|_| (rows, spans));
+        draws.samples = self.samples.as_ref().map(|_| (points, per_step));
+        draws
     }
 
     /// The fused step's inputs on frame `k`: its rows (prepared, or drawn now), their
