@@ -562,9 +562,9 @@ def fit(
             rate falling to 0 (those tracks are then not fitted).
         backend: one of ``BACKENDS`` (default ``flex``).
         jacobian: ``analytic`` (fused, hand-derived; default) or ``autodiff``.
-        step: ``"composed"`` (Burn's operations; default), ``"fused"`` (the whole
-            training step as one CPU operation; refused where it does not apply) or
-            ``"auto"`` (fused where it applies; what ``recipe="fast"`` sets).
+        step: ``"auto"`` (default: the whole training step as one CPU operation where
+            it applies, Burn's operations elsewhere), ``"fused"`` (refused where it does
+            not apply) or ``"composed"`` (Burn's operations).
         seed: seed of the weights, the split and the frame order (default 0).
         test_fraction: the fraction of tracks held out of the fit for the report
             (default 0: every track is fitted; the paper's Tab. 1 holds out 0.75).

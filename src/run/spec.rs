@@ -94,9 +94,9 @@ pub struct RunSpec {
     #[arg(long, help_heading = "Model")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub jacobian: Option<JacobianKind>,
-    /// How each training step is computed: `composed` (Burn's operations; the default),
-    /// `fused` (the whole step as one CPU op; refused where it does not apply) or `auto`
-    /// (fused where it applies; what `--recipe fast` sets).
+    /// How each training step is computed: `auto` (the default: the whole step as one CPU
+    /// op where it applies, Burn's operations elsewhere), `fused` (refused where it does
+    /// not apply) or `composed` (Burn's operations around the Jacobian method).
     #[arg(long, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub step: Option<crate::train::StepKind>,

@@ -167,6 +167,9 @@ impl RunSpec {
         if let Some(p) = self.robust {
             fit.loss.data_penalty = (p != DataPenalty::L1).then_some(p);
         }
+        // A user's fit takes the fused step where it applies (the experiments keep the
+        // paper's composed step unless asked).
+        fit.step = fit.step.or(Some(crate::train::StepKind::Auto));
         Ok(fit)
     }
 
