@@ -5,10 +5,9 @@
 //! et al. 2018). Each returns a copy of the positions (or values at given entries) with
 //! the gaps filled from the observed entries alone.
 
+use super::eigen::{column_gram, symmetric_eigen_householder};
 use super::fillers::Marked;
-use super::linalg::{
-    column_gram, natural_second_derivatives, spline_at, symmetric_eigen_householder,
-};
+use super::linalg::{natural_second_derivatives, spline_at};
 use super::spans::gaps;
 
 impl Marked<'_> {

@@ -25,8 +25,8 @@
 // Index loops over small matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
+use super::eigen::{Components, principal_components};
 use super::fillers::Marked;
-use super::linalg::{Components, principal_components};
 
 /// `σ` of the distance weights, in millimetres (the MATLAB's `WeightScale`).
 pub const GLOERSEN_WEIGHT_SCALE_MM: f64 = 200.0;

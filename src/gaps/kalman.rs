@@ -12,8 +12,8 @@
 // Index loops over small matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
+use super::eigen::principal_components;
 use super::fillers::Marked;
-use super::linalg::principal_components;
 
 /// The share of the singular values' sum that the components leave out (pyCGM2's `tol`).
 pub const KALMAN_TOLERANCE: f64 = 1e-2;

@@ -39,7 +39,8 @@
 //! | `field_fill.rs` | [`FieldPrediction`], the lenders ([`Lending`]), the residual carry |
 //! | `blend.rs` | [`blend::Weights`] (one per filler), learning and applying a blend |
 //! | `spans.rs` | gaps and their classes and lengths, hidden and validation spans |
-//! | `linalg.rs` | the small solvers: the spline's system, eigenproblems (Jacobi, Householder + QL), principal components, simplex least squares |
+//! | `linalg.rs` | the small solvers: the spline's system, simplex least squares |
+//! | `eigen.rs` | eigenproblems (Jacobi, Householder + QL) and principal components |
 //!
 //! Adding a filler: a variant of [`Filler`], its name and label, its arm in
 //! [`Filler::fill_at`] (its function in a file of its own or in `classic.rs`), and tests.
@@ -49,6 +50,7 @@
 pub mod blend;
 pub mod classic;
 pub mod donors;
+pub mod eigen;
 pub mod field_fill;
 pub mod fillers;
 pub mod gloersen;

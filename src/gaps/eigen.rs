@@ -1,0 +1,420 @@
+//! The symmetric eigenproblem (Jacobi rotations; Householder and QL) and the principal
+//! components of a PCA, for the low-rank fill, the Kalman smoother and Gløersen's fill.
+//! Plain `f64` arithmetic on slices, no tensors.
+
+// Index loops over small matrices read as the algebra they implement.
+#![allow(clippy::needless_range_loop)]
+
+use std::ops::Range;
+
+/// `Xᵀ X` (`[d, d]`, row-major) of the rows of `x` (each `d` long), summed row by row so
+/// that a matrix far larger than a cache is read in order; each entry sums over the rows
+/// in their order.
+pub fn column_gram<'a>(rows: impl IntoIterator<Item = &'a [f64]>, d: usize) -> Vec<f64> {
+    let mut g = vec![0f64; d * d];
+    for row in rows {
+        for a in 0..d {
+            let ra = row[a];
+            for (entry, &rb) in g[a * d + a..(a + 1) * d].iter_mut().zip(&row[a..]) {
+                *entry += ra * rb;
+            }
+        }
+    }
+    for a in 0..d {
+        for b in 0..a {
+            g[a * d + b] = g[b * d + a];
+        }
+    }
+    g
+}
+
+/// The eigenvalues and eigenvectors (columns of the returned `[n, n]`) of the symmetric
+/// `a` (`[n, n]`, row-major), by cyclic Jacobi rotations, until the off-diagonal squares
+/// sum to at most 10⁻²⁴ of all squares.
+pub fn symmetric_eigen(a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>) {
+    symmetric_eigen_to(a, n, 1e-24)
+}
+
+/// [`symmetric_eigen`] until the off-diagonal squares sum to at most `tolerance` of all
+/// squares (at most 60 sweeps): a small eigenvalue's vector is only as accurate as the
+/// off-diagonal left, relative to the gap to its neighbours.
+pub fn symmetric_eigen_to(mut a: Vec<f64>, n: usize, tolerance: f64) -> (Vec<f64>, Vec<f64>) {
+    let mut v = vec![0f64; n * n];
+    for i in 0..n {
+        v[i * n + i] = 1.0;
+    }
+    let scale: f64 = a.iter().map(|x| x * x).sum::<f64>().max(1e-300);
+    for _sweep in 0..60 {
+        let off: f64 = (0..n)
+            .flat_map(|p| (0..n).filter(move |&q| q != p).map(move |q| (p, q)))
+            .map(|(p, q)| a[p * n + q] * a[p * n + q])
+            .sum();
+        if off <= tolerance * scale {
+            break;
+        }
+        for p in 0..n {
+            for q in p + 1..n {
+                let apq = a[p * n + q];
+                if apq.abs() <= 1e-300 {
+                    continue;
+                }
+                let theta = (a[q * n + q] - a[p * n + p]) / (2.0 * apq);
+                let tan = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let tan = if theta == 0.0 { 1.0 } else { tan };
+                let cos = 1.0 / (tan * tan + 1.0).sqrt();
+                let sin = tan * cos;
+                for k in 0..n {
+                    let (akp, akq) = (a[k * n + p], a[k * n + q]);
+                    a[k * n + p] = cos * akp - sin * akq;
+                    a[k * n + q] = sin * akp + cos * akq;
+                }
+                for k in 0..n {
+                    let (apk, aqk) = (a[p * n + k], a[q * n + k]);
+                    a[p * n + k] = cos * apk - sin * aqk;
+                    a[q * n + k] = sin * apk + cos * aqk;
+                }
+                for k in 0..n {
+                    let (vkp, vkq) = (v[k * n + p], v[k * n + q]);
+                    v[k * n + p] = cos * vkp - sin * vkq;
+                    v[k * n + q] = sin * vkp + cos * vkq;
+                }
+            }
+        }
+    }
+    ((0..n).map(|i| a[i * n + i]).collect(), v)
+}
+
+/// The eigenvalues and eigenvectors (columns of the returned `[n, n]`) of the symmetric
+/// `a` (`[n, n]`, row-major), by Householder reduction to tridiagonal form and the
+/// implicit QL iteration (EISPACK's `tred2` and `tql2`): about `10 n³` operations where
+/// cyclic Jacobi rotations take `6 n³` per sweep, for the many eigenproblems of
+/// Gløersen's fill (two per gapped marker).
+pub fn symmetric_eigen_householder(a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>) {
+    if n == 0 {
+        return (Vec::new(), Vec::new());
+    }
+    let mut v = a;
+    let at = |i: usize, j: usize| i * n + j;
+    let mut d = vec![0f64; n];
+    let mut e = vec![0f64; n];
+    // Householder reduction to tridiagonal form.
+    for j in 0..n {
+        d[j] = v[at(n - 1, j)];
+    }
+    for i in (1..n).rev() {
+        let scale: f64 = d[..i].iter().map(|x| x.abs()).sum();
+        let mut h = 0f64;
+        if scale == 0.0 {
+            e[i] = d[i - 1];
+            for j in 0..i {
+                d[j] = v[at(i - 1, j)];
+                v[at(i, j)] = 0.0;
+                v[at(j, i)] = 0.0;
+            }
+        } else {
+            for k in 0..i {
+                d[k] /= scale;
+                h += d[k] * d[k];
+            }
+            let f = d[i - 1];
+            let g = if f > 0.0 { -h.sqrt() } else { h.sqrt() };
+            e[i] = scale * g;
+            h -= f * g;
+            d[i - 1] = f - g;
+            e[..i].fill(0.0);
+            for j in 0..i {
+                let f = d[j];
+                v[at(j, i)] = f;
+                let mut g = e[j] + v[at(j, j)] * f;
+                for k in j + 1..i {
+                    g += v[at(k, j)] * d[k];
+                    e[k] += v[at(k, j)] * f;
+                }
+                e[j] = g;
+            }
+            let mut f = 0f64;
+            for j in 0..i {
+                e[j] /= h;
+                f += e[j] * d[j];
+            }
+            let hh = f / (h + h);
+            for j in 0..i {
+                e[j] -= hh * d[j];
+            }
+            for j in 0..i {
+                let (f, g) = (d[j], e[j]);
+                for k in j..i {
+                    v[at(k, j)] -= f * e[k] + g * d[k];
+                }
+                d[j] = v[at(i - 1, j)];
+                v[at(i, j)] = 0.0;
+            }
+        }
+        d[i] = h;
+    }
+    // Accumulate the transformations.
+    for i in 0..n - 1 {
+        v[at(n - 1, i)] = v[at(i, i)];
+        v[at(i, i)] = 1.0;
+        let h = d[i + 1];
+        if h != 0.0 {
+            for k in 0..=i {
+                d[k] = v[at(k, i + 1)] / h;
+            }
+            for j in 0..=i {
+                let g: f64 = (0..=i).map(|k| v[at(k, i + 1)] * v[at(k, j)]).sum();
+                for k in 0..=i {
+                    v[at(k, j)] -= g * d[k];
+                }
+            }
+        }
+        for k in 0..=i {
+            v[at(k, i + 1)] = 0.0;
+        }
+    }
+    for j in 0..n {
+        d[j] = v[at(n - 1, j)];
+        v[at(n - 1, j)] = 0.0;
+    }
+    v[at(n - 1, n - 1)] = 1.0;
+    e[0] = 0.0;
+    // Implicit QL on the tridiagonal (d, e).
+    for i in 1..n {
+        e[i - 1] = e[i];
+    }
+    e[n - 1] = 0.0;
+    let (mut f, mut tst1) = (0f64, 0f64);
+    let eps = f64::EPSILON;
+    for l in 0..n {
+        tst1 = tst1.max(d[l].abs() + e[l].abs());
+        let mut m = l;
+        while m < n - 1 && e[m].abs() > eps * tst1 {
+            m += 1;
+        }
+        if m > l {
+            for _iteration in 0..60 {
+                let g = d[l];
+                let p = (d[l + 1] - g) / (2.0 * e[l]);
+                let r = if p < 0.0 { -p.hypot(1.0) } else { p.hypot(1.0) };
+                d[l] = e[l] / (p + r);
+                d[l + 1] = e[l] * (p + r);
+                let dl1 = d[l + 1];
+                let h = g - d[l];
+                for x in &mut d[l + 2..n] {
+                    *x -= h;
+                }
+                f += h;
+                let mut p = d[m];
+                let (mut c, mut c2, mut c3) = (1f64, 1f64, 1f64);
+                let el1 = e[l + 1];
+                let (mut s, mut s2) = (0f64, 0f64);
+                for i in (l..m).rev() {
+                    c3 = c2;
+                    c2 = c;
+                    s2 = s;
+                    let g = c * e[i];
+                    let h = c * p;
+                    let r = p.hypot(e[i]);
+                    e[i + 1] = s * r;
+                    s = e[i] / r;
+                    c = p / r;
+                    p = c * d[i] - s * g;
+                    d[i + 1] = h + s * (c * g + s * d[i]);
+                    for k in 0..n {
+                        let h = v[at(k, i + 1)];
+                        v[at(k, i + 1)] = s * v[at(k, i)] + c * h;
+                        v[at(k, i)] = c * v[at(k, i)] - s * h;
+                    }
+                }
+                p = -s * s2 * c3 * el1 * e[l] / dl1;
+                e[l] = s * p;
+                d[l] = c * p;
+                if e[l].abs() <= eps * tst1 {
+                    break;
+                }
+            }
+        }
+        d[l] += f;
+        e[l] = 0.0;
+    }
+    (d, v)
+}
+
+/// A principal component analysis: the singular values of a matrix, largest first, and
+/// their right singular vectors.
+pub struct Components {
+    /// The singular values, largest first.
+    pub singular: Vec<f64>,
+    /// `vectors[j][c]`: component `j`'s loading on column `c`.
+    pub vectors: Vec<Vec<f64>>,
+}
+
+/// The components of `x` (`rows × cols`, row-major, `rows ≥ 2`) with the columns `zeroed`
+/// set to 0, as the SVD of `X / √(rows − 1)` (numpy's and MATLAB's economy SVD):
+/// `min(rows, cols)` of them. From
+/// the eigenvectors of `Xᵀ X`, or, for fewer rows than columns (a short clip of many
+/// markers), of the smaller `X Xᵀ`, each `u` giving the vector `Xᵀ u / ‖Xᵀ u‖`.
+pub fn principal_components(
+    x: &[f64],
+    rows: usize,
+    cols: usize,
+    zeroed: Option<Range<usize>>,
+) -> Components {
+    let zeroed = zeroed.unwrap_or(0..0);
+    let scale = (rows - 1) as f64;
+    let (n, values, vectors) = if rows >= cols {
+        let mut gram = column_gram(x.chunks(cols), cols);
+        for c in zeroed.clone() {
+            for o in 0..cols {
+                gram[c * cols + o] = 0.0;
+                gram[o * cols + c] = 0.0;
+            }
+        }
+        let (values, vectors) = symmetric_eigen_householder(gram, cols);
+        (cols, values, vectors)
+    } else {
+        let kept = |c: &usize| !zeroed.contains(c);
+        let mut gram = vec![0f64; rows * rows];
+        for a in 0..rows {
+            for b in 0..=a {
+                let (ra, rb) = (&x[a * cols..(a + 1) * cols], &x[b * cols..(b + 1) * cols]);
+                let dot: f64 = (0..cols).filter(kept).map(|c| ra[c] * rb[c]).sum();
+                gram[a * rows + b] = dot;
+                gram[b * rows + a] = dot;
+            }
+        }
+        let (values, u) = symmetric_eigen_householder(gram, rows);
+        // Column o of the result: Xᵀ u_o, normalised (0 for a null direction).
+        let mut vectors = vec![0f64; cols * rows];
+        for o in 0..rows {
+            let v: Vec<f64> = (0..cols)
+                .map(|c| match kept(&c) {
+                    true => (0..rows).map(|r| x[r * cols + c] * u[r * rows + o]).sum(),
+                    false => 0.0,
+                })
+                .collect();
+            let norm = v.iter().map(|a| a * a).sum::<f64>().sqrt();
+            if norm > 0.0 {
+                for c in 0..cols {
+                    vectors[c * rows + o] = v[c] / norm;
+                }
+            }
+        }
+        (rows, values, vectors)
+    };
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
+    order.truncate(rows.min(cols));
+    Components {
+        singular: order
+            .iter()
+            .map(|&o| (values[o].max(0.0) / scale).sqrt())
+            .collect(),
+        vectors: order
+            .iter()
+            .map(|&o| (0..cols).map(|c| vectors[c * n + o]).collect())
+            .collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Fewer rows than columns: the components from `X Xᵀ` are those from `Xᵀ X`, up to
+    /// sign, with and without zeroed columns.
+    #[test]
+    fn components_of_a_wide_matrix_are_those_of_its_column_gram() {
+        let (rows, cols) = (4, 9);
+        let x: Vec<f64> = (0..rows * cols)
+            .map(|v| ((v * 7919) % 101) as f64 / 50.0 - 1.0)
+            .collect();
+        for zeroed in [None, Some(3..6)] {
+            let wide = principal_components(&x, rows, cols, zeroed.clone());
+            // The same matrix padded with zero rows to be tall has the same components.
+            let mut tall = x.clone();
+            tall.resize(cols * cols, 0.0);
+            let reference = principal_components(&tall, cols, cols, zeroed.clone());
+            let rescale = ((cols - 1) as f64 / (rows - 1) as f64).sqrt();
+            assert_eq!(wide.singular.len(), rows);
+            for o in 0..rows {
+                let (a, b) = (wide.singular[o], reference.singular[o] * rescale);
+                assert!((a - b).abs() < 1e-12 * b.max(1.0), "{o}: {a} {b}");
+                if b > 1e-9 {
+                    let dot: f64 = wide.vectors[o]
+                        .iter()
+                        .zip(&reference.vectors[o])
+                        .map(|(p, q)| p * q)
+                        .sum();
+                    assert!((dot.abs() - 1.0).abs() < 1e-9, "{o}: {dot}");
+                }
+            }
+        }
+    }
+
+    /// Householder and QL: `A v = λ v` with orthonormal vectors, and Jacobi's eigenvalues,
+    /// on matrices of sizes 1 to 40 (one of them rank-deficient, as a Gram matrix of few
+    /// rows is).
+    #[test]
+    fn householder_eigenpairs_satisfy_a_v_equals_lambda_v() {
+        for n in [1usize, 2, 3, 7, 40] {
+            let b: Vec<f64> = (0..n * n)
+                .map(|v| (((v * 7919 + 13) % 97) as f64) / 48.0 - 1.0)
+                .collect();
+            // A = Bᵀ B over the first min(n, 3) rows of B: rank ≤ 3.
+            let rows = n.min(3);
+            let mut a = vec![0f64; n * n];
+            for i in 0..n {
+                for j in 0..n {
+                    a[i * n + j] = (0..rows).map(|r| b[r * n + i] * b[r * n + j]).sum::<f64>()
+                        + if n < 7 {
+                            b[i.min(j) * n + i.max(j)]
+                        } else {
+                            0.0
+                        };
+                }
+            }
+            let (values, vectors) = symmetric_eigen_householder(a.clone(), n);
+            let scale = a.iter().map(|x| x.abs()).fold(1f64, f64::max);
+            for o in 0..n {
+                for i in 0..n {
+                    let av: f64 = (0..n).map(|j| a[i * n + j] * vectors[j * n + o]).sum();
+                    assert!(
+                        (av - values[o] * vectors[i * n + o]).abs() < 1e-12 * scale,
+                        "{n} {o}"
+                    );
+                }
+                for q in 0..n {
+                    let dot: f64 = (0..n)
+                        .map(|i| vectors[i * n + o] * vectors[i * n + q])
+                        .sum();
+                    let want = if o == q { 1.0 } else { 0.0 };
+                    assert!((dot - want).abs() < 1e-12, "{n} {o} {q}");
+                }
+            }
+            let mut ours = values.clone();
+            let mut theirs = symmetric_eigen(a, n).0;
+            ours.sort_by(f64::total_cmp);
+            theirs.sort_by(f64::total_cmp);
+            for (x, y) in ours.iter().zip(&theirs) {
+                assert!((x - y).abs() < 1e-12 * scale, "{n}: {ours:?} {theirs:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn jacobi_diagonalises_a_known_matrix() {
+        // [[2, 1], [1, 2]]: eigenvalues 1 and 3.
+        let (values, vectors) = symmetric_eigen(vec![2.0, 1.0, 1.0, 2.0], 2);
+        let mut sorted = values.clone();
+        sorted.sort_by(f64::total_cmp);
+        assert!((sorted[0] - 1.0).abs() < 1e-12 && (sorted[1] - 3.0).abs() < 1e-12);
+        // A v = λ v for each column.
+        for j in 0..2 {
+            let v = [vectors[j], vectors[2 + j]];
+            let av = [2.0 * v[0] + v[1], v[0] + 2.0 * v[1]];
+            assert!((av[0] - values[j] * v[0]).abs() < 1e-12);
+            assert!((av[1] - values[j] * v[1]).abs() < 1e-12);
+        }
+    }
+}
