@@ -1,11 +1,9 @@
 //! The composed training step against the fused one (`doma bench --fused`): the same
 //! fits, one trainer per step kind, their steps timed in turn.
 
-use std::time::Instant;
-
 use serde::Serialize;
 
-use super::{FitStep, median, synthetic_config};
+use super::{FitStep, median, steps_in_turn, synthetic_config};
 use crate::Result;
 use crate::backend::BackendKind;
 use crate::data::synthetic::{Motion, benchmark_sequence};
@@ -57,16 +55,7 @@ pub fn fused_rows(backend: BackendKind, warmup: usize, steps: usize) -> Result<V
             .iter()
             .map(|&k| FitStep::new(&config.clone().with_step(Some(k)), &seq.train, &device))
             .collect::<Result<Vec<_>>>()?;
-        let mut times = [Vec::new(), Vec::new()];
-        for i in 0..warmup + steps.max(1) {
-            for (trainer, times) in trainers.iter_mut().zip(&mut times) {
-                let start = Instant::now();
-                trainer.run()?;
-                if i >= warmup {
-                    times.push(start.elapsed().as_secs_f64() * 1e3);
-                }
-            }
-        }
+        let times = steps_in_turn(&mut trainers, warmup, steps)?;
         let ratios = times[0].iter().zip(&times[1]).map(|(c, f)| c / f).collect();
         rows.push(FusedRow {
             step: name.into(),

@@ -204,16 +204,7 @@ pub fn fit_step_rows(
         .smoothness_sampling
         .max_points
         .map_or(n, |m| m.min(n));
-    let mut times = vec![Vec::with_capacity(steps); methods.len()];
-    for k in 0..warmup + steps.max(1) {
-        for (step, times) in fit_steps.iter_mut().zip(&mut times) {
-            let start = Instant::now();
-            step.run()?;
-            if k >= warmup {
-                times.push(start.elapsed().as_secs_f64() * 1e3);
-            }
-        }
-    }
+    let times = steps_in_turn(&mut fit_steps, warmup, steps)?;
     let (kind, points, flops) = if smoothness {
         let flops = siren_flops(n, &widths()) + siren_flops(4 * h_points, &widths());
         (BenchKind::FitStep, h_points, flops)
@@ -246,6 +237,26 @@ pub fn fit_step_rows(
             }
         })
         .collect())
+}
+
+/// The steps of several trainers timed in turn (one step of each per round), `warmup`
+/// rounds untimed then `steps` timed: each trainer's step times in ms, in order.
+pub(crate) fn steps_in_turn(
+    trainers: &mut [FitStep<'_>],
+    warmup: usize,
+    steps: usize,
+) -> Result<Vec<Vec<f64>>> {
+    let mut times = vec![Vec::with_capacity(steps); trainers.len()];
+    for k in 0..warmup + steps.max(1) {
+        for (step, times) in trainers.iter_mut().zip(&mut times) {
+            let start = Instant::now();
+            step.run()?;
+            if k >= warmup {
+                times.push(start.elapsed().as_secs_f64() * 1e3);
+            }
+        }
+    }
+    Ok(times)
 }
 
 /// The median of `values` (the upper one of an even count).
