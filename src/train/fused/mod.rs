@@ -18,19 +18,22 @@
 //! | file | what it holds |
 //! |---|---|
 //! | `head.rs` | the four heads and their backward on rows |
+//! | `loss.rs` | the trajectory penalty and `L_H` on rows, with their gradients |
+//! | `params.rs` | the parameters read from and written back into Burn's module |
 //! | `adam.rs` | Adam's update as Burn computes it |
 //! | `tests.rs` | against Burn's autodiff step, and finite differences in f64 |
 
 mod adam;
 mod head;
+mod loss;
+mod params;
 #[cfg(test)]
 mod tests;
 
 pub use adam::{AdamSettings, AdamState};
 
-use burn::module::{Module, ModuleMapper, Param};
 use burn::optim::AdamConfig;
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
 use super::config::FitConfig;
@@ -41,6 +44,8 @@ use crate::jacobian::analytic::cpu::{Net, Real, serial};
 use crate::loss::{DataPenalty, SmoothnessNorm};
 use crate::siren::Siren;
 use crate::{DomaError, Result};
+use loss::{data_term, smoothness};
+use params::read_params;
 
 /// How a training step is computed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -198,8 +203,8 @@ pub struct StepLoss {
 #[derive(Clone, Debug)]
 pub struct FusedStep<E> {
     variant: Variant,
-    shapes: Vec<[usize; 2]>,
-    omega: f64,
+    /// The network's op without tangents, and with them.
+    specs: [OpSpec; 2],
     loss: StepLoss,
     /// `[W_0, b_0, …, W_o, b_o]`, the layout of the analytic op.
     params: Vec<E>,
@@ -215,13 +220,11 @@ impl<E: Float> FusedStep<E> {
         loss: StepLoss,
         adam: AdamSettings,
     ) -> Result<Self> {
-        let spec = OpSpec::of(siren, false);
         let params = read_params(siren)?;
         let len = params.len();
         Ok(FusedStep {
             variant,
-            shapes: spec.shapes,
-            omega: spec.omega,
+            specs: [OpSpec::of(siren, false), OpSpec::of(siren, true)],
             loss,
             params,
             adam: AdamState::new(adam, len),
@@ -264,12 +267,8 @@ impl<E: Float> FusedStep<E> {
         Ok(())
     }
 
-    fn spec(&self, dual: bool) -> OpSpec {
-        OpSpec {
-            shapes: self.shapes.clone(),
-            omega: self.omega,
-            dual,
-        }
+    fn spec(&self, dual: bool) -> &OpSpec {
+        &self.specs[usize::from(dual)]
     }
 
     /// The step's losses and the gradient of the total with respect to the flat
@@ -325,7 +324,7 @@ impl<E: Float> FusedStep<E> {
         let o = self.variant.outputs();
         let h_on_rows = self.rows_dual(batch);
         let net_spec = self.spec(h_on_rows);
-        let net = Net::new(&self.params, &net_spec);
+        let net = Net::new(&self.params, net_spec);
         let input = with_time(batch.x0, batch.time);
         let (out, acts) = net.forward(&input);
         let values = &out[..n * o];
@@ -355,7 +354,7 @@ impl<E: Float> FusedStep<E> {
             .filter(|s| self.loss.smoothness_weight > 0.0 && !s.is_empty())?;
         let (p, o) = (samples.len() / 3, self.variant.outputs());
         let net_spec = self.spec(true);
-        let net = Net::new(&self.params, &net_spec);
+        let net = Net::new(&self.params, net_spec);
         let input = with_time(samples, batch.time);
         let (out, acts) = net.forward(&input);
         let mut g_out = vec![E::zero(); out.len()];
@@ -375,59 +374,6 @@ impl<E: Float> FusedStep<E> {
     }
 }
 
-impl FusedStep<f32> {
-    /// Writes the flat parameters into `field`'s float parameters, in the order the
-    /// module visits them (the analytic op's layout), keeping their ids (which key a
-    /// checkpoint's Adam state) and their `require_grad`.
-    pub fn write_back<M: Module>(&self, field: M) -> M {
-        let mut writer = Writer {
-            flat: &self.params,
-            offset: 0,
-        };
-        let field = field.map(&mut writer);
-        debug_assert_eq!(writer.offset, self.params.len());
-        field
-    }
-}
-
-/// The SIREN's parameters in the analytic op's flat layout, read back from the device.
-fn read_params<E: Float>(siren: &Siren) -> Result<Vec<E>> {
-    let mut flat = Vec::with_capacity(OpSpec::of(siren, false).param_count());
-    for layer in siren.sine.iter().chain(std::iter::once(&siren.output)) {
-        let w = crate::readback::to_vec::<f64, 2, _>(layer.weight.val())?;
-        flat.extend(w.into_iter().map(E::from_f64));
-        if let Some(b) = &layer.bias {
-            let b = crate::readback::to_vec::<f64, 1, _>(b.val())?;
-            flat.extend(b.into_iter().map(E::from_f64));
-        }
-    }
-    Ok(flat)
-}
-
-/// Writes consecutive slices of a flat buffer into every float parameter it visits.
-struct Writer<'a> {
-    flat: &'a [f32],
-    offset: usize,
-}
-
-impl ModuleMapper for Writer<'_> {
-    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-        param.map(|tensor| {
-            let shape = tensor.shape();
-            let len = shape.num_elements();
-            let values = self.flat[self.offset..self.offset + len].to_vec();
-            self.offset += len;
-            let device = tensor.device();
-            let fresh = Tensor::<D>::from_data(TensorData::new(values, shape), &device);
-            if tensor.is_require_grad() {
-                fresh.require_grad()
-            } else {
-                fresh
-            }
-        })
-    }
-}
-
 /// `f`, inside [`serial`] when `whole`.
 fn serial_if<R>(whole: bool, f: impl FnOnce() -> R) -> R {
     if whole { serial(f) } else { f() }
@@ -440,85 +386,6 @@ fn with_time<E: Float>(x: &[E], t: f64) -> Vec<E> {
     x.chunks_exact(3)
         .flat_map(|p| [p[0], p[1], p[2], t])
         .collect()
-}
-
-/// The trajectory loss ([`crate::loss::trajectory_loss`]) of the warped rows `y` against
-/// `target`, and its gradient with respect to `y`.
-fn data_term<E: Float>(
-    y: &[E],
-    target: &[E],
-    weights: Option<&[E]>,
-    penalty: DataPenalty,
-) -> (f64, Vec<E>) {
-    // ρ(r) and ρ'(r) per coordinate.
-    let rho = |r: E| -> (E, E) {
-        let zero = E::zero();
-        let sign = if r > zero {
-            E::one()
-        } else if r < zero {
-            zero - E::one()
-        } else {
-            zero
-        };
-        match penalty {
-            DataPenalty::L1 => (r.abs(), sign),
-            DataPenalty::Huber { delta } => {
-                let (a, d) = (r.abs(), E::from_f64(delta));
-                let c = if a > d { d } else { a };
-                let two = E::from_f64(2.0);
-                (c * (a - c / two) / d, sign * c / d)
-            }
-            DataPenalty::Charbonnier { epsilon } => {
-                let e = E::from_f64(epsilon);
-                let root = (r * r + e * e).sqrt();
-                (root - e, r / root)
-            }
-        }
-    };
-    let n = y.len() / 3;
-    // Each row's share: 1 / 3n, or w_i / (3 Σ w).
-    let (norm, w_of): (E, Box<dyn Fn(usize) -> E>) = match weights {
-        None => (E::from_f64((3 * n) as f64), Box::new(|_| E::one())),
-        Some(w) => {
-            let total = w.iter().fold(E::zero(), |a, b| a + *b) * E::from_f64(3.0);
-            let total = total.max(E::from_f64(f32::MIN_POSITIVE as f64));
-            (total, Box::new(move |i| w[i]))
-        }
-    };
-    let mut loss = E::zero();
-    let mut g = vec![E::zero(); y.len()];
-    for i in 0..n {
-        let w = w_of(i);
-        for c in 0..3 {
-            let (value, slope) = rho(y[3 * i + c] - target[3 * i + c]);
-            loss = loss + value * w;
-            g[3 * i + c] = slope * w / norm;
-        }
-    }
-    ((loss / norm).to_f64(), g)
-}
-
-/// `w_H · L_H` (Eq. 13; [`crate::loss::smoothness`]) of the tangent rows (`[3p, O]`, the
-/// dual output's rows after the values) over `p` points; its gradient is written into
-/// `g` (same shape).
-fn smoothness<E: Float>(tangents: &[E], p: usize, loss: StepLoss, g: &mut [E]) -> f64 {
-    let scale = E::from_f64(loss.smoothness_weight) / E::from_f64(p as f64);
-    let mut sum = E::zero();
-    for (j, gj) in tangents.iter().zip(g.iter_mut()) {
-        let sq = *j * *j;
-        match loss.smoothness_norm {
-            SmoothnessNorm::Squared => {
-                sum = sum + sq;
-                *gj = E::from_f64(2.0) * *j * scale;
-            }
-            SmoothnessNorm::Charbonnier => {
-                let root = (sq + E::one()).sqrt();
-                sum = sum + (root - E::one());
-                *gj = *j / root * scale;
-            }
-        }
-    }
-    (sum.to_f64() / p as f64) * loss.smoothness_weight
 }
 
 /// A step's inputs, owned ([`StepBatch`] borrows them).
