@@ -75,12 +75,11 @@ impl<'a, M: MotionField + Module> Trainer<M, TrajectoryObjective<'a>> {
         .frames_per_step(config.frames_per_step.unwrap_or(1));
         trainer.frames_per_iteration = config.frames_per_iteration;
         trainer.convergence = config.until_converged.clone();
-        match (
-            config.step.unwrap_or(StepKind::Composed),
-            trainer.start_fused(config, device),
-        ) {
-            (StepKind::Composed, _) | (StepKind::Auto, _) | (StepKind::Fused, Ok(())) => {}
-            (StepKind::Fused, Err(e)) => return Err(e),
+        // `auto` goes on with the composed step where the fused one does not apply.
+        if let Err(e) = trainer.start_fused(config, device)
+            && config.step == Some(StepKind::Fused)
+        {
+            return Err(e);
         }
         Ok(trainer)
     }
