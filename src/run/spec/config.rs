@@ -220,7 +220,7 @@ impl RunSpec {
     }
 
     /// The new fit these options ask for, with its data read once: the run config,
-    /// checked, and the sequence that [`super::fit_run`] fits. With `h_weight = auto`, the
+    /// checked, and the sequence that [`crate::run::fit_run`] fits. With `h_weight = auto`, the
     /// weight search runs here, on the same sequence (`search`; `on_weight` hears each
     /// weight's validation EPE).
     pub fn prepare(

@@ -54,7 +54,7 @@ pub enum StepKind {
     /// Burn's operations around the Jacobian method, differentiated by Burn's autodiff:
     /// every model, backend and loss.
     Composed,
-    /// The whole step as one operation on the CPU ([`FusedStep`]): a DOMA field, the
+    /// The whole step as one operation on the CPU (docs/design.md §2.4): a DOMA field, the
     /// analytic Jacobian, flex or ndarray, the trajectory loss and `L_H`; refused, with
     /// the reason, for any other fit.
     Fused,
