@@ -37,7 +37,7 @@ pub trait Objective<M>: Send {
     ) -> Result<(Tensor<1>, Tensor<1>)>;
 
     /// Switches the objective to host batches for the fused step
-    /// ([`super::fused::FusedStep`]): from now on [`Objective::prepare_iteration`] keeps
+    /// (the whole step as one CPU op, [`super::StepKind::Fused`]): from now on [`Objective::prepare_iteration`] keeps
     /// its draws on the host and [`Objective::host_batch`] gives each step's inputs. The
     /// reason when the objective has no such form (the default).
     fn use_host_batches(&mut self) -> std::result::Result<(), String> {
