@@ -36,10 +36,10 @@ pub trait Objective<M>: Send {
         rng: &mut ChaCha8Rng,
     ) -> Result<(Tensor<1>, Tensor<1>)>;
 
-    /// Switches the objective to host batches for the fused step
-    /// (the whole step as one CPU op, [`super::StepKind::Fused`]): from now on [`Objective::prepare_iteration`] keeps
-    /// its draws on the host and [`Objective::host_batch`] gives each step's inputs. The
-    /// reason when the objective has no such form (the default).
+    /// Switches the objective to host batches for the fused step (the whole step as one
+    /// CPU op, [`super::StepKind::Fused`]): from now on [`Objective::prepare_iteration`]
+    /// keeps its draws on the host and [`Objective::host_batch`] gives each step's inputs.
+    /// The reason when the objective has no such form (the default).
     fn use_host_batches(&mut self) -> std::result::Result<(), String> {
         Err("this objective is not a trajectory fit".into())
     }
