@@ -3,8 +3,9 @@
 
 The protocol of `doma bench`'s `fit_step` rows (synthetic protocol, DOMA-Affinity, SIREN
 4 -> 128 -> 128 -> 128 -> 12, omega 30 applied to the bias too, 750 training points, one
-Adam step on one frame), with the spatial Jacobian for L_H (750 jittered points, squared
-entries summed per point, mean over points) computed in one of four ways:
+Adam step on one frame), with the spatial Jacobian for L_H (750 jittered points, or the
+first --h-points of them; squared entries summed per point, mean over points) computed in
+one of four ways:
 
   none      no regulariser: trajectory L1 only
   jacrev    torch.func.vmap(jacrev(...)): the path the authors' release offers
@@ -72,7 +73,7 @@ def warp(raw, x):
     return torch.einsum("nij,nj->ni", a, x) + raw[:, 9:12]
 
 
-def time_mode(mode, n, warmup, steps):
+def time_mode(mode, n, h, warmup, steps):
     net = Siren()
     opt = torch.optim.Adam(net.parameters(), lr=1e-4, eps=1e-8)
     params = dict(net.named_parameters())
@@ -88,17 +89,17 @@ def time_mode(mode, n, warmup, steps):
         xt = torch.cat([x0, torch.full((n, 1), t)], 1)
         loss = (warp(net(xt), x0) - target).abs().mean()
         if mode != "none":
-            xh = x0 + 0.1 * torch.randn(n, 3)
+            xh = x0[:h] + 0.1 * torch.randn(h, 3)
             if mode == "jacrev":
                 f = lambda xi: raw_at(params, xi.unsqueeze(0)).squeeze(0)
                 lh = vmap(jacrev(f))(xh).pow(2).sum((1, 2)).mean()  # [n, 12, 3]
             elif mode == "jvp":
                 f = lambda xx: raw_at(params, xx)
-                tangents = torch.eye(3).unsqueeze(1).expand(3, n, 3)
+                tangents = torch.eye(3).unsqueeze(1).expand(3, h, 3)
                 _, jt = vmap(lambda v: jvp(f, (xh,), (v,)))(tangents)  # [3, n, 12]
                 lh = jt.pow(2).sum((0, 2)).mean()
             elif mode == "dual":
-                _, jt = net.forward_dual(torch.cat([xh, torch.full((n, 1), t)], 1))
+                _, jt = net.forward_dual(torch.cat([xh, torch.full((h, 1), t)], 1))
                 lh = jt.pow(2).sum((0, 2)).mean()
             else:
                 raise SystemExit(f"unknown mode {mode!r} (none, jacrev, jvp, dual)")
@@ -122,14 +123,18 @@ def main():
     p.add_argument("--steps", type=int, default=200)
     p.add_argument("--warmup", type=int, default=20)
     p.add_argument("--points", type=int, default=750)
+    p.add_argument("--h-points", type=int, default=None,
+                   help="L_H samples per step (default: --points; at most --points)")
     p.add_argument("--modes", default="none,jacrev,jvp,dual")
     a = p.parse_args()
     torch.set_num_threads(a.threads)
     torch.manual_seed(0)
     for mode in a.modes.split(","):
-        times = time_mode(mode, a.points, a.warmup, a.steps)
+        h = min(a.h_points or a.points, a.points)
+        times = time_mode(mode, a.points, h, a.warmup, a.steps)
         row = {"impl": "pytorch", "torch": torch.__version__, "mode": mode,
-               "threads": a.threads, "points": a.points, "ms_median": statistics.median(times),
+               "threads": a.threads, "points": a.points, "h_points": h,
+               "ms_median": statistics.median(times),
                "ms_min": min(times), "ms_max": max(times)}
         print(json.dumps(row), flush=True)
 

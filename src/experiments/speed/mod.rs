@@ -14,7 +14,7 @@ mod torch;
 pub use fused::{FusedRow, fused_rows, fused_table};
 pub use steps::{FitStep, JacobianStep, WarpStep, synthetic_config};
 pub use torch::{
-    Comparison, TorchRow, compare_torch, comparison_table, parse_torch_rows, torch_rows,
+    Comparison, TorchRow, TorchSize, compare_torch, comparison_table, parse_torch_rows, torch_rows,
     torch_script,
 };
 
@@ -164,19 +164,6 @@ pub fn jacobian_row(
         peak_percent: f64::NAN,
         speedup: None,
     })
-}
-
-/// The `fit_step` row (one training step of the synthetic protocol, Affinity-H), or with
-/// `smoothness = false` the `fit_step_l1` row (the same step without `L_H`).
-pub fn fit_step_row(
-    backend: BackendKind,
-    method: JacobianKind,
-    smoothness: bool,
-    warmup: usize,
-    steps: usize,
-) -> Result<BenchRow> {
-    let mut rows = fit_step_rows(backend, &[method], smoothness, warmup, steps)?;
-    Ok(rows.remove(0))
 }
 
 /// The `fit_step` (or `fit_step_l1`) rows of several methods, timed **step by step in

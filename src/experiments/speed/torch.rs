@@ -4,10 +4,12 @@
 
 use serde::Serialize;
 
-use super::fit_step_row;
+use super::{FitStep, median, steps_in_turn, synthetic_config};
 use crate::backend::BackendKind;
+use crate::data::synthetic::{Motion, benchmark_sequence};
 use crate::error::{DomaError, Result};
 use crate::jacobian::JacobianKind;
+use crate::train::{FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, Recipe, StepKind};
 
 /// The PyTorch side of a comparison: `benches/torch_step.py` in the crate.
 pub fn torch_script() -> std::path::PathBuf {
@@ -40,11 +42,21 @@ pub fn parse_torch_rows(stdout: &str) -> Result<Vec<TorchRow>> {
         .collect()
 }
 
+/// The size of a PyTorch step: training points and `L_H` samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct TorchSize {
+    /// Training points per step.
+    pub points: usize,
+    /// `L_H` samples per step.
+    pub h_points: usize,
+}
+
 /// Runs the PyTorch step script with `python` for `modes` (comma-separated) on `threads`
-/// threads.
+/// threads, at `size`.
 pub fn torch_rows(
     python: &std::path::Path,
     modes: &str,
+    size: TorchSize,
     warmup: usize,
     steps: usize,
     threads: usize,
@@ -58,6 +70,8 @@ pub fn torch_rows(
             "--steps",
             &steps.to_string(),
         ])
+        .args(["--points", &size.points.to_string()])
+        .args(["--h-points", &size.h_points.to_string()])
         .args(["--threads", &threads.to_string()])
         .output()
         .map_err(|e| DomaError::io(python, e))?;
@@ -80,19 +94,24 @@ pub fn torch_rows(
 /// measured once per round, rounds alternating between the two.
 #[derive(Clone, Debug, Serialize)]
 pub struct Comparison {
-    /// The step: `affinity-h` or `no-reg`.
+    /// The step: `affinity-h`, `no-reg` (the protocol's, 750 points and 750 `L_H`
+    /// samples) or `fast` (`--recipe fast`'s Affinity-H step, 256 points and 64 samples).
     pub step: &'static str,
-    /// doma's method.
-    pub doma: JacobianKind,
+    /// doma's way of taking it: `analytic` or `autodiff` (the composed step by that
+    /// Jacobian method) or `fused` (the whole step as one op).
+    pub doma: &'static str,
     /// doma's median ms per step, one per round.
     pub doma_ms: Vec<f64>,
     /// PyTorch's mode (for `fastest`, the fastest of `dual`, `jvp` and `jacrev` in each
     /// round).
     pub torch: &'static str,
+    /// The size of both sides' step.
+    pub size: TorchSize,
     /// PyTorch's median ms per step, one per round.
     pub torch_ms: Vec<f64>,
-    /// The speed-up this step is expected to reach: `torch / doma` of the medians over rounds.
-    pub target: f64,
+    /// The speed-up this step is expected to reach: `torch / doma` of the medians over
+    /// rounds (`None`: no target set).
+    pub target: Option<f64>,
 }
 
 impl Comparison {
@@ -109,9 +128,11 @@ impl Comparison {
     }
 }
 
-/// doma against PyTorch on flex, `rounds` times alternating: Affinity-H with Analytic
-/// against PyTorch's fastest mode, with Autodiff against `jvp`, and the no-regulariser step
-/// against `none`.
+/// doma against PyTorch on flex, `rounds` times alternating: the protocol's Affinity-H
+/// step (composed with Analytic, and fused) against PyTorch's fastest mode, with Autodiff
+/// against `jvp`, the no-regulariser step (composed and fused) against `none`, and `--recipe
+/// fast`'s step (fused) against PyTorch's fastest mode at the same size. In a round, doma's
+/// steps are timed in turn, then PyTorch's.
 pub fn compare_torch(
     python: &std::path::Path,
     rounds: usize,
@@ -120,48 +141,116 @@ pub fn compare_torch(
     mut progress: impl FnMut(&str),
 ) -> Result<Vec<Comparison>> {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let mut rows = vec![
-        (("affinity-h", JacobianKind::Analytic, true), "fastest", 2.5),
-        (("affinity-h", JacobianKind::Autodiff, true), "jvp", 1.0),
-        (("no-reg", JacobianKind::Analytic, false), "none", 2.0),
-    ]
-    .into_iter()
-    .map(|((step, doma, smoothness), torch, target)| {
-        let c = Comparison {
+    let device = BackendKind::Flex.device()?;
+    let seq = benchmark_sequence(Motion::Rotation, 0)?;
+    let n = seq.train.points();
+    let protocol = TorchSize {
+        points: n,
+        h_points: n,
+    };
+    let fast = TorchSize {
+        points: FAST_POINTS_PER_STEP.min(n),
+        h_points: FAST_SMOOTHNESS_POINTS.min(n),
+    };
+    let config =
+        |method, smoothness, step| synthetic_config(method, smoothness).with_step(Some(step));
+    let fast_config = Recipe::Fast
+        .apply(synthetic_config(JacobianKind::Analytic, true))
+        .with_step(Some(StepKind::Fused));
+    let (analytic, autodiff) = (JacobianKind::Analytic, JacobianKind::Autodiff);
+    let (composed, fused) = (StepKind::Composed, StepKind::Fused);
+    let cases = [
+        (
+            "affinity-h",
+            "analytic",
+            config(analytic, true, composed),
+            "fastest",
+            protocol,
+            Some(2.5),
+        ),
+        (
+            "affinity-h",
+            "fused",
+            config(analytic, true, fused),
+            "fastest",
+            protocol,
+            None,
+        ),
+        (
+            "affinity-h",
+            "autodiff",
+            config(autodiff, true, composed),
+            "jvp",
+            protocol,
+            Some(1.0),
+        ),
+        (
+            "no-reg",
+            "analytic",
+            config(analytic, false, composed),
+            "none",
+            protocol,
+            Some(2.0),
+        ),
+        (
+            "no-reg",
+            "fused",
+            config(analytic, false, fused),
+            "none",
+            protocol,
+            None,
+        ),
+        ("fast", "fused", fast_config, "fastest", fast, None),
+    ];
+    let mut trainers = Vec::new();
+    let mut rows = Vec::new();
+    for (step, doma, config, torch, size, target) in cases {
+        trainers.push(FitStep::new(&config, &seq.train, &device)?);
+        rows.push(Comparison {
             step,
             doma,
             doma_ms: Vec::new(),
             torch,
+            size,
             torch_ms: Vec::new(),
             target,
-        };
-        (c, smoothness)
-    })
-    .collect::<Vec<_>>();
+        });
+    }
     for round in 0..rounds.max(1) {
-        for (c, smoothness) in rows.iter_mut() {
-            let r = fit_step_row(BackendKind::Flex, c.doma, *smoothness, warmup, steps)?;
+        let times = steps_in_turn(&mut trainers, warmup, steps)?;
+        for (c, t) in rows.iter_mut().zip(times) {
+            let ms = median(t);
             progress(&format!(
-                "round {round}: doma {} {}: {:.2} ms",
-                c.step, c.doma, r.ms
+                "round {round}: doma {} {}: {ms:.2} ms",
+                c.step, c.doma
             ));
-            c.doma_ms.push(r.ms);
+            c.doma_ms.push(ms);
         }
-        let torch = torch_rows(python, "none,jvp,dual,jacrev", warmup, steps, threads)?;
-        let ms = |mode: &str| torch.iter().find(|t| t.mode == mode).map(|t| t.ms_median);
-        for (c, _) in rows.iter_mut() {
-            let v = match c.torch {
-                "fastest" => ["dual", "jvp", "jacrev"]
-                    .iter()
-                    .filter_map(|m| ms(m))
-                    .fold(f64::INFINITY, f64::min),
-                mode => ms(mode).unwrap_or(f64::NAN),
+        for size in [protocol, fast] {
+            let modes = if size == protocol {
+                "none,jvp,dual,jacrev"
+            } else {
+                "jvp,dual,jacrev"
             };
-            progress(&format!("round {round}: pytorch {}: {v:.2} ms", c.torch));
-            c.torch_ms.push(v);
+            let torch = torch_rows(python, modes, size, warmup, steps, threads)?;
+            let ms = |mode: &str| torch.iter().find(|t| t.mode == mode).map(|t| t.ms_median);
+            for c in rows.iter_mut().filter(|c| c.size == size) {
+                let v = match c.torch {
+                    "fastest" => ["dual", "jvp", "jacrev"]
+                        .iter()
+                        .filter_map(|m| ms(m))
+                        .fold(f64::INFINITY, f64::min),
+                    mode => ms(mode).unwrap_or(f64::NAN),
+                };
+                progress(&format!(
+                    "round {round}: pytorch {} at {} points: {v:.2} ms",
+                    c.torch, size.points
+                ));
+                c.torch_ms.push(v);
+            }
         }
     }
-    Ok(rows.into_iter().map(|(c, _)| c).collect())
+    Ok(rows)
 }
 
 /// The side-by-side table: each line's medians over rounds (min–max), the ratio and its
@@ -174,21 +263,31 @@ pub fn comparison_table(rows: &[Comparison]) -> String {
         format!("{:.2} ({lo:.2}-{hi:.2})", Comparison::median(v))
     };
     let mut s = format!(
-        "{:<11} {:<9} {:>22} {:<8} {:>22} {:>8} {:>7}\n",
-        "step", "doma", "ms (min-max)", "pytorch", "ms (min-max)", "speed-up", "target"
+        "{:<11} {:>7} {:<9} {:>22} {:<8} {:>22} {:>8} {:>7}\n",
+        "step", "points", "doma", "ms (min-max)", "pytorch", "ms (min-max)", "speed-up", "target"
     );
-    s += &"-".repeat(94);
+    s += &"-".repeat(102);
     s += "\n";
     for c in rows {
         s += &format!(
-            "{:<11} {:<9} {:>22} {:<8} {:>22} {:>7.2}x {:>6.1}x\n",
+            "{:<11} {:>7} {:<9} {:>22} {:<8} {:>22} {:>7.2}x {:>7}\n",
             c.step,
+            // PyTorch's `none` step samples no `L_H` points.
+            format!(
+                "{}/{}",
+                c.size.points,
+                if c.torch == "none" {
+                    0
+                } else {
+                    c.size.h_points
+                }
+            ),
             c.doma,
             range(&c.doma_ms),
             c.torch,
             range(&c.torch_ms),
             c.ratio(),
-            c.target
+            c.target.map_or("-".into(), |t| format!("{t:.1}x"))
         );
     }
     s
@@ -206,11 +305,15 @@ mod tests {
         assert!(parse_torch_rows("{ not json").is_err());
         let c = Comparison {
             step: "affinity-h",
-            doma: JacobianKind::Analytic,
+            doma: "analytic",
             doma_ms: vec![5.0, 4.0, 6.0],
             torch: "fastest",
+            size: TorchSize {
+                points: 750,
+                h_points: 750,
+            },
             torch_ms: vec![12.0, 15.0, 13.0],
-            target: 2.5,
+            target: Some(2.5),
         };
         // Medians 5 and 13: 2.6x.
         assert!((c.ratio() - 2.6).abs() < 1e-12);
