@@ -41,6 +41,7 @@ __all__ = [
     "Field",
     "FitProgress",
     "JACOBIANS",
+    "OPTIMIZERS",
     "RECIPES",
     "STEPS",
     "SizeError",
@@ -68,6 +69,8 @@ JACOBIANS = _CHOICES["jacobian"]
 RECIPES = _CHOICES["recipe"]
 #: How ``fit(step=...)`` computes a training step.
 STEPS = _CHOICES["step"]
+#: The optimisers ``fit(optimizer=...)`` takes.
+OPTIMIZERS = _CHOICES["optimizer"]
 #: The methods of :func:`fill`: the gap fillers that need no field.
 FILLERS = _CHOICES["filler"]
 
@@ -120,7 +123,10 @@ def _check_size(what: str, count: int, frames: int, per_point: int) -> None:
 
 
 #: The string arguments that name a choice: read in any case, as ``reg`` is.
-_CHOICE_ARGUMENTS = ("variant", "backend", "jacobian", "recipe", "step", "robust", "h_weight", "layout", "frame")
+_CHOICE_ARGUMENTS = (
+    "variant", "backend", "jacobian", "recipe", "step", "optimizer", "robust", "h_weight", "layout",
+    "frame",
+)
 
 
 def _lower_choices(options: dict[str, Any]) -> dict[str, Any]:
@@ -554,9 +560,10 @@ def fit(
             layer's drawn this many times wider (default 1, the authors').
         t_weight: the weight of the temporal smoothness loss L_T, the squared acceleration
             of the fitted tracks' paths (default 0: off).
-        recipe: ``"paper"`` (the paper's protocol, the default) or ``"fast"`` (1.5 times
+        recipe: ``"paper"`` (the paper's protocol, the default), ``"fast"`` (1.5 times
             the learning rate with a warm-up and a cosine decay, 256 training points and 64
-            L_H samples per step); the other options override it.
+            L_H samples per step) or ``"soap"`` (``"fast"`` over 400 iterations, stepped by
+            SOAP; the fused step only); the other options override it.
         until_converged: stop once the EPE on a held-back tenth of the training tracks has
             not improved for this many iterations, after as many iterations of a learning
             rate falling to 0 (those tracks are then not fitted).
@@ -565,6 +572,8 @@ def fit(
         step: ``"auto"`` (default: the whole training step as one CPU operation where
             it applies, Burn's operations elsewhere), ``"fused"`` (refused where it does
             not apply) or ``"composed"`` (Burn's operations).
+        optimizer: ``"adam"`` (default, the paper's) or ``"soap"`` (Adam in the eigenbasis
+            of Shampoo's factors of each weight matrix; the fused step only).
         seed: seed of the weights, the split and the frame order (default 0).
         test_fraction: the fraction of tracks held out of the fit for the report
             (default 0: every track is fitted; the paper's Tab. 1 holds out 0.75).

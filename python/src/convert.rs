@@ -181,6 +181,7 @@ pub fn choices(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     table.set_item("jacobian", choices::<doma::jacobian::JacobianKind>())?;
     table.set_item("recipe", choices::<doma::train::Recipe>())?;
     table.set_item("step", choices::<doma::train::StepKind>())?;
+    table.set_item("optimizer", choices::<doma::train::OptimizerKind>())?;
     table.set_item("layout", choices::<Layout>())?;
     table.set_item("frame", choices::<CoordFrame>())?;
     table.set_item("filler", crate::fill::names())?;

@@ -120,6 +120,18 @@ def test_a_recipe_and_a_stop_on_convergence_go_into_the_run_config(clip, tmp_pat
     assert np.isfinite(field.report["epe_x1e4"])
 
 
+def test_soap_goes_into_the_run_config_and_is_refused_without_the_fused_step(clip, tmp_path):
+    assert doma.OPTIMIZERS == ("adam", "soap")
+    field = doma.fit(clip, recipe="fast", optimizer="SOAP", iters=4, progress=False, out=tmp_path / "run")
+    fit = json.loads((tmp_path / "run" / "config.json").read_text())["fit"]
+    assert fit["soap"]["every"] == 100 and fit["step"] == "auto"
+    assert np.isfinite(field.report["epe_x1e4"])
+    with pytest.raises(ValueError, match="SOAP"):
+        doma.fit(clip, optimizer="soap", step="composed", iters=2, progress=False)
+    with pytest.raises(ValueError, match="optimizer"):
+        doma.fit(clip, optimizer="lbfgs", iters=2, progress=False)
+
+
 def test_a_refused_fit_leaves_every_file_of_the_folder_as_it_was(clip, tmp_path):
     folder = tmp_path / "mine"
     folder.mkdir()

@@ -273,9 +273,10 @@ mod tests {
 /// A named recipe and a stop on convergence, for every subcommand that starts fits.
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct RecipeArgs {
-    /// A named recipe: `paper` (the paper's protocol, the default) or `fast` (1.5 times the
+    /// A named recipe: `paper` (the paper's protocol, the default), `fast` (1.5 times the
     /// learning rate, warm-up and cosine decay, 256 training points and 64 `L_H` samples
-    /// per step; docs/speed.md). Other flags override its settings; they all go into the
+    /// per step) or `soap` (`fast` over 400 iterations, stepped by SOAP; the fused step
+    /// only); docs/speed.md. Other flags override its settings; they all go into the
     /// run's config.
     #[arg(long, value_enum)]
     pub recipe: Option<crate::train::Recipe>,

@@ -51,8 +51,8 @@ pub struct BenchArgs {
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub rounds: Option<u64>,
     /// Instead of the table: the composed training step against the fused one (the
-    /// protocol's Affinity-H and L1 steps, and `--recipe fast`'s), timed in turn on the
-    /// first --backend, with the paired speed-up.
+    /// protocol's Affinity-H and L1 steps, and `--recipe fast`'s, also with SOAP's
+    /// update), timed in turn on the first --backend, with the paired speed-up.
     #[arg(long, conflicts_with_all = ["compare_torch", "scaling"])]
     pub fused: bool,
     /// Instead of the table: time per training step and peak memory for N ∈ {10³, 10⁴,

@@ -100,6 +100,11 @@ pub struct RunSpec {
     #[arg(long, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub step: Option<crate::train::StepKind>,
+    /// The optimiser: `adam` (the default, the paper's) or `soap` (Adam in the eigenbasis
+    /// of Shampoo's factors; the fused step only; docs/speed.md, "Fourth round").
+    #[arg(long, help_heading = "Training")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub optimizer: Option<crate::train::OptimizerKind>,
     /// Iterations (passes over all frames; default 1000, or 300 for tracks with gaps).
     #[arg(long = "iters", value_name = "N", value_parser = at_least_one, help_heading = "Training")]
     #[serde(default, alias = "iters", skip_serializing_if = "Option::is_none")]
@@ -230,9 +235,10 @@ pub struct RunSpec {
         skip_serializing_if = "Option::is_none"
     )]
     pub robust: Option<DataPenalty>,
-    /// A named recipe: `paper` (the paper's protocol, the default) or `fast` (1.5 times the
+    /// A named recipe: `paper` (the paper's protocol, the default), `fast` (1.5 times the
     /// learning rate, warm-up and cosine decay, 256 training points and 64 `L_H` samples
-    /// per step; docs/speed.md). The other options override its settings.
+    /// per step) or `soap` (`fast` over 400 iterations, stepped by SOAP; the fused step
+    /// only); docs/speed.md. The other options override its settings.
     #[arg(long, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub recipe: Option<Recipe>,

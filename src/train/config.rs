@@ -180,6 +180,10 @@ pub struct FitConfig {
     /// How each step is computed: Burn's operations around the Jacobian method, or the
     /// whole step as one CPU operation ([`super::StepKind`]; `None`: composed).
     pub step: Option<super::StepKind>,
+    /// The fused step's update: SOAP, Adam in the eigenbasis of Shampoo's factors
+    /// ([`super::fused::SoapConfig`]; `None`: Adam, the paper's optimiser). Only the fused
+    /// step computes it: a fit that sets it takes fused steps or is refused.
+    pub soap: Option<super::fused::SoapConfig>,
     /// The name of the recipe the settings came from ([`super::Recipe`]); a label only:
     /// the settings themselves are the other fields.
     pub recipe: Option<super::Recipe>,
@@ -228,6 +232,14 @@ impl FitConfig {
         }
         if let Some(c) = &self.until_converged {
             c.validate()?;
+        }
+        if let Some(soap) = &self.soap {
+            soap.check().map_err(DomaError::InvalidConfig)?;
+            if self.step.unwrap_or(super::StepKind::Composed) == super::StepKind::Composed {
+                return Err(DomaError::InvalidConfig(
+                    "SOAP is computed by the fused step only: use --step fused (or auto)".into(),
+                ));
+            }
         }
         self.model.validate()?;
         self.model.check_jacobian(self.jacobian)

@@ -23,11 +23,12 @@ mod trainer;
 mod trajectory;
 
 pub use config::{FitConfig, LossConfig, SmoothnessSampling, WithSchedule, check_weights};
-pub use fused::StepKind;
+pub use fused::{OptimizerKind, SoapConfig, StepKind};
 pub use hooks::{EachFn, Hooks, Progress};
 pub use objective::Objective;
 pub use recipe::{
-    FAST_LR_FACTOR, FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, FAST_WARMUP, Recipe, RecipeChoice,
+    FAST_LR_FACTOR, FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, FAST_WARMUP, Recipe,
+    RecipeChoice, SOAP_ITERATIONS,
 };
 pub use record::{Fitted, IterationRecord, Outcome, RngState, TrainerSnapshot, gaussian};
 pub use schedule::{Convergence, Decay, ScheduleConfig, default_adam};

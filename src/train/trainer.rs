@@ -75,9 +75,10 @@ impl<'a, M: MotionField + Module> Trainer<M, TrajectoryObjective<'a>> {
         .frames_per_step(config.frames_per_step.unwrap_or(1));
         trainer.frames_per_iteration = config.frames_per_iteration;
         trainer.convergence = config.until_converged.clone();
-        // `auto` goes on with the composed step where the fused one does not apply.
+        // `auto` goes on with the composed step where the fused one does not apply, unless
+        // the fit asks for SOAP, which only the fused step computes.
         if let Err(e) = trainer.start_fused(config, device)
-            && config.step == Some(StepKind::Fused)
+            && (config.step == Some(StepKind::Fused) || config.soap.is_some())
         {
             return Err(e);
         }
@@ -104,7 +105,10 @@ impl<'a, M: MotionField + Module> Trainer<M, TrajectoryObjective<'a>> {
             smoothness_weight: config.loss.smoothness_weight,
             smoothness_norm: config.loss.smoothness_norm,
         };
-        let step = FusedStep::from_siren(siren, field.head(), loss, adam)?;
+        let mut step = FusedStep::from_siren(siren, field.head(), loss, adam)?;
+        if let Some(soap) = config.soap {
+            step = step.with_soap(soap);
+        }
         Objective::<M>::use_host_batches(&mut self.objective).map_err(refuse)?;
         self.fused = Some(step);
         Ok(())

@@ -12,7 +12,7 @@ use doma::run::RunSpec;
 use doma::siren::WithSirenShape;
 use doma::train::{
     Convergence, Decay, FAST_LR_FACTOR, FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, FitConfig,
-    Recipe, RecipeChoice, ScheduleConfig, Trainer, WithSchedule,
+    Recipe, RecipeChoice, SOAP_ITERATIONS, ScheduleConfig, SoapConfig, Trainer, WithSchedule,
 };
 
 #[test]
@@ -201,6 +201,37 @@ fn the_fast_recipe_sets_its_schedule_and_caps_the_capped_smoothness_sampling() {
         choice.apply(paper).until_converged,
         Some(Convergence::new(25))
     );
+}
+
+#[test]
+fn the_soap_recipe_is_the_fast_one_over_400_iterations_with_soap() {
+    let paper =
+        FitConfig::doma(DomaFieldConfig::new(Variant::Affinity)).with_smoothness_weight(0.1);
+    let fast = Recipe::Fast.apply(paper.clone());
+    let soap = Recipe::Soap.apply(paper.clone());
+    assert_eq!(soap.schedule.iterations, SOAP_ITERATIONS);
+    assert_eq!(soap.soap, Some(SoapConfig::default()));
+    assert_eq!(soap.recipe, Some(Recipe::Soap));
+    // Everything else is fast's.
+    let strip = |c: &FitConfig| {
+        let mut c = c.clone();
+        c.schedule.iterations = 0;
+        c.soap = None;
+        c.recipe = None;
+        serde_json::to_value(c).unwrap()
+    };
+    assert_eq!(strip(&soap), strip(&fast));
+    // A flag wins over the recipe: --optimizer adam takes SOAP out, --step composed is
+    // then allowed; with SOAP kept it is refused.
+    let spec: RunSpec =
+        serde_json::from_str(r#"{"recipe": "soap", "optimizer": "adam", "step": "composed"}"#)
+            .unwrap();
+    let fit = spec.fit_config(|| Ok(10)).unwrap();
+    assert_eq!((fit.soap, fit.schedule.iterations), (None, SOAP_ITERATIONS));
+    let spec: RunSpec = serde_json::from_str(r#"{"recipe": "soap", "step": "composed"}"#).unwrap();
+    let fit = spec.fit_config(|| Ok(10)).unwrap();
+    let err = fit.validate().unwrap_err().to_string();
+    assert!(err.contains("SOAP"), "{err}");
 }
 
 #[test]

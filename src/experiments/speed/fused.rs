@@ -8,7 +8,7 @@ use crate::Result;
 use crate::backend::BackendKind;
 use crate::data::synthetic::{Motion, benchmark_sequence};
 use crate::jacobian::JacobianKind;
-use crate::train::{FitConfig, Recipe, StepKind};
+use crate::train::{FitConfig, Recipe, SoapConfig, StepKind};
 
 /// One fit's step, composed and fused.
 #[derive(Clone, Debug, Serialize)]
@@ -25,11 +25,15 @@ pub struct FusedRow {
     pub fused_ms: f64,
     /// The median over steps of composed / fused, each pair timed back to back.
     pub speedup: f64,
+    /// The fused step with SOAP's update instead of Adam's, timed in turn with the two
+    /// others (the `fast` row only), ms.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub soap_ms: Option<f64>,
 }
 
 /// The three steps (the synthetic protocol's Affinity-H and L1 steps, and `--recipe
-/// fast`'s Affinity-H step) on `backend`, each composed and fused in turn: `warmup`
-/// untimed pairs, then `steps` timed.
+/// fast`'s Affinity-H step) on `backend`, each composed and fused in turn (`fast`'s also
+/// fused with SOAP's update): `warmup` untimed rounds, then `steps` timed.
 pub fn fused_rows(backend: BackendKind, warmup: usize, steps: usize) -> Result<Vec<FusedRow>> {
     let device = backend.device()?;
     let seq = benchmark_sequence(Motion::Rotation, 0)?;
@@ -50,10 +54,16 @@ pub fn fused_rows(backend: BackendKind, warmup: usize, steps: usize) -> Result<V
     ];
     let mut rows = Vec::new();
     for (name, config) in cases {
-        let kinds = [StepKind::Composed, StepKind::Fused];
-        let mut trainers = kinds
+        let mut configs = vec![
+            config.clone().with_step(Some(StepKind::Composed)),
+            config.clone().with_step(Some(StepKind::Fused)),
+        ];
+        if name.starts_with("fast") {
+            configs.push(configs[1].clone().with_soap(Some(SoapConfig::default())));
+        }
+        let mut trainers = configs
             .iter()
-            .map(|&k| FitStep::new(&config.clone().with_step(Some(k)), &seq.train, &device))
+            .map(|c| FitStep::new(c, &seq.train, &device))
             .collect::<Result<Vec<_>>>()?;
         let times = steps_in_turn(&mut trainers, warmup, steps)?;
         let ratios = times[0].iter().zip(&times[1]).map(|(c, f)| c / f).collect();
@@ -64,6 +74,7 @@ pub fn fused_rows(backend: BackendKind, warmup: usize, steps: usize) -> Result<V
             composed_ms: median(times[0].clone()),
             fused_ms: median(times[1].clone()),
             speedup: median(ratios),
+            soap_ms: times.get(2).map(|t| median(t.clone())),
         });
     }
     Ok(rows)
@@ -84,15 +95,21 @@ fn samples(config: &FitConfig, n: usize) -> usize {
 /// The rows as a fixed-width table.
 pub fn fused_table(rows: &[FusedRow]) -> String {
     let mut s = format!(
-        "{:<20} {:>6} {:>7} {:>12} {:>9} {:>9}\n",
-        "step", "points", "samples", "composed ms", "fused ms", "speed-up"
+        "{:<20} {:>6} {:>7} {:>12} {:>9} {:>9} {:>14}\n",
+        "step", "points", "samples", "composed ms", "fused ms", "speed-up", "fused SOAP ms"
     );
-    s += &"-".repeat(68);
+    s += &"-".repeat(83);
     s += "\n";
     for r in rows {
         s += &format!(
-            "{:<20} {:>6} {:>7} {:>12.3} {:>9.3} {:>8.2}×\n",
-            r.step, r.points, r.samples, r.composed_ms, r.fused_ms, r.speedup
+            "{:<20} {:>6} {:>7} {:>12.3} {:>9.3} {:>8.2}× {:>14}\n",
+            r.step,
+            r.points,
+            r.samples,
+            r.composed_ms,
+            r.fused_ms,
+            r.speedup,
+            r.soap_ms.map_or("-".into(), |m| format!("{m:.3}"))
         );
     }
     s

@@ -140,6 +140,9 @@ impl RunSpec {
         if self.step.is_some() {
             fit.step = self.step;
         }
+        if let Some(o) = self.optimizer {
+            fit.soap = o.soap();
+        }
         if let Some(i) = self.iterations {
             fit.schedule.iterations = i;
         }

@@ -186,7 +186,10 @@ fn every_variant_steps_as_burns_autodiff_step_for_100_steps() {
                 }
                 let grads = GradientsParams::from_grads(grads, &burn_field);
                 burn_field = optim.step(lr, burn_field, grads);
-                fused.adam.update(&mut fused.params, &g_fused, lr);
+                let Optimizer::Adam(adam) = &mut fused.optimizer else {
+                    unreachable!("a fresh step takes Adam's update")
+                };
+                adam.update(&mut fused.params, &g_fused, lr);
                 let after = flat(&burn_field);
                 for (i, (a, b)) in fused.params().iter().zip(&after).enumerate() {
                     assert!(
@@ -374,4 +377,76 @@ fn the_fused_step_is_refused_where_it_does_not_apply_and_auto_falls_back() {
             .unwrap()
             .is_fused()
     );
+}
+
+/// A SOAP fit stopped and resumed from its checkpoint ends where the uninterrupted fit
+/// ends, bit for bit; an Adam fit refuses its checkpoint, and it refuses an Adam one.
+#[test]
+fn a_soap_fit_resumes_from_its_checkpoint_exactly() {
+    let data = tracks();
+    let device = Device::flex();
+    let soap = SoapConfig {
+        every: 3,
+        ..SoapConfig::default()
+    };
+    let cfg = config(StepKind::Fused)
+        .with_soap(Some(soap))
+        .with_schedule(crate::train::ScheduleConfig::new().with_iterations(4));
+    let whole = Trainer::from_config(&cfg, &data, &device)
+        .unwrap()
+        .run()
+        .unwrap();
+    let mut first = Trainer::from_config(&cfg, &data, &device).unwrap();
+    first.iteration().unwrap();
+    first.iteration().unwrap();
+    let snapshot = first.snapshot().unwrap();
+    let mut second = Trainer::from_config(&cfg, &data, &device).unwrap();
+    second.restore(&snapshot).unwrap();
+    let resumed = second.run().unwrap();
+    let params = |f: &crate::field::model::Model| read_params::<f32>(f.siren().unwrap()).unwrap();
+    assert_eq!(params(&whole.field), params(&resumed.field));
+    // SOAP moved the weights elsewhere than Adam does.
+    let adam_cfg = config(StepKind::Fused)
+        .with_schedule(crate::train::ScheduleConfig::new().with_iterations(4));
+    let adam = Trainer::from_config(&adam_cfg, &data, &device)
+        .unwrap()
+        .run()
+        .unwrap();
+    assert_ne!(params(&whole.field), params(&adam.field));
+    let mut adam_trainer = Trainer::from_config(&adam_cfg, &data, &device).unwrap();
+    let err = adam_trainer.restore(&snapshot).unwrap_err().to_string();
+    assert!(err.contains("SOAP"), "{err}");
+    adam_trainer.iteration().unwrap();
+    let adam_snapshot = adam_trainer.snapshot().unwrap();
+    let mut third = Trainer::from_config(&cfg, &data, &device).unwrap();
+    let err = third.restore(&adam_snapshot).unwrap_err().to_string();
+    assert!(err.contains("Adam"), "{err}");
+}
+
+#[test]
+fn soap_is_refused_without_the_fused_step() {
+    let data = tracks();
+    let device = Device::flex();
+    let soap = Some(SoapConfig::default());
+    for cfg in [
+        config(StepKind::Composed).with_soap(soap),
+        config(StepKind::Auto)
+            .with_soap(soap)
+            .with_elasticity_weight(0.1),
+    ] {
+        let err = Trainer::from_config(&cfg, &data, &device)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(err.contains("SOAP") || err.contains("elasticity"), "{err}");
+    }
+    let bad = config(StepKind::Fused).with_soap(Some(SoapConfig {
+        beta_2: 1.0,
+        ..SoapConfig::default()
+    }));
+    let err = Trainer::from_config(&bad, &data, &device)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("betas"), "{err}");
 }

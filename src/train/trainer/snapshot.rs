@@ -5,7 +5,7 @@ use burn::optim::AdamConfig;
 
 use super::Trainer;
 use crate::field::MotionField;
-use crate::train::fused::AdamState;
+use crate::train::fused::is_fused_state;
 use crate::train::objective::Objective;
 use crate::train::record::{RngState, TrainerSnapshot};
 use crate::{DomaError, Result};
@@ -14,9 +14,9 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
     /// Everything a resumed fit needs besides the config and the data: the field's
     /// parameters, Adam's state, the random stream's position and the history.
     pub fn snapshot(&self) -> Result<TrainerSnapshot> {
-        // The fused step keeps Adam's moments on the host, in its own record.
+        // The fused step keeps its optimiser's state on the host, in its own record.
         let optimizer = match &self.fused {
-            Some(fused) => fused.adam().to_bytes(),
+            Some(fused) => fused.optimizer().to_bytes(),
             None => self
                 .optim
                 .into_bytes()
@@ -46,12 +46,17 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
                 snapshot.history.len()
             )));
         }
-        if AdamState::is_fused(&snapshot.optimizer) && self.fused.is_none() {
+        if is_fused_state(&snapshot.optimizer) && self.fused.is_none() {
             return Err(DomaError::InvalidData(
-                "the checkpoint's Adam state was written by the fused step, and this fit takes \
-                 composed steps: resume it with the same --step on a CPU device"
+                "the checkpoint's optimiser state was written by the fused step, and this fit \
+                 takes composed steps: resume it with the same --step on a CPU device"
                     .into(),
             ));
+        }
+        if let Some(fused) = &self.fused {
+            fused
+                .check_optimizer(&snapshot.optimizer)
+                .map_err(DomaError::InvalidData)?;
         }
         let field = self.field.take().expect("the field is always put back");
         let loaded = crate::checkpoint::decode_checkpoint(field.clone(), &snapshot.model);
@@ -62,15 +67,15 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
                 return Err(e);
             }
         });
-        if !AdamState::is_fused(&snapshot.optimizer) && self.fused.is_some() {
+        if !is_fused_state(&snapshot.optimizer) && self.fused.is_some() {
             // A composed fit's checkpoint (Burn's Adam record): the rest is composed too.
             self.fused = None;
             self.objective.stop_host_batches();
         }
         if let Some(fused) = self.fused.as_mut() {
-            let adam = AdamState::from_bytes(&snapshot.optimizer, fused.adam().settings())
+            fused
+                .restore_optimizer(&snapshot.optimizer)
                 .map_err(DomaError::InvalidData)?;
-            fused.set_adam(adam)?;
             if let Some(siren) = self.field.as_ref().and_then(|f| f.siren()) {
                 fused.reload(siren)?;
             }

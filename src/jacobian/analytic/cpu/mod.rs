@@ -15,6 +15,6 @@ mod net;
 mod real;
 mod rows;
 
-pub(crate) use gemm::serial;
+pub(crate) use gemm::{Mat, gemm, serial};
 pub(crate) use net::Net;
 pub(crate) use real::Real;
