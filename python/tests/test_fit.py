@@ -122,7 +122,7 @@ def test_a_recipe_and_a_stop_on_convergence_go_into_the_run_config(clip, tmp_pat
 
 def test_soap_goes_into_the_run_config_and_is_refused_without_the_fused_step(clip, tmp_path):
     assert doma.OPTIMIZERS == ("adam", "soap")
-    field = doma.fit(clip, recipe="fast", optimizer="SOAP", iters=4, progress=False, out=tmp_path / "run")
+    field = doma.fit(clip, recipe="fast", optimizer="SOAP", iters=8, progress=False, out=tmp_path / "run")
     fit = json.loads((tmp_path / "run" / "config.json").read_text())["fit"]
     assert fit["soap"]["every"] == 100 and fit["step"] == "auto"
     assert np.isfinite(field.report["epe_x1e4"])

@@ -62,7 +62,7 @@ def test_read_tracks_reads_every_shipped_format(tmp_path):
         (lambda c: doma.fit(c, iter=5), TypeError, "unexpected keyword argument 'iter'"),
         (lambda c: doma.fit(c, layout="masked"), TypeError, "does not take 'layout'"),
         (lambda c: doma.fit(c, reg="e"), ValueError, "reg 'e'"),
-        (lambda c: doma.fit(c, recipe="fastest"), ValueError, "recipe: unknown variant `fastest`, expected `paper` or `fast`"),
+        (lambda c: doma.fit(c, recipe="fastest"), ValueError, "recipe: unknown variant `fastest`, expected one of `paper`, `fast`, `soap`"),
         (lambda c: doma.fit(c, until_converged=0), ValueError, "until_converged: 0 is not at least 1"),
         (lambda c: doma.fit(c, robust="l2"), ValueError, "robust: `l2` is not l1"),
         (lambda c: doma.fit(c, test_fraction=1.0), ValueError, "test_fraction: `1` must be at least 0 and below 1"),

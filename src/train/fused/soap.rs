@@ -364,19 +364,14 @@ fn step_scale(c: SoapConfig, t: usize) -> f64 {
 }
 
 impl<E: Float> Matrix<E> {
-    /// `dst = a b`, with `a` and `b` given as (data, rows, cols, transposed).
-    fn product(dst: &mut [E], a: Mat<E>, b: Mat<E>) {
-        gemm(dst, a, b, false);
-    }
-
     /// `Q_Lᵀ X Q_R` (or, `back`, `Q_L X Q_Rᵀ`) into `dst`, through `tmp`.
     fn rotate(&self, x: &[E], back: bool, tmp: &mut [E], dst: &mut [E]) {
         let (r, c) = (self.rows, self.cols);
         let ql = Mat::new(&self.q_left, r, r);
         let qr = Mat::new(&self.q_right, c, c);
         let (ql, qr) = if back { (ql, qr.t()) } else { (ql.t(), qr) };
-        Self::product(tmp, ql, Mat::new(x, r, c));
-        Self::product(dst, Mat::new(tmp, r, c), qr);
+        gemm(tmp, ql, Mat::new(x, r, c), false);
+        gemm(dst, Mat::new(tmp, r, c), qr, false);
     }
 
     /// `f ← β f + (1 − β) X Xᵀ` (`left`) or `Xᵀ X`, for the gradient `g`.
@@ -433,7 +428,7 @@ impl<E: Float> Matrix<E> {
             *p = *p - size * s;
         }
         self.accumulate_factors(g, c.beta_2);
-        if t % c.every == 0 {
+        if t.is_multiple_of(c.every) {
             self.refresh();
         }
     }
@@ -679,13 +674,13 @@ mod tests {
             for k in 0..r * cc {
                 w[k] -= size * back[k];
             }
-            for k in 0..r * r {
-                self.l[k] = c.beta_2 * self.l[k] + (1.0 - c.beta_2) * ggt[k];
+            for (l, x) in self.l.iter_mut().zip(&ggt) {
+                *l = c.beta_2 * *l + (1.0 - c.beta_2) * x;
             }
-            for k in 0..cc * cc {
-                self.rr[k] = c.beta_2 * self.rr[k] + (1.0 - c.beta_2) * gtg[k];
+            for (rr, x) in self.rr.iter_mut().zip(&gtg) {
+                *rr = c.beta_2 * *rr + (1.0 - c.beta_2) * x;
             }
-            if self.t % c.every == 0 {
+            if self.t.is_multiple_of(c.every) {
                 let sorted = |f: &[f64], q: &[f64], n: usize| {
                     let fq = mm(f, q, n, n, n);
                     let mut order: Vec<usize> = (0..n).collect();
