@@ -110,7 +110,7 @@ pub struct TimeArgs {
     /// The regulariser: none, H (`L_H`, weight 0.1) or E (elasticity, weight 0.01).
     #[arg(long, value_enum, default_value = "h")]
     pub reg: Regularizer,
-    /// The named recipes to run (comma-separated: paper, fast; or all). The first one
+    /// The named recipes to run (comma-separated: paper, fast, soap; or all). The first one
     /// run is the reference of the speed-ups; `paper` always runs first.
     #[arg(long, default_value = "all", value_parser = selection::<Recipe>)]
     pub recipe: Selection<Recipe>,

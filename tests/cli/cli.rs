@@ -874,3 +874,38 @@ fn a_fit_refused_by_its_trainer_leaves_no_run_folder() {
         std::fs::read_dir(&run).map(|d| d.count())
     );
 }
+
+#[test]
+fn fit_takes_soap_from_the_flag_and_refuses_it_without_the_fused_step() {
+    let dir = common::scratch("doma-soap");
+    let data = dir.join("tiny.traj");
+    let positions: Vec<f32> = (0..5 * 16 * 3).map(|v| (v as f32 * 0.37).sin()).collect();
+    doma::data::traj::write_traj(
+        &data,
+        &doma::data::Trajectories::new(5, 16, positions).unwrap(),
+    )
+    .unwrap();
+    let run = dir.join("run");
+    let fit = |extra: &[&str]| {
+        let mut args = vec![
+            "fit",
+            data.to_str().unwrap(),
+            "--out",
+            run.to_str().unwrap(),
+            "--iters",
+            "2",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        doma(&args)
+    };
+    let (ok, _, err) = fit(&["--optimizer", "soap", "--step", "composed"]);
+    assert!(!ok && err.contains("SOAP"), "{err}");
+    assert!(!run.exists());
+    let (ok, _, err) = fit(&["--optimizer", "soap"]);
+    assert!(ok, "{err}");
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["fit"]["soap"]["every"], 100);
+    assert_eq!(config["fit"]["step"], "auto");
+}
