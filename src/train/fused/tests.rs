@@ -11,7 +11,7 @@ use crate::data::Trajectories;
 use crate::field::{DomaField, DomaFieldConfig, MotionField, Variant};
 use crate::jacobian::Analytic;
 use crate::siren::WithSirenShape;
-use crate::train::{FitConfig, SmoothnessSampling, Trainer, default_adam};
+use crate::train::{FitConfig, SmoothnessSampling, Trainer, TrainerSnapshot, default_adam};
 
 fn field(variant: Variant, ad: &Device) -> DomaField {
     DomaFieldConfig::new(variant)
@@ -317,27 +317,37 @@ fn a_fused_fit_follows_the_composed_fit() {
     );
 }
 
+/// Fits `cfg` for 4 iterations whole, and for 2 then resumed from a checkpoint for the
+/// rest: the same parameters, bit for bit. Returns the checkpoint and the whole fit's
+/// parameters.
+fn resumes_exactly(cfg: &FitConfig, data: &Trajectories) -> (TrainerSnapshot, Vec<f32>) {
+    let device = Device::flex();
+    let cfg = cfg
+        .clone()
+        .with_schedule(crate::train::ScheduleConfig::new().with_iterations(4));
+    let whole = Trainer::from_config(&cfg, data, &device)
+        .unwrap()
+        .run()
+        .unwrap();
+    let mut first = Trainer::from_config(&cfg, data, &device).unwrap();
+    first.iteration().unwrap();
+    first.iteration().unwrap();
+    let snapshot = first.snapshot().unwrap();
+    let mut second = Trainer::from_config(&cfg, data, &device).unwrap();
+    second.restore(&snapshot).unwrap();
+    let resumed = second.run().unwrap();
+    let params = |f: &crate::field::model::Model| read_params::<f32>(f.siren().unwrap()).unwrap();
+    assert_eq!(params(&whole.field), params(&resumed.field));
+    (snapshot, params(&whole.field))
+}
+
 /// A fused fit stopped and resumed from its checkpoint ends where the uninterrupted fit
 /// ends, bit for bit; a composed fit refuses the fused checkpoint.
 #[test]
 fn a_fused_fit_resumes_from_its_checkpoint_exactly() {
     let data = tracks();
+    let (snapshot, _) = resumes_exactly(&config(StepKind::Fused), &data);
     let device = Device::flex();
-    let cfg = config(StepKind::Fused)
-        .with_schedule(crate::train::ScheduleConfig::new().with_iterations(4));
-    let whole = Trainer::from_config(&cfg, &data, &device)
-        .unwrap()
-        .run()
-        .unwrap();
-    let mut first = Trainer::from_config(&cfg, &data, &device).unwrap();
-    first.iteration().unwrap();
-    first.iteration().unwrap();
-    let snapshot = first.snapshot().unwrap();
-    let mut second = Trainer::from_config(&cfg, &data, &device).unwrap();
-    second.restore(&snapshot).unwrap();
-    let resumed = second.run().unwrap();
-    let params = |f: &crate::field::model::Model| read_params::<f32>(f.siren().unwrap()).unwrap();
-    assert_eq!(params(&whole.field), params(&resumed.field));
     let mut composed = Trainer::from_config(&config(StepKind::Composed), &data, &device).unwrap();
     let err = composed.restore(&snapshot).unwrap_err().to_string();
     assert!(err.contains("fused step"), "{err}");
@@ -389,37 +399,16 @@ fn a_soap_fit_resumes_from_its_checkpoint_exactly() {
         every: 3,
         ..SoapConfig::default()
     };
-    let cfg = config(StepKind::Fused)
-        .with_soap(Some(soap))
-        .with_schedule(crate::train::ScheduleConfig::new().with_iterations(4));
-    let whole = Trainer::from_config(&cfg, &data, &device)
-        .unwrap()
-        .run()
-        .unwrap();
-    let mut first = Trainer::from_config(&cfg, &data, &device).unwrap();
-    first.iteration().unwrap();
-    first.iteration().unwrap();
-    let snapshot = first.snapshot().unwrap();
-    let mut second = Trainer::from_config(&cfg, &data, &device).unwrap();
-    second.restore(&snapshot).unwrap();
-    let resumed = second.run().unwrap();
-    let params = |f: &crate::field::model::Model| read_params::<f32>(f.siren().unwrap()).unwrap();
-    assert_eq!(params(&whole.field), params(&resumed.field));
+    let cfg = config(StepKind::Fused).with_soap(Some(soap));
+    let (snapshot, soap_params) = resumes_exactly(&cfg, &data);
     // SOAP moved the weights elsewhere than Adam does.
-    let adam_cfg = config(StepKind::Fused)
-        .with_schedule(crate::train::ScheduleConfig::new().with_iterations(4));
-    let adam = Trainer::from_config(&adam_cfg, &data, &device)
-        .unwrap()
-        .run()
-        .unwrap();
-    assert_ne!(params(&whole.field), params(&adam.field));
-    let mut adam_trainer = Trainer::from_config(&adam_cfg, &data, &device).unwrap();
-    let err = adam_trainer.restore(&snapshot).unwrap_err().to_string();
+    let (adam_snapshot, adam_params) = resumes_exactly(&config(StepKind::Fused), &data);
+    assert_ne!(soap_params, adam_params);
+    let mut adam = Trainer::from_config(&config(StepKind::Fused), &data, &device).unwrap();
+    let err = adam.restore(&snapshot).unwrap_err().to_string();
     assert!(err.contains("SOAP"), "{err}");
-    adam_trainer.iteration().unwrap();
-    let adam_snapshot = adam_trainer.snapshot().unwrap();
-    let mut third = Trainer::from_config(&cfg, &data, &device).unwrap();
-    let err = third.restore(&adam_snapshot).unwrap_err().to_string();
+    let mut soap = Trainer::from_config(&cfg, &data, &device).unwrap();
+    let err = soap.restore(&adam_snapshot).unwrap_err().to_string();
     assert!(err.contains("Adam"), "{err}");
 }
 
