@@ -27,7 +27,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from torch_synthetic import FRAMES, Siren, sequence, warp  # noqa: E402
+from torch_synthetic import FRAMES, Siren, held_out_epe, sequence, warp, with_time  # noqa: E402
 
 
 class Soap(torch.optim.Optimizer):
@@ -131,13 +131,10 @@ def main():
         return 0.5 * (1 + math.cos(math.pi * (e - warm) / max(1, a.iters - warm)))
 
     def xt_of(x, k):
-        return torch.cat([x, ts[k].expand(x.shape[0], 1)], 1)
+        return with_time(x, ts[k])
 
     def epe():
-        with torch.no_grad():
-            err = [(warp(net(xt_of(test[0], k)), test[0]) - test[k]).abs().sum(1).mean()
-                   for k in range(FRAMES)]
-            return float(torch.stack(err).mean()) * 1e4
+        return held_out_epe(net, test, ts)
 
     curve = []
     seconds = 0.0

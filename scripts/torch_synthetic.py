@@ -79,6 +79,19 @@ def warp(raw, x):
     return torch.einsum("nij,nj->ni", a, x) + raw[:, 9:12]
 
 
+def with_time(x, t):
+    """[x, y, z, t] rows from [x, y, z] rows at time t."""
+    return torch.cat([x, t.expand(x.shape[0], 1)], 1)
+
+
+def held_out_epe(net, test, ts):
+    """EPE x1e4 on the test points over every frame, frame 0 included."""
+    with torch.no_grad():
+        err = [(warp(net(with_time(test[0], ts[k])), test[0]) - test[k]).abs().sum(1).mean()
+               for k in range(FRAMES)]
+        return float(torch.stack(err).mean()) * 1e4
+
+
 def write_dump(path, d):
     """The step-by-step record, float32 arrays (frames too) that doma's reader takes."""
     f32 = lambda v: np.asarray(v, dtype=np.float32)
@@ -115,13 +128,10 @@ def main():
     n = canon.shape[0]
 
     def xt_of(x, k):
-        return torch.cat([x, ts[k].expand(x.shape[0], 1)], 1)
+        return with_time(x, ts[k])
 
     def epe():
-        with torch.no_grad():
-            err = [(warp(net(xt_of(test[0], k)), test[0]) - test[k]).abs().sum(1).mean()
-                   for k in range(FRAMES)]
-            return float(torch.stack(err).mean()) * 1e4
+        return held_out_epe(net, test, ts)
 
     def flat():
         return torch.cat([p.detach().reshape(-1) for p in params]).clone()
