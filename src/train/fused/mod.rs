@@ -21,18 +21,21 @@
 //! | `loss.rs` | the trajectory penalty and `L_H` on rows, with their gradients |
 //! | `params.rs` | the parameters read from and written back into Burn's module |
 //! | `adam.rs` | Adam's update as Burn computes it |
-//! | `soap.rs` | SOAP's update (Adam in Shampoo's eigenbasis), the fused step's alternative |
+//! | `optimizer.rs` | the update a step applies (Adam or SOAP), and its checkpoint's kind |
+//! | `soap/` | SOAP's update (Adam in Shampoo's eigenbasis), the fused step's alternative |
 //! | `tests.rs` | against Burn's autodiff step, and finite differences in f64 |
 
 mod adam;
 mod head;
 mod loss;
+mod optimizer;
 mod params;
 mod soap;
 #[cfg(test)]
 mod tests;
 
 pub use adam::{AdamSettings, AdamState};
+pub use optimizer::{Optimizer, OptimizerKind, is_fused_state};
 pub use soap::{SoapConfig, SoapState};
 
 use burn::optim::AdamConfig;
@@ -66,29 +69,6 @@ pub enum StepKind {
 }
 
 crate::names::value_names!(StepKind);
-
-/// The optimiser of a fit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum OptimizerKind {
-    /// Adam, the paper's optimiser (every step kind).
-    Adam,
-    /// SOAP: Adam in the eigenbasis of Shampoo's factors of each weight matrix
-    /// ([`SoapConfig`]), refreshed every 100 steps; the fused step only.
-    Soap,
-}
-
-crate::names::value_names!(OptimizerKind);
-
-impl OptimizerKind {
-    /// The config's SOAP settings for this choice (`None`: Adam).
-    pub fn soap(self) -> Option<SoapConfig> {
-        match self {
-            OptimizerKind::Adam => None,
-            OptimizerKind::Soap => Some(SoapConfig::default()),
-        }
-    }
-}
 
 /// The float operations the step needs beyond the network's ([`Real`]).
 pub(crate) trait Float: Real + std::ops::Div<Output = Self> + PartialOrd {
@@ -225,30 +205,6 @@ pub struct StepLoss {
     pub smoothness_norm: SmoothnessNorm,
 }
 
-/// The update a fused step applies to its gradient.
-#[derive(Clone, Debug)]
-pub enum Optimizer<E> {
-    /// Adam, as Burn computes it (the composed step's optimiser).
-    Adam(AdamState<E>),
-    /// SOAP ([`SoapState`]).
-    Soap(SoapState<E>),
-}
-
-impl Optimizer<f32> {
-    /// The state as a checkpoint stores it (each kind under its own magic).
-    pub fn to_bytes(&self) -> Vec<u8> {
-        match self {
-            Optimizer::Adam(a) => a.to_bytes(),
-            Optimizer::Soap(s) => s.to_bytes(),
-        }
-    }
-}
-
-/// Whether a checkpoint's optimiser state was written by the fused step.
-pub fn is_fused_state(bytes: &[u8]) -> bool {
-    AdamState::is_fused(bytes) || SoapState::is_fused(bytes)
-}
-
 /// A DOMA field's SIREN, its head and the optimiser's state on flat host buffers, and
 /// the step.
 #[derive(Clone, Debug)]
@@ -282,12 +238,6 @@ impl<E: Float + Send + Sync> FusedStep<E> {
         })
     }
 
-    /// The same step with SOAP's update instead of Adam's, from a fresh state.
-    pub fn with_soap(mut self, config: SoapConfig) -> Self {
-        self.optimizer = Optimizer::Soap(SoapState::new(config, &self.specs[0].shapes));
-        self
-    }
-
     /// The flat parameters `[W_0, b_0, …, W_o, b_o]`.
     #[cfg(test)]
     pub fn params(&self) -> &[E] {
@@ -303,24 +253,6 @@ impl<E: Float + Send + Sync> FusedStep<E> {
     /// Reads the parameters again from `siren` (after a checkpoint put them back).
     pub fn reload(&mut self, siren: &Siren) -> Result<()> {
         self.params = read_params(siren)?;
-        Ok(())
-    }
-
-    /// The optimiser's state.
-    pub fn optimizer(&self) -> &Optimizer<E> {
-        &self.optimizer
-    }
-
-    /// Puts an Adam state back (a resumed fit's).
-    pub fn set_adam(&mut self, adam: AdamState<E>) -> Result<()> {
-        if adam.moment_1.len() != self.params.len() || adam.moment_2.len() != self.params.len() {
-            return Err(DomaError::InvalidData(format!(
-                "the saved Adam state holds {} moments for {} parameters",
-                adam.moment_1.len(),
-                self.params.len()
-            )));
-        }
-        self.optimizer = Optimizer::Adam(adam);
         Ok(())
     }
 
@@ -426,43 +358,9 @@ impl<E: Float + Send + Sync> FusedStep<E> {
     pub fn step(&mut self, batch: &StepBatch<'_, E>, lr: f64) -> StepLosses {
         let (losses, grad) = self.gradients(batch);
         if let Some(g) = grad {
-            match &mut self.optimizer {
-                Optimizer::Adam(a) => a.update(&mut self.params, &g, lr),
-                Optimizer::Soap(s) => s.update(&mut self.params, &g, lr),
-            }
+            self.optimizer.update(&mut self.params, &g, lr);
         }
         losses
-    }
-}
-
-impl FusedStep<f32> {
-    /// Whether a checkpoint's optimiser state can resume this step: a SOAP state only a
-    /// SOAP step, and a SOAP step only a SOAP state (Adam's, fused or Burn's, cannot).
-    pub fn check_optimizer(&self, bytes: &[u8]) -> std::result::Result<(), String> {
-        let soap_bytes = SoapState::is_fused(bytes);
-        match (&self.optimizer, soap_bytes) {
-            (Optimizer::Adam(_), true) => Err("the checkpoint holds a SOAP state and this fit \
-                                               steps with Adam: resume it with the same optimiser"
-                .into()),
-            (Optimizer::Soap(_), false) => Err("the checkpoint holds an Adam state and this fit \
-                                                steps with SOAP: resume it with the same \
-                                                optimiser"
-                .into()),
-            _ => Ok(()),
-        }
-    }
-
-    /// Puts a checkpoint's optimiser state back (a resumed fit's); it must be of this
-    /// step's kind ([`FusedStep::check_optimizer`]), for these layers.
-    pub fn restore_optimizer(&mut self, bytes: &[u8]) -> std::result::Result<(), String> {
-        self.check_optimizer(bytes)?;
-        match &mut self.optimizer {
-            Optimizer::Adam(a) => {
-                let adam = AdamState::from_bytes(bytes, a.settings())?;
-                self.set_adam(adam).map_err(|e| e.to_string())
-            }
-            Optimizer::Soap(s) => s.read_bytes(bytes),
-        }
     }
 }
 
