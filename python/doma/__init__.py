@@ -562,8 +562,8 @@ def fit(
             of the fitted tracks' paths (default 0: off).
         recipe: ``"paper"`` (the paper's protocol, the default), ``"fast"`` (1.5 times
             the learning rate with a warm-up and a cosine decay, 256 training points and 64
-            L_H samples per step) or ``"soap"`` (``"fast"`` over 400 iterations, stepped by
-            SOAP; the fused step only); the other options override it.
+            L_H samples per step) or ``"soap"`` (``"fast"`` over 400 iterations at 3 times
+            the rate, stepped by SOAP; the fused step only); the other options override it.
         until_converged: stop once the EPE on a held-back tenth of the training tracks has
             not improved for this many iterations, after as many iterations of a learning
             rate falling to 0 (those tracks are then not fitted).

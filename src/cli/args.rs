@@ -275,7 +275,7 @@ mod tests {
 pub struct RecipeArgs {
     /// A named recipe: `paper` (the paper's protocol, the default), `fast` (1.5 times the
     /// learning rate, warm-up and cosine decay, 256 training points and 64 `L_H` samples
-    /// per step) or `soap` (`fast` over 400 iterations, stepped by SOAP; the fused step
+    /// per step) or `soap` (`fast` over 400 iterations at 3 times the rate, stepped by SOAP; the fused step
     /// only); docs/speed.md. Other flags override its settings; they all go into the
     /// run's config.
     #[arg(long, value_enum)]

@@ -237,7 +237,7 @@ pub struct RunSpec {
     pub robust: Option<DataPenalty>,
     /// A named recipe: `paper` (the paper's protocol, the default), `fast` (1.5 times the
     /// learning rate, warm-up and cosine decay, 256 training points and 64 `L_H` samples
-    /// per step) or `soap` (`fast` over 400 iterations, stepped by SOAP; the fused step
+    /// per step) or `soap` (`fast` over 400 iterations at 3 times the rate, stepped by SOAP; the fused step
     /// only); docs/speed.md. The other options override its settings.
     #[arg(long, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -28,7 +28,7 @@ pub use hooks::{EachFn, Hooks, Progress};
 pub use objective::Objective;
 pub use recipe::{
     FAST_LR_FACTOR, FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, FAST_WARMUP, Recipe,
-    RecipeChoice, SOAP_ITERATIONS,
+    RecipeChoice, SOAP_ITERATIONS, SOAP_LR_FACTOR,
 };
 pub use record::{Fitted, IterationRecord, Outcome, RngState, TrainerSnapshot, gaussian};
 pub use schedule::{Convergence, Decay, ScheduleConfig, default_adam};

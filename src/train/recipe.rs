@@ -20,18 +20,22 @@ pub enum Recipe {
     /// the paper's protocol on the synthetic benchmark and the shipped sequences, in a
     /// third to a quarter of the time (docs/speed.md, "Time to accuracy").
     Fast,
-    /// `Fast`'s sampling and schedule shape over 400 iterations, stepped by SOAP (Adam in
-    /// the eigenbasis of Shampoo's factors, [`super::SoapConfig`]) in the fused step: the
-    /// authors' error on the synthetic benchmark over ten times sooner than the paper's
-    /// protocol, and a held-out error a sixth to a third lower on the shipped sequences
-    /// with thousands of tracks; on clips of a hundred tracks it lands within about 1.5 %
-    /// of the protocol either way, as `Fast` does (docs/speed.md, "Fourth round").
+    /// `Fast`'s sampling and schedule shape over 400 iterations at 3 times the paper's
+    /// learning rate, stepped by SOAP (Adam in the eigenbasis of Shampoo's factors,
+    /// [`super::SoapConfig`]) in the fused step: the authors' error on the synthetic
+    /// benchmark over fifteen times sooner than the paper's protocol, and a held-out error
+    /// a quarter to a half lower on the shipped sequences with thousands of tracks; on
+    /// clips of a hundred tracks it lands within about 2 % of the protocol either way, as
+    /// `Fast` does, and below it on average over seeds (docs/speed.md, "Fourth round").
     /// Refused where the fused step does not apply.
     Soap,
 }
 
 /// The SOAP recipe's iterations.
 pub const SOAP_ITERATIONS: usize = 400;
+
+/// The SOAP recipe's learning rate, as a multiple of the config's.
+pub const SOAP_LR_FACTOR: f64 = 3.0;
 
 /// The fast recipe's learning rate, as a multiple of the config's.
 pub const FAST_LR_FACTOR: f64 = 1.5;
@@ -50,9 +54,11 @@ impl Recipe {
     /// capped `L_H` sampling (the authors' Affinity one) at [`FAST_SMOOTHNESS_POINTS`], and
     /// takes the whole step as one CPU op where it applies ([`super::StepKind::Auto`],
     /// unless the config names a step). [`Recipe::Soap`] does the same over
-    /// [`SOAP_ITERATIONS`] iterations with SOAP's update. The model, the loss weights and
+    /// [`SOAP_ITERATIONS`] iterations at [`SOAP_LR_FACTOR`] times the config's learning
+    /// rate with SOAP's update. The model, the loss weights and
     /// the seed are kept.
     pub fn apply(self, mut config: FitConfig) -> FitConfig {
+        let base_rate = config.schedule.learning_rate;
         if self != Recipe::Paper {
             let s = &mut config.schedule;
             s.learning_rate = decimal(s.learning_rate * FAST_LR_FACTOR);
@@ -67,6 +73,7 @@ impl Recipe {
         }
         if self == Recipe::Soap {
             config.schedule.iterations = SOAP_ITERATIONS;
+            config.schedule.learning_rate = decimal(base_rate * SOAP_LR_FACTOR);
             config.soap = Some(super::SoapConfig::default());
         }
         config.recipe = Some(self);

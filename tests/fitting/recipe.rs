@@ -12,7 +12,8 @@ use doma::run::RunSpec;
 use doma::siren::WithSirenShape;
 use doma::train::{
     Convergence, Decay, FAST_LR_FACTOR, FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, FitConfig,
-    Recipe, RecipeChoice, SOAP_ITERATIONS, ScheduleConfig, SoapConfig, Trainer, WithSchedule,
+    Recipe, RecipeChoice, SOAP_ITERATIONS, SOAP_LR_FACTOR, ScheduleConfig, SoapConfig, Trainer,
+    WithSchedule,
 };
 
 #[test]
@@ -204,18 +205,22 @@ fn the_fast_recipe_sets_its_schedule_and_caps_the_capped_smoothness_sampling() {
 }
 
 #[test]
-fn the_soap_recipe_is_the_fast_one_over_400_iterations_with_soap() {
+fn the_soap_recipe_is_the_fast_one_over_400_iterations_at_3_times_the_rate_with_soap() {
     let paper =
         FitConfig::doma(DomaFieldConfig::new(Variant::Affinity)).with_smoothness_weight(0.1);
     let fast = Recipe::Fast.apply(paper.clone());
     let soap = Recipe::Soap.apply(paper.clone());
     assert_eq!(soap.schedule.iterations, SOAP_ITERATIONS);
+    // Written as a short decimal: 3e-4 from the paper's 1e-4, as config.json reads it back.
+    assert_eq!(SOAP_LR_FACTOR, 3.0);
+    assert_eq!(soap.schedule.learning_rate, 3e-4);
     assert_eq!(soap.soap, Some(SoapConfig::default()));
     assert_eq!(soap.recipe, Some(Recipe::Soap));
     // Everything else is fast's.
     let strip = |c: &FitConfig| {
         let mut c = c.clone();
         c.schedule.iterations = 0;
+        c.schedule.learning_rate = 0.0;
         c.soap = None;
         c.recipe = None;
         serde_json::to_value(c).unwrap()
