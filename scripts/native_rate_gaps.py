@@ -16,12 +16,14 @@ event is the mean Euclidean distance over its hidden entries, in the file's unit
 a case's figure is the mean over its events.
 
     python scripts/native_rate_gaps.py MOCAP_DIR [--draws 20] [--recordings A,B] [--out DIR]
-        [--add FILLER,...]
+        [--add FILLER,...] [--blind-validation]
 
 Needs the doma wheel (scripts/build_wheel.sh), numpy and `c3d` (for the rate). Writes one
 JSON per recording to --out (default results/native) and prints the table. A recording
 whose JSON exists is not run again; `--add` fills its draw sets (the same, drawn from the
 same seed) with the fillers named and adds their columns, without fitting.
+`--blind-validation` fits with `blind_validation=True` (doma's blend learned on spans hidden
+from the field).
 """
 
 import argparse
@@ -131,7 +133,7 @@ def add_fillers(path, report, methods, draws, seed):
     return report
 
 
-def run_recording(path, draws, seed):
+def run_recording(path, draws, seed, blind=False):
     seq = doma.read_tracks(path)
     tracks, observed = seq.tracks, seq.observed
     truth = tracks.astype(np.float64)
@@ -141,7 +143,7 @@ def run_recording(path, draws, seed):
     errors = {}
     for count, events_of_set, mask in masks(observed, rate, draws, seed):
         started = time.time()
-        field = doma.fit(tracks, mask, drop_unobserved=True, seed=seed, progress=False)
+        field = doma.fit(tracks, mask, drop_unobserved=True, seed=seed, progress=False, blind_validation=blind)
         fit_s = time.time() - started
         started = time.time()
         done = field.complete()
@@ -209,6 +211,8 @@ def main():
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=pathlib.Path, default=pathlib.Path("results/native"))
     p.add_argument("--add", default="", help="fillers to add to existing reports, comma-separated")
+    p.add_argument("--blind-validation", action="store_true",
+                   help="fit with blind_validation=True: the blend learned on spans hidden from the field")
     args = p.parse_args()
     added = [m for m in args.add.split(",") if m]
     for m in added:
@@ -226,7 +230,8 @@ def main():
                 report.write_text(json.dumps(r, indent=1))
             results.append(r)
             continue
-        r = run_recording(path, args.draws, args.seed)
+        r = run_recording(path, args.draws, args.seed, args.blind_validation)
+        r["blind_validation"] = args.blind_validation
         report.write_text(json.dumps(r, indent=1))
         results.append(r)
     print(table(results))

@@ -91,3 +91,18 @@ def test_complete_with_one_method_is_that_filler_through_the_field_s_coordinates
     assert np.isfinite(field.complete(method="field_fill").tracks[gap]).all()
     with pytest.raises(ValueError, match="not a filler"):
         field.complete(method="nearest")
+
+
+def test_a_blind_validation_fit_completes_with_every_observation_as_given(tmp_path):
+    """`blind_validation=True` hides validation spans from the fit, not from the output:
+    the completion gives every observation as the input holds it and fills the gap."""
+    tracks, observed, i, a, b = hidden_gap()
+    clip = slice(a - 40, b + 40)
+    tracks, observed = tracks[clip], observed[clip]
+    field = doma.fit(tracks, observed, iters=2, progress=False, drop_unobserved=True, blind_validation=True)
+    done = field.complete()
+    assert np.array_equal(done.tracks[observed], tracks[observed])
+    gap = ~observed & observed.any(axis=0)
+    assert np.isfinite(done.tracks[gap]).all()
+    with pytest.raises(TypeError, match="blind_validation"):
+        doma.fit(tracks, observed, iters=2, progress=False, blind_validation=0.5)

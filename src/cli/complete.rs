@@ -104,5 +104,32 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
             weights.join(", ")
         );
     }
+    let mut shortest = crate::gaps::SPLINE_CARRY_FRAMES + 1;
+    for class in b.by_length.iter() {
+        let lengths = match class.longest {
+            Some(l) => format!("{shortest}–{l} frames"),
+            None => format!("{shortest} frames or more"),
+        };
+        shortest = class.longest.map_or(shortest, |l| l + 1);
+        let count = class.validated;
+        if !class.own {
+            eprintln!("    gaps of {lengths}: the long gaps' weights ({count} validation entries)");
+        } else if !class.cross_fitted {
+            eprintln!(
+                "    gaps of {lengths}: the field's fill (no blend beat it on {count} validation entries)"
+            );
+        } else {
+            let weights: Vec<String> = class
+                .weights
+                .iter()
+                .filter(|(_, v)| *v >= 0.005)
+                .map(|(f, v)| format!("{} {v:.2}", f.label()))
+                .collect();
+            eprintln!(
+                "    gaps of {lengths} (from {count} validation entries): {}",
+                weights.join(", ")
+            );
+        }
+    }
     Ok(())
 }

@@ -13,6 +13,7 @@ use super::layout::TrackFile;
 use super::mesh::read_obj;
 use super::tracks::Tracks;
 use super::{Trajectories, anime, c3d, layout, npy, traj};
+use crate::gaps::blend::blind_spans;
 use crate::gaps::spans::hold_out_spans;
 use crate::{DomaError, Result};
 
@@ -32,6 +33,10 @@ pub struct Sequence {
     /// The observations hidden from the fit to measure gap filling
     /// ([`LoadOptions::hold_out`]), normalised like the trajectories.
     pub held_out: Option<HeldOut>,
+    /// The validation spans hidden from the fit so that doma's fill is validated where the
+    /// field has not seen the answer ([`LoadOptions::blind_validation`]), normalised like
+    /// the trajectories.
+    pub blind: Option<HeldOut>,
     /// The input's indices of the tracks kept ([`LoadOptions::drop_unobserved`]); `None`:
     /// every track, in order.
     pub kept: Option<Vec<usize>>,
@@ -76,6 +81,9 @@ pub struct LoadOptions {
     /// Hide this fraction of the observations, in spans, with this seed
     /// ([`hold_out_spans`]).
     pub hold_out: Option<HoldOut>,
+    /// With tracks that have gaps (after `hold_out`), hide the validation spans of doma's
+    /// fill drawn with this seed ([`blind_spans`]) from the fit.
+    pub blind_validation: Option<u64>,
 }
 
 /// Loads `data` (`.traj`, `.anime`, `.npy`, `.npz`, or a folder of OBJ frames with equal
@@ -154,6 +162,18 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
         Some(h) => Some(hold_out(&mut tracks, h).map_err(malformed)?),
         None => None,
     };
+    let blind = match options.blind_validation {
+        Some(seed) if tracks.observed().iter().any(|&o| !o) => {
+            let entries = blind_spans(&tracks.marked(), seed);
+            let kept = taken(&tracks, &entries);
+            tracks.hide(&entries);
+            (!entries.is_empty()).then_some(HeldOut {
+                entries,
+                truth: kept,
+            })
+        }
+        _ => None,
+    };
     let trajectories = tracks
         .into_trajectories(options.reference)
         .map_err(|e| match e {
@@ -164,14 +184,16 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
     let (trajectories, center, scale) = trajectories
         .normalized()
         .map_err(|e| malformed(e.to_string()))?;
-    let held_out = held_out.map(|h| HeldOut {
+    let normalise = |h: HeldOut| HeldOut {
         truth: h
             .truth
             .iter()
             .map(|p| std::array::from_fn(|c| (p[c] - center[c]) / scale))
             .collect(),
         entries: h.entries,
-    });
+    };
+    let held_out = held_out.map(normalise);
+    let blind = blind.map(normalise);
     let name = data
         .file_stem()
         .map_or("data".into(), |s| s.to_string_lossy().into_owned());
@@ -182,6 +204,7 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
         center,
         scale,
         held_out,
+        blind,
         kept,
     })
 }
@@ -219,17 +242,22 @@ fn renumber(faces: Option<Vec<[u32; 3]>>, kept: &[usize]) -> Option<Vec<[u32; 3]
 fn hold_out(tracks: &mut Tracks, h: &HoldOut) -> std::result::Result<HeldOut, String> {
     let entries = hold_out_spans(&tracks.marked(), h.fraction, h.spans.clone(), h.seed)
         .map_err(|e| format!("--holdout-observations: {e}"))?;
+    let truth = taken(tracks, &entries);
+    tracks.hide(&entries);
+    Ok(HeldOut { entries, truth })
+}
+
+/// The positions of `entries` `(frame, point)` of `tracks`.
+fn taken(tracks: &Tracks, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
     let n = tracks.points();
-    let truth = entries
+    entries
         .iter()
         .map(|&(k, i)| {
             let e = 3 * (k * n + i);
             let p = &tracks.positions()[e..e + 3];
             [p[0], p[1], p[2]]
         })
-        .collect();
-    tracks.hide(&entries);
-    Ok(HeldOut { entries, truth })
+        .collect()
 }
 
 /// The file's extension, lower-case ("" if none).

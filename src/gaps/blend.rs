@@ -9,14 +9,19 @@
 //! of [`VALIDATION_FOLDS`] draws, [`VALIDATION_FRACTION`] of the observed entries are
 //! hidden again, in spans as long as the data's own gaps; every filler fills them from
 //! what is left, and the convex combination with the least squared error over the draws is
-//! found, one for gaps of at most [`SPLINE_CARRY_FRAMES`](super::SPLINE_CARRY_FRAMES) frames and one for longer gaps.
-//! It replaces the field's fill only if it also wins cross-fitted (weights learned on the
-//! other draws, judged on each draw in turn): a blend that won by chance on a few spans
-//! is not used. The real gaps are then filled from every observation (docs/design.md §7).
+//! found: one for gaps of at most [`SPLINE_CARRY_FRAMES`](super::SPLINE_CARRY_FRAMES)
+//! frames, one for longer gaps pooled, and one for each [`length_class`] of the longer ones
+//! seen in two draws or more (the pooled one serves the others). Each replaces the field's
+//! fill only if it also wins cross-fitted (weights learned on the other draws, judged on
+//! each draw in turn): a blend that won by chance on a few spans is not used. The real gaps are then filled from every observation (docs/design.md §7).
 //!
-//! The field was fitted to the validation entries, so its fill is judged where it has seen
-//! the answer; that favours the field's fills. The field alone is not blended for that
-//! reason: judged on entries it was fitted to, it looks far better than inside a gap.
+//! By default the field was fitted to the validation entries, so its fill is judged where
+//! it has seen the answer; that favours the field's fills. The field alone is not blended
+//! for that reason: judged on entries it was fitted to, it looks far better than inside a
+//! gap. A fit with blind validation (`--blind-validation`) hides one draw of validation
+//! spans from the field itself ([`blind_spans`]); the weights are then learned on those
+//! spans alone, split into [`VALIDATION_FOLDS`] folds by span, where every filler, the
+//! field's fills included, fills them as it fills a real gap.
 
 // Index loops over 6 × 6 matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
@@ -24,7 +29,7 @@
 use super::field_fill::{FieldPrediction, Lending, field_fill};
 use super::fillers::{Filler, Marked, PerFiller, Sources};
 use super::linalg::{quadratic, simplex_least_squares};
-use super::spans::{gap_classes, validation_spans};
+use super::spans::{gap_sizes, validation_spans};
 use serde::{Deserialize, Serialize};
 
 /// The share of the observed entries hidden in each validation draw.
@@ -32,6 +37,17 @@ pub const VALIDATION_FRACTION: f64 = 0.1;
 
 /// The validation draws.
 pub const VALIDATION_FOLDS: usize = 3;
+
+/// Keeps the seed of the spans hidden from a fit ([`blind_spans`]) apart from the draws'.
+const BLIND_SEED: u64 = 0x5851_f42d_4c95_7f2d;
+
+/// The validation spans hidden from a fit with blind validation: [`VALIDATION_FRACTION`]
+/// of the observed entries of `tracks`, in spans as long as its own gaps
+/// ([`validation_spans`]), drawn with `seed`; none where no span fits. `(frame, track)`,
+/// sorted.
+pub fn blind_spans(tracks: &Marked, seed: u64) -> Vec<(usize, usize)> {
+    validation_spans(tracks, VALIDATION_FRACTION, seed ^ BLIND_SEED).unwrap_or_default()
+}
 
 /// The number of fillers blended.
 const M: usize = Filler::COUNT;
@@ -46,12 +62,38 @@ impl Weights {
     }
 }
 
+/// The classes of long gaps by length: more than
+/// [`SPLINE_CARRY_FRAMES`](super::SPLINE_CARRY_FRAMES) frames up to twice that, then each
+/// up to twice the last, the last one unbounded. A convex blend tuned on two-second gaps
+/// is not the one for quarter-second ones: rigid-body fill's error grows with the gap, a
+/// spline's much faster, and the squared errors of the longest gaps would set the weights
+/// of all of them.
+pub const LENGTH_CLASSES: usize = 5;
+
+/// The class of a gap of `len` frames among [`LENGTH_CLASSES`]; `None` for a short gap.
+pub fn length_class(len: usize) -> Option<usize> {
+    let carry = super::SPLINE_CARRY_FRAMES;
+    (len > carry).then(|| {
+        let (mut class, mut top) = (0, 2 * carry);
+        while len > top && class + 1 < LENGTH_CLASSES {
+            class += 1;
+            top *= 2;
+        }
+        class
+    })
+}
+
+/// The longest gap of length class `class`, in frames (`None`: no bound).
+pub fn class_longest(class: usize) -> Option<usize> {
+    (class + 1 < LENGTH_CLASSES).then(|| super::SPLINE_CARRY_FRAMES << (class + 1))
+}
+
 /// The weights a fill used, and the validation entries that chose them.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Blend {
     /// For gaps of at most [`SPLINE_CARRY_FRAMES`](super::SPLINE_CARRY_FRAMES) frames.
     pub short: Weights,
-    /// For longer gaps.
+    /// For longer gaps, all lengths pooled: those of a length class without its own.
     pub long: Weights,
     /// The validation entries behind `short` and `long`, over the draws (0: that class had
     /// none and took the other's weights, or the field's fill alone if neither had any).
@@ -59,23 +101,49 @@ pub struct Blend {
     /// Whether each class's blend beat the field's fill cross-fitted; where not, that
     /// class fills with the field's fill alone.
     pub cross_fitted: [bool; 2],
+    /// The long gaps by length ([`LENGTH_CLASSES`]; empty where there was no long
+    /// validation entry, and in reports written before).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub by_length: Vec<LengthBlend>,
+}
+
+/// The weights of one length class of long gaps ([`length_class`]).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct LengthBlend {
+    /// The longest gap of the class, in frames (`None`: no bound).
+    pub longest: Option<usize>,
+    /// The weights used: the class's own, or the pooled long ones.
+    pub weights: Weights,
+    /// The validation entries of the class, over the draws.
+    pub validated: usize,
+    /// Whether the weights are the class's own: it had validation entries in at least
+    /// two draws (else it takes the pooled long weights).
+    pub own: bool,
+    /// Whether its own blend beat the field's fill cross-fitted (else its own weights are
+    /// the field's fill alone).
+    pub cross_fitted: bool,
 }
 
 /// doma's fill of every unobserved entry of `tracks` from the field's prediction `field`:
 /// each gap filled by the blend of the fillers whose weights did best on validation spans
-/// drawn with `seed` (module docs). Observed entries are returned as observed; a track
-/// never observed is left as it is.
-pub fn blended_fill(tracks: &Marked, field: &FieldPrediction, seed: u64) -> (Vec<f32>, Blend) {
+/// drawn with `seed`, or on `blind`, observed entries of `tracks` that the field was fitted
+/// without ([`blind_spans`]), where there are any (module docs). Observed entries are
+/// returned as observed; a track never observed is left as it is.
+pub fn blended_fill(
+    tracks: &Marked,
+    field: &FieldPrediction,
+    seed: u64,
+    blind: &[(usize, usize)],
+) -> (Vec<f32>, Blend) {
     let n = tracks.points;
-    let classes = gap_classes(tracks);
-    let blend = learn(tracks, field, seed);
+    let sizes = gap_sizes(tracks);
+    let blend = learn(tracks, field, seed, blind);
     // The entries to fill: every gap of a track observed somewhere.
-    let entries: Vec<(usize, usize, bool)> = (0..tracks.frames)
+    let entries: Vec<(usize, usize, usize)> = (0..tracks.frames)
         .flat_map(|k| (0..n).map(move |i| (k, i)))
-        .filter_map(|(k, i)| classes[k * n + i].map(|long| (k, i, long)))
+        .filter_map(|(k, i)| sizes[k * n + i].map(|len| (k, i, len)))
         .collect();
-    let field_only = Weights::only(Filler::FieldFill);
-    if blend.short == field_only && blend.long == field_only {
+    if blend.is_field_only() {
         return (field_fill(tracks, field, Lending::Fixed), blend);
     }
     let mut out = tracks.positions.to_vec();
@@ -90,25 +158,25 @@ pub fn blended_fill(tracks: &Marked, field: &FieldPrediction, seed: u64) -> (Vec
     (out, blend)
 }
 
-/// The blend of every filler at `entries` `(frame, track, long)` by `blend`'s weights for
-/// each entry's class, and the fillers' values there.
+/// The blend of every filler at `entries` `(frame, track, gap length)` by `blend`'s
+/// weights for each entry's class, and the fillers' values there.
 fn blend_at(
     sources: &Sources,
     blend: &Blend,
-    entries: &[(usize, usize, bool)],
+    entries: &[(usize, usize, usize)],
 ) -> (Vec<[f32; 3]>, Vec<[[f32; 3]; M]>) {
     let values = candidates(sources, entries);
     let fills = values
         .iter()
         .zip(entries)
-        .map(|(p, &(_, _, long))| blend.combine(long, p))
+        .map(|(p, &(_, _, len))| blend.combine(len, p))
         .collect();
     (fills, values)
 }
 
-/// Every filler's value at `entries` `(frame, track, long)`, in the order of
+/// Every filler's value at `entries` `(frame, track, gap length)`, in the order of
 /// [`Filler::ALL`].
-fn candidates(sources: &Sources, entries: &[(usize, usize, bool)]) -> Vec<[[f32; 3]; M]> {
+fn candidates(sources: &Sources, entries: &[(usize, usize, usize)]) -> Vec<[[f32; 3]; M]> {
     let pairs: Vec<(usize, usize)> = entries.iter().map(|&(k, i, _)| (k, i)).collect();
     let columns = Filler::ALL.map(|f| f.fill_at(sources, &pairs));
     (0..entries.len())
@@ -140,14 +208,15 @@ pub fn fills_at(
     tracks: &Marked,
     field: &FieldPrediction,
     seed: u64,
+    blind: &[(usize, usize)],
     entries: &[(usize, usize)],
 ) -> FillsAt {
     let n = tracks.points;
-    let classes = gap_classes(tracks);
-    let blend = learn(tracks, field, seed);
-    let entries: Vec<(usize, usize, bool)> = entries
+    let sizes = gap_sizes(tracks);
+    let blend = learn(tracks, field, seed, blind);
+    let entries: Vec<(usize, usize, usize)> = entries
         .iter()
-        .map(|&(k, i)| (k, i, classes[k * n + i] == Some(true)))
+        .map(|&(k, i)| (k, i, sizes[k * n + i].unwrap_or(0)))
         .collect();
     let (doma, fillers) = blend_at(&Sources::new(*tracks, field), &blend, &entries);
     FillsAt {
@@ -158,9 +227,26 @@ pub fn fills_at(
 }
 
 impl Blend {
-    /// The blend of one entry's filler values `p` by the weights of its class.
-    fn combine(&self, long: bool, p: &[[f32; 3]; M]) -> [f32; 3] {
-        let w = if long { self.long } else { self.short }.0;
+    /// The weights for a gap of `len` frames.
+    pub fn weights_for(&self, len: usize) -> &Weights {
+        match length_class(len) {
+            None => &self.short,
+            Some(c) => self.by_length.get(c).map_or(&self.long, |b| &b.weights),
+        }
+    }
+
+    /// Whether every class fills with the field's fill alone.
+    fn is_field_only(&self) -> bool {
+        let field_only = Weights::only(Filler::FieldFill);
+        self.short == field_only
+            && self.long == field_only
+            && self.by_length.iter().all(|b| b.weights == field_only)
+    }
+
+    /// The blend of one entry's filler values `p`, in a gap of `len` frames, by the
+    /// weights of its class.
+    fn combine(&self, len: usize, p: &[[f32; 3]; M]) -> [f32; 3] {
+        let w = self.weights_for(len).0;
         std::array::from_fn(|c| {
             (0..M)
                 .filter(|&m| w[m] > 0.0)
@@ -170,10 +256,26 @@ impl Blend {
     }
 }
 
-/// The weights: in each draw, validation spans hidden and every filler filling them from
-/// the rest; the least-squares convex combination per class over the draws, kept where it
-/// beats the field's fill cross-fitted.
-fn learn(tracks: &Marked, field: &FieldPrediction, seed: u64) -> Blend {
+/// The classes whose weights [`learn`] solves for: short gaps, long gaps pooled, then each
+/// length class of the long ones.
+const CLASSES: usize = 2 + LENGTH_CLASSES;
+
+/// The classes a validation entry in a gap of `len` frames counts in.
+fn classes_of(len: usize) -> impl Iterator<Item = usize> {
+    match length_class(len) {
+        None => [Some(0), None],
+        Some(c) => [Some(1), Some(2 + c)],
+    }
+    .into_iter()
+    .flatten()
+}
+
+/// The weights: in each draw, validation spans hidden (drawn with `seed`, or the folds of
+/// `blind`) and every filler filling them from the rest; the least-squares convex
+/// combination per class over the draws, kept where it beats the field's fill
+/// cross-fitted. Short gaps and long ones pooled, then each length class of the long ones
+/// with validation entries in two draws or more.
+fn learn(tracks: &Marked, field: &FieldPrediction, seed: u64, blind: &[(usize, usize)]) -> Blend {
     let (t, n, observed) = (tracks.frames, tracks.points, tracks.observed);
     let field_only = Weights::only(Filler::FieldFill);
     let carried_only = Blend {
@@ -181,50 +283,44 @@ fn learn(tracks: &Marked, field: &FieldPrediction, seed: u64) -> Blend {
         long: field_only,
         validated: [0, 0],
         cross_fitted: [false, false],
+        by_length: Vec::new(),
     };
     if t < 3 || observed.iter().all(|&o| o) {
         return carried_only;
     }
     // Per draw and class, E[m][l] = Σ (p_m − y)·(p_l − y).
     let mut grams = Vec::with_capacity(VALIDATION_FOLDS);
-    let mut counts = [0usize; 2];
-    for fold in 0..VALIDATION_FOLDS {
-        let fold_seed = seed ^ 0x9e37_79b9_7f4a_7c15u64.wrapping_mul(fold as u64 + 1);
-        let Ok(hidden) = validation_spans(tracks, VALIDATION_FRACTION, fold_seed) else {
-            continue;
-        };
-        let mut left = observed.to_vec();
-        for &(k, i) in &hidden {
-            left[k * n + i] = false;
-        }
-        // Each validation entry's class, by its gap in what is left.
+    let mut counts = [0usize; CLASSES];
+    // The draws in which each class has a validation entry.
+    let mut drawn = [0usize; CLASSES];
+    for (hidden, left) in draws(tracks, seed, blind) {
+        // Each validation entry's gap length in what is left.
         let left_tracks = tracks.with_observed(&left);
-        let left_classes = gap_classes(&left_tracks);
-        let entries: Vec<(usize, usize, bool)> = hidden
+        let left_sizes = gap_sizes(&left_tracks);
+        let entries: Vec<(usize, usize, usize)> = hidden
             .iter()
-            .filter_map(|&(k, i)| left_classes[k * n + i].map(|long| (k, i, long)))
+            .filter_map(|&(k, i)| left_sizes[k * n + i].map(|len| (k, i, len)))
             .collect();
-        let mut gram = [[[0f64; M]; M]; 2];
+        let mut gram = [[[0f64; M]; M]; CLASSES];
+        let before = counts;
         accumulate(
             &Sources::new(left_tracks, field),
             &entries,
             &mut gram,
             &mut counts,
         );
+        for c in 0..CLASSES {
+            drawn[c] += usize::from(counts[c] > before[c]);
+        }
         grams.push(gram);
     }
-    let mut weights = [field_only; 2];
     // The field's fill's row and column of each Gram matrix.
     let f = Filler::FieldFill.index();
-    let mut cross_fitted = [false; 2];
-    for class in 0..2 {
-        if counts[class] == 0 {
-            continue;
-        }
+    let solve = |class: usize| -> (Weights, bool) {
         let sum = |skip: Option<usize>| {
             let mut e = [[0f64; M]; M];
-            for (f, g) in grams.iter().enumerate() {
-                if Some(f) != skip {
+            for (fold, g) in grams.iter().enumerate() {
+                if Some(fold) != skip {
                     for m in 0..M {
                         for l in 0..M {
                             e[m][l] += g[class][m][l];
@@ -246,35 +342,116 @@ fn learn(tracks: &Marked, field: &FieldPrediction, seed: u64) -> Blend {
             alone += g[class][f][f];
         }
         if blended < alone {
-            weights[class] = PerFiller(simplex_least_squares(&sum(None)));
-            cross_fitted[class] = true;
+            (PerFiller(simplex_least_squares(&sum(None))), true)
+        } else {
+            (field_only, false)
+        }
+    };
+    let mut weights = [field_only; 2];
+    let mut cross_fitted = [false; 2];
+    for class in 0..2 {
+        if counts[class] > 0 {
+            (weights[class], cross_fitted[class]) = solve(class);
         }
     }
     // A class with no validation entry takes the other's weights.
-    match counts {
+    match [counts[0], counts[1]] {
         [0, 0] => return carried_only,
         [0, _] => (weights[0], cross_fitted[0]) = (weights[1], cross_fitted[1]),
         [_, 0] => (weights[1], cross_fitted[1]) = (weights[0], cross_fitted[0]),
         _ => {}
     }
+    let by_length = if counts[1] == 0 {
+        Vec::new()
+    } else {
+        (0..LENGTH_CLASSES)
+            .map(|c| {
+                let class = 2 + c;
+                let own = drawn[class] >= 2;
+                let (w, beat) = if own {
+                    solve(class)
+                } else {
+                    (weights[1], false)
+                };
+                LengthBlend {
+                    longest: class_longest(c),
+                    weights: w,
+                    validated: counts[class],
+                    own,
+                    cross_fitted: beat,
+                }
+            })
+            .collect()
+    };
     Blend {
         short: weights[0],
         long: weights[1],
-        validated: counts,
+        validated: [counts[0], counts[1]],
         cross_fitted,
+        by_length,
     }
 }
 
+/// One validation draw: the entries hidden, and the `[T, N]` mask of what is left observed.
+type Draw = (Vec<(usize, usize)>, Vec<bool>);
+
+/// The validation draws of [`learn`], each its hidden entries and what is left observed:
+/// [`VALIDATION_FOLDS`] draws of spans with `seed`, or, where `blind` holds observed
+/// entries, those alone hidden and split into the folds span by span.
+fn draws(tracks: &Marked, seed: u64, blind: &[(usize, usize)]) -> Vec<Draw> {
+    let (n, observed) = (tracks.points, tracks.observed);
+    let hide = |hidden: &[(usize, usize)]| {
+        let mut left = observed.to_vec();
+        for &(k, i) in hidden {
+            left[k * n + i] = false;
+        }
+        left
+    };
+    let mut blind: Vec<(usize, usize)> = blind
+        .iter()
+        .copied()
+        .filter(|&(k, i)| observed[k * n + i])
+        .collect();
+    if blind.is_empty() {
+        return (0..VALIDATION_FOLDS)
+            .filter_map(|fold| {
+                let fold_seed = seed ^ 0x9e37_79b9_7f4a_7c15u64.wrapping_mul(fold as u64 + 1);
+                let hidden = validation_spans(tracks, VALIDATION_FRACTION, fold_seed).ok()?;
+                let left = hide(&hidden);
+                Some((hidden, left))
+            })
+            .collect();
+    }
+    let left = hide(&blind);
+    // Span by span (a track's consecutive frames), so that a fold never judges a span
+    // whose other half another fold learned from.
+    blind.sort_unstable_by_key(|&(k, i)| (i, k));
+    let mut folds = vec![Vec::new(); VALIDATION_FOLDS];
+    let mut span = 0;
+    for (r, &(k, i)) in blind.iter().enumerate() {
+        if r > 0 && blind[r - 1] != (k.wrapping_sub(1), i) {
+            span += 1;
+        }
+        folds[span % VALIDATION_FOLDS].push((k, i));
+    }
+    folds
+        .into_iter()
+        .filter(|f| !f.is_empty())
+        .map(|f| (f, left.clone()))
+        .collect()
+}
+
 /// Adds to each class's `E[m][l] = Σ (p_m − y)·(p_l − y)` (over the entries and their
-/// coordinates) the fillers' errors at `entries`, filled from the observations of `sources`.
+/// coordinates) the fillers' errors at `entries` `(frame, track, gap length)`, filled from
+/// the observations of `sources`.
 fn accumulate(
     sources: &Sources,
-    entries: &[(usize, usize, bool)],
-    gram: &mut [[[f64; M]; M]; 2],
-    counts: &mut [usize; 2],
+    entries: &[(usize, usize, usize)],
+    gram: &mut [[[f64; M]; M]; CLASSES],
+    counts: &mut [usize; CLASSES],
 ) {
     let (positions, n) = (sources.marked.positions, sources.marked.points);
-    for (p, &(k, i, long)) in candidates(sources, entries).iter().zip(entries) {
+    for (p, &(k, i, len)) in candidates(sources, entries).iter().zip(entries) {
         let e = 3 * (k * n + i);
         let d: Vec<[f64; 3]> = p
             .iter()
@@ -283,19 +460,43 @@ fn accumulate(
         if d.iter().flatten().any(|v| !v.is_finite()) {
             continue;
         }
-        let g = &mut gram[usize::from(long)];
-        for m in 0..M {
-            for l in 0..M {
-                g[m][l] += (0..3).map(|c| d[m][c] * d[l][c]).sum::<f64>();
+        for class in classes_of(len) {
+            let g = &mut gram[class];
+            for m in 0..M {
+                for l in 0..M {
+                    g[m][l] += (0..3).map(|c| d[m][c] * d[l][c]).sum::<f64>();
+                }
             }
+            counts[class] += 1;
         }
-        counts[usize::from(long)] += 1;
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `[T, N, 3]`: a grid of `n` tracks, five to a row, translated by an irregular jump
+    /// every frame (a camera shake: no spline follows it).
+    fn camera_shake(t: usize, n: usize) -> Vec<f32> {
+        let jump = |k: usize| {
+            let k = k as f32;
+            [
+                (1.7 * k * k).sin(),
+                (2.3 * k * k + 1.0).cos(),
+                0.5 * (0.9 * k * k).sin(),
+            ]
+        };
+        (0..t)
+            .flat_map(|k| {
+                let d = jump(k);
+                (0..n).flat_map(move |i| {
+                    let (x, y) = ((i % 5) as f32, (i / 5) as f32);
+                    [x + d[0], y + d[1], d[2]]
+                })
+            })
+            .collect()
+    }
 
     #[test]
     fn where_nothing_can_be_validated_the_fill_is_the_carried_one() {
@@ -311,7 +512,7 @@ mod tests {
         }
         let canonical: Vec<f32> = (0..3 * n).map(|v| v as f32).collect();
         let field = FieldPrediction::new(n, &predicted, &canonical, &observed);
-        let (filled, blend) = blended_fill(&Marked::new(t, n, &truth, &observed), &field, 3);
+        let (filled, blend) = blended_fill(&Marked::new(t, n, &truth, &observed), &field, 3, &[]);
         assert_eq!(blend.short, Weights::only(Filler::FieldFill));
         assert_eq!(blend.validated, [0, 0]);
         assert_eq!(
@@ -332,23 +533,7 @@ mod tests {
         // fill is the spline's: the blend must move its weight to the fillers that follow
         // the other tracks' motion, which are exact here.
         let (t, n) = (30usize, 20usize);
-        let jump = |k: usize| {
-            let k = k as f32;
-            [
-                (1.7 * k * k).sin(),
-                (2.3 * k * k + 1.0).cos(),
-                0.5 * (0.9 * k * k).sin(),
-            ]
-        };
-        let truth: Vec<f32> = (0..t)
-            .flat_map(|k| {
-                let d = jump(k);
-                (0..n).flat_map(move |i| {
-                    let (x, y) = ((i % 5) as f32, (i / 5) as f32);
-                    [x + d[0], y + d[1], d[2]]
-                })
-            })
-            .collect();
+        let truth = camera_shake(t, n);
         let mut observed = vec![true; t * n];
         for i in 0..n {
             for k in 0..4 {
@@ -360,7 +545,7 @@ mod tests {
             predicted: &predicted,
             neighbours: vec![Vec::new(); n],
         };
-        let (filled, blend) = blended_fill(&Marked::new(t, n, &truth, &observed), &field, 7);
+        let (filled, blend) = blended_fill(&Marked::new(t, n, &truth, &observed), &field, 7, &[]);
         assert!(blend.validated[0] > 0 && blend.cross_fitted[0], "{blend:?}");
         // The neighbours' motion, pattern and rigid-body fill are all exact for a
         // translation: the weight goes to them, split as the least squares' ties fall.
@@ -388,6 +573,195 @@ mod tests {
     }
 
     #[test]
+    fn blind_spans_judge_a_field_that_only_memorised_what_it_saw() {
+        // A camera-shake translation of 20 tracks, each with a real gap of 4 frames and a
+        // blind span of 3 frames elsewhere. The "field" is exact where it was fitted and
+        // 3 units off everywhere else, as an overfitted field is.
+        // Validated on spans it was fitted to, it looks exact and keeps the weight; on
+        // the blind spans it is seen as it is inside a gap, and the weight goes to the
+        // fillers that follow the other tracks.
+        let (t, n) = (30usize, 20usize);
+        let truth = camera_shake(t, n);
+        let mut observed = vec![true; t * n];
+        let mut blind = Vec::new();
+        for i in 0..n {
+            for k in 3 + i..7 + i {
+                observed[k * n + i] = false;
+            }
+            let start = if i < 10 { 18 + i % 5 } else { 4 };
+            blind.extend((start..start + 3).map(|k| (k, i)));
+        }
+        blind.sort_unstable();
+        let mut fitted = observed.clone();
+        for &(k, i) in &blind {
+            fitted[k * n + i] = false;
+        }
+        let predicted: Vec<f32> = truth
+            .iter()
+            .enumerate()
+            .map(|(e, &y)| if fitted[e / 3] { y } else { y + 3.0 })
+            .collect();
+        let field = FieldPrediction {
+            predicted: &predicted,
+            neighbours: vec![Vec::new(); n],
+        };
+        let tracks = Marked::new(t, n, &truth, &observed);
+        let worst = |filled: &[f32]| {
+            (0..3 * t * n)
+                .filter(|&e| !observed[e / 3])
+                .map(|e| (filled[e] - truth[e]).abs())
+                .fold(0f32, f32::max)
+        };
+
+        // Fitted to every observation, the same field is exact on all of them.
+        let memorised: Vec<f32> = truth
+            .iter()
+            .enumerate()
+            .map(|(e, &y)| if observed[e / 3] { y } else { y + 3.0 })
+            .collect();
+        let memorised = FieldPrediction {
+            predicted: &memorised,
+            neighbours: vec![Vec::new(); n],
+        };
+        let (seen, fooled) = blended_fill(&tracks, &memorised, 7, &[]);
+        assert!(fooled.short[Filler::FieldFill] > 0.5, "{fooled:?}");
+        assert!(worst(&seen) > 1.0, "{}", worst(&seen));
+
+        // Each blind span lands whole in one fold, and every fold hides all of them.
+        let folds = draws(&tracks, 7, &blind);
+        assert_eq!(folds.len(), VALIDATION_FOLDS);
+        let mut all: Vec<(usize, usize)> = folds.iter().flat_map(|(h, _)| h.clone()).collect();
+        all.sort_unstable();
+        assert_eq!(all, blind);
+        for (hidden, left) in &folds {
+            assert!(blind.iter().all(|&(k, i)| !left[k * n + i]));
+            for &(k, i) in hidden {
+                let whole = (k.saturating_sub(2)..k + 3)
+                    .filter(|&j| blind.binary_search(&(j, i)).is_ok())
+                    .all(|j| hidden.contains(&(j, i)));
+                assert!(whole, "the span of ({k}, {i}) is split across folds");
+            }
+        }
+
+        let (filled, blend) = blended_fill(&tracks, &field, 7, &blind);
+        assert_eq!(
+            blend.validated.iter().sum::<usize>(),
+            blind.len(),
+            "{blend:?}"
+        );
+        let exact = [Filler::Neighbours, Filler::Pattern, Filler::RigidBody];
+        for weights in [blend.short, blend.long] {
+            let on_exact: f64 = exact.iter().map(|&f| weights[f]).sum();
+            assert!(on_exact > 0.95, "{blend:?}");
+        }
+        assert!(worst(&filled) < 0.1, "{}", worst(&filled));
+        for (e, (&f, &y)) in filled.iter().zip(&truth).enumerate() {
+            if observed[e / 3] {
+                assert_eq!(
+                    f, y,
+                    "an observed entry, blind or not, is returned as given"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn length_classes_double_from_the_spline_carry() {
+        let c = crate::gaps::SPLINE_CARRY_FRAMES;
+        assert_eq!(length_class(c), None);
+        assert_eq!(length_class(c + 1), Some(0));
+        assert_eq!(length_class(2 * c), Some(0));
+        assert_eq!(length_class(2 * c + 1), Some(1));
+        assert_eq!(length_class(16 * c), Some(3));
+        assert_eq!(length_class(16 * c + 1), Some(4));
+        assert_eq!(length_class(usize::MAX), Some(LENGTH_CLASSES - 1));
+        for class in 0..LENGTH_CLASSES - 1 {
+            let top = class_longest(class).unwrap();
+            assert_eq!(
+                (length_class(top), length_class(top + 1)),
+                (Some(class), Some(class + 1))
+            );
+        }
+        assert_eq!(class_longest(LENGTH_CLASSES - 1), None);
+    }
+
+    #[test]
+    fn each_length_class_learns_its_own_weights() {
+        // Twelve tracks on slow sines of their own (no donor follows another), each with a
+        // gap of 24 frames and one of 100. A spline is near exact across 24 frames and far
+        // off across 100; the "field" is off by the same noise everywhere. Pooled, the long
+        // gaps' squared errors would choose for both; by length, the 24-frame gaps go to
+        // the spline and the 100-frame ones to the field.
+        let (t, n) = (400usize, 12usize);
+        let truth: Vec<f32> = (0..t)
+            .flat_map(|k| {
+                (0..n).flat_map(move |i| {
+                    let (k, i) = (k as f32, i as f32);
+                    let tau = std::f32::consts::TAU;
+                    [
+                        (tau * k / 160.0 + i).sin(),
+                        (tau * k / (130.0 + 7.0 * i)).cos(),
+                        0.1 * i + 0.3 * (tau * k / (190.0 + 5.0 * i)).sin(),
+                    ]
+                })
+            })
+            .collect();
+        let mut observed = vec![true; t * n];
+        for i in 0..n {
+            let (a, b) = (10 + 7 * i, 200 + 9 * i);
+            for k in (a..a + 24).chain(b..b + 100) {
+                observed[k * n + i] = false;
+            }
+        }
+        let predicted: Vec<f32> = truth
+            .iter()
+            .enumerate()
+            .map(|(e, &y)| y + 0.05 * ((e as f32 * 12.9898).sin() * 43_758.547).fract())
+            .collect();
+        let field = FieldPrediction {
+            predicted: &predicted,
+            neighbours: vec![Vec::new(); n],
+        };
+        let tracks = Marked::new(t, n, &truth, &observed);
+        let (filled, blend) = blended_fill(&tracks, &field, 5, &[]);
+        let of = |len: usize| blend.by_length[length_class(len).unwrap()];
+        let (medium, long) = (of(24), of(100));
+        assert!(medium.own && long.own, "{blend:?}");
+        assert!(medium.weights[Filler::Spline] > 0.5, "{blend:?}");
+        assert!(long.weights[Filler::Spline] < 0.1, "{blend:?}");
+        // The 24-frame gaps filled by their class's weights beat the pooled ones there.
+        let pooled = Blend {
+            by_length: Vec::new(),
+            ..blend.clone()
+        };
+        let entries: Vec<(usize, usize, usize)> = (0..n)
+            .flat_map(|i| (10 + 7 * i..34 + 7 * i).map(move |k| (k, i, 24)))
+            .collect();
+        let (by_pool, _) = blend_at(&Sources::new(tracks, &field), &pooled, &entries);
+        let error = |fill: &dyn Fn(usize) -> [f32; 3]| {
+            entries
+                .iter()
+                .enumerate()
+                .map(|(r, &(k, i, _))| {
+                    let e = 3 * (k * n + i);
+                    let v = fill(r);
+                    (0..3).map(|c| (v[c] - truth[e + c]).powi(2)).sum::<f32>()
+                })
+                .sum::<f32>()
+        };
+        let own = error(&|r| {
+            let (k, i, _) = entries[r];
+            let e = 3 * (k * n + i);
+            [filled[e], filled[e + 1], filled[e + 2]]
+        });
+        let pooled_error = error(&|r| by_pool[r]);
+        assert!(
+            own < 0.5 * pooled_error,
+            "{own} against {pooled_error}: {blend:?}"
+        );
+    }
+
+    #[test]
     fn an_exact_field_keeps_the_whole_weight() {
         // The field is the truth: its carried fill is exact, so it wins every validation
         // entry and the real gaps are filled exactly.
@@ -407,7 +781,7 @@ mod tests {
             }
         }
         let field = FieldPrediction::new(n, &truth, &truth[..3 * n], &observed);
-        let (filled, blend) = blended_fill(&Marked::new(t, n, &truth, &observed), &field, 1);
+        let (filled, blend) = blended_fill(&Marked::new(t, n, &truth, &observed), &field, 1, &[]);
         assert_eq!(blend.short, Weights::only(Filler::FieldFill), "{blend:?}");
         for (a, b) in filled.iter().zip(&truth) {
             assert!((a - b).abs() < 1e-5);
@@ -420,7 +794,8 @@ mod tests {
         let positions: Vec<f32> = (0..3 * t * n).map(|v| v as f32).collect();
         let observed = vec![true; t * n];
         let field = FieldPrediction::new(n, &positions, &positions[..3 * n], &observed);
-        let (filled, blend) = blended_fill(&Marked::new(t, n, &positions, &observed), &field, 0);
+        let (filled, blend) =
+            blended_fill(&Marked::new(t, n, &positions, &observed), &field, 0, &[]);
         assert_eq!(filled, positions);
         assert_eq!(blend.validated, [0, 0]);
     }

@@ -82,14 +82,14 @@ pub fn gaps<'a>(tracks: &'a Marked<'a>) -> impl Iterator<Item = Gap> + 'a {
     (0..tracks.points).flat_map(move |i| track_gaps(tracks, i))
 }
 
-/// For each entry `[T, N]`: `None` if observed or of a track never observed, else whether
-/// its gap [`Gap::is_long`].
-pub fn gap_classes(tracks: &Marked) -> Vec<Option<bool>> {
+/// For each entry `[T, N]`: `None` if observed or of a track never observed, else the
+/// length of its gap, in frames.
+pub fn gap_sizes(tracks: &Marked) -> Vec<Option<usize>> {
     let n = tracks.points;
     let mut out = vec![None; tracks.frames * n];
     for gap in gaps(tracks) {
         for k in gap.frames.clone() {
-            out[k * n + gap.track] = Some(gap.is_long());
+            out[k * n + gap.track] = Some(gap.len());
         }
     }
     out
@@ -273,7 +273,7 @@ mod tests {
     }
 
     #[test]
-    fn gap_classes_and_lengths_follow_the_gaps() {
+    fn gap_sizes_and_lengths_follow_the_gaps() {
         // One track of 40 frames: seen at 0, 4, 30, 39 (gaps of 3, 25 and 8), and one never
         // seen.
         let (t, n) = (40, 2);
@@ -283,10 +283,12 @@ mod tests {
         }
         let positions = vec![0f32; 3 * t * n];
         let tracks = Marked::new(t, n, &positions, &observed);
-        let classes = gap_classes(&tracks);
-        assert_eq!(classes[2 * n], Some(false));
-        assert_eq!(classes[10 * n], Some(true));
-        assert!(classes.iter().skip(1).step_by(2).all(Option::is_none));
+        let sizes = gap_sizes(&tracks);
+        assert_eq!(sizes[2 * n], Some(3));
+        assert_eq!(sizes[10 * n], Some(25));
+        assert_eq!(sizes[35 * n], Some(8));
+        assert_eq!(sizes[30 * n], None);
+        assert!(sizes.iter().skip(1).step_by(2).all(Option::is_none));
         assert_eq!(gap_lengths(&tracks), vec![3, 25, 8]);
     }
 

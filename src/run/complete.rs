@@ -289,7 +289,10 @@ fn complete_with(
     let field = FieldPrediction::new(n, &predicted, data.canonical(), seen);
     let tracks = Marked::new(t, n, &normalised, seen);
     let (values, blend) = match policy.method {
-        None => blended_fill(&tracks, &field, config.fit.seed),
+        None => {
+            let blind = sequence.blind.as_ref().map_or(&[][..], |b| &b.entries[..]);
+            blended_fill(&tracks, &field, config.fit.seed, blind)
+        }
         Some(filler) => {
             let gaps: Vec<(usize, usize)> = (0..t * n)
                 .filter(|&e| !seen[e])
@@ -306,6 +309,7 @@ fn complete_with(
                 long: only,
                 validated: [0, 0],
                 cross_fitted: [false, false],
+                by_length: Vec::new(),
             };
             (values, blend)
         }

@@ -188,6 +188,7 @@ fn finish(
                 center: sequence.center,
                 scale: sequence.scale,
                 held_out: sequence.held_out.clone(),
+                blind: sequence.blind.clone(),
                 kept: sequence.kept.clone(),
             }
         }

@@ -79,17 +79,25 @@ pub fn gap_report(
         return Ok(None);
     }
     let (t, n) = (given.frames(), given.points());
-    let all_seen = vec![true; t * n];
-    let tracks = Marked::new(
-        t,
-        n,
-        given.positions(),
-        given.observed().unwrap_or(&all_seen),
-    );
+    let mut seen = given.observed().map_or(vec![true; t * n], <[bool]>::to_vec);
+    let mut positions = given.positions().to_vec();
+    // The blind validation spans are observations the fill has, though the field does not.
+    let mut blind = Vec::new();
+    if let Some(b) = &placed.blind {
+        for (&(k, i), p) in b.entries.iter().zip(&b.truth) {
+            if row[i] != usize::MAX {
+                let e = k * n + row[i];
+                positions[3 * e..3 * e + 3].copy_from_slice(p);
+                seen[e] = true;
+                blind.push((k, row[i]));
+            }
+        }
+    }
+    let tracks = Marked::new(t, n, &positions, &seen);
     let predicted = field_everywhere(field, &train, device)?;
     // doma's fill and its fillers (the field's fills and the classic ones) at the entries.
     let prediction = FieldPrediction::new(n, &predicted, train.canonical(), tracks.observed);
-    let fills = fills_at(&tracks, &prediction, config.fit.seed, &entries);
+    let fills = fills_at(&tracks, &prediction, config.fit.seed, &blind, &entries);
     let field_alone: Vec<[f32; 3]> = entries
         .iter()
         .map(|&(k, r)| {

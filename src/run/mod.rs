@@ -103,6 +103,11 @@ pub struct RunConfig {
     /// 2 and 10).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout_span: Option<[usize; 2]>,
+    /// On tracks with gaps, hide one draw of doma's fill's validation spans from the fit
+    /// (seeded by the fit's seed), so that `complete` learns the blend's weights where the
+    /// field has not seen the answer ([`crate::gaps::blend`]).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub blind_validation: bool,
     /// A digest of the data as the fit read it ([`data_digest`]), so that a run whose data
     /// file was replaced or edited since is refused rather than read with another
     /// normalisation (absent in runs made before it was recorded: not checked).
@@ -165,6 +170,7 @@ impl RunConfig {
             drop_unobserved: false,
             holdout_observations: None,
             holdout_span: None,
+            blind_validation: false,
             data_digest: None,
         }
     }
@@ -229,6 +235,7 @@ impl RunConfig {
                     spans: self.holdout_span.map_or(DEFAULT_SPANS, |[a, b]| a..=b),
                     seed: self.fit.seed,
                 }),
+                blind_validation: self.blind_validation.then_some(self.fit.seed),
             },
         )
     }

@@ -149,9 +149,10 @@ fn held_out_observations_are_reported_beside_every_baseline_and_eval_repeats_the
         }
     }
     // doma's fill: convex weights per class of gaps, validated on entries of this data.
-    let blend = gaps.blend.expect("the fill's weights");
+    let blend = gaps.blend.clone().expect("the fill's weights");
     assert!(blend.validated.iter().sum::<usize>() > 0, "{blend:?}");
-    for w in [blend.short, blend.long] {
+    let by_length = blend.by_length.iter().map(|b| b.weights);
+    for w in [blend.short, blend.long].into_iter().chain(by_length) {
         assert!(w.0.iter().all(|&v| v >= 0.0), "{blend:?}");
         assert!((w.0.iter().sum::<f64>() - 1.0).abs() < 1e-9, "{blend:?}");
     }
@@ -171,6 +172,58 @@ fn held_out_observations_are_reported_beside_every_baseline_and_eval_repeats_the
         plots.len() >= 3 && plots.iter().all(|p| p.is_file()),
         "{plots:?}"
     );
+}
+
+/// With blind validation the fit never sees the validation spans, the blend is learned on
+/// them alone, and the completion still returns them as observed.
+#[test]
+fn blind_validation_spans_are_hidden_from_the_fit_and_validate_the_blend() {
+    let v = view();
+    let dir = common::scratch("doma-blind-fit");
+    let npz = dir.join("clip.npz");
+    v.write(&npz, Layout::TapVid3d).unwrap();
+    let run = RunDir::new(dir.join("run"));
+    let report = fit(&npz, &run, |c| {
+        c.drop_unobserved = true;
+        c.test_fraction = 0.0;
+        c.holdout_observations = Some(0.2);
+        c.blind_validation = true;
+    });
+    let config = run.load_config().unwrap();
+    assert!(config.blind_validation);
+    let data = run.load_data(&config).unwrap();
+    let blind = data.blind.clone().expect("blind spans");
+    let held = data.held_out.clone().expect("held-out spans");
+    let n = data.trajectories.points();
+    let fitted = data.trajectories.observed().unwrap();
+    assert!(blind.entries.iter().all(|&(k, i)| !fitted[k * n + i]));
+    assert!(
+        blind
+            .entries
+            .iter()
+            .all(|e| held.entries.binary_search(e).is_err())
+    );
+    // The report's blend is learned on the blind spans alone.
+    let gaps = report.held_out_observations.expect("a gap report");
+    let learned = gaps.blend.expect("the fill's weights");
+    assert_eq!(learned.validated.iter().sum::<usize>(), blind.entries.len());
+
+    let done = doma::run::complete_tracks(&run, FillPolicy::default(), &Device::flex()).unwrap();
+    assert_eq!(
+        done.blend.validated.iter().sum::<usize>(),
+        blind.entries.len()
+    );
+    let (input, _) = doma::data::sequence::read_tracks(&npz, &TrackFile::default()).unwrap();
+    let kept = data.kept.clone().unwrap_or_else(|| (0..n).collect());
+    let input = input.select_points(&kept);
+    for &(k, i) in &blind.entries {
+        let e = k * n + i;
+        assert!(done.observed[e] && !done.filled[e]);
+        assert_eq!(
+            done.tracks[3 * e..3 * e + 3],
+            input.positions()[3 * e..3 * e + 3]
+        );
+    }
 }
 
 /// A completion of every unobserved entry, past the tracks' ends too.

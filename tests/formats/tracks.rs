@@ -320,6 +320,67 @@ fn a_hidden_entry_s_stored_value_changes_nothing() {
 }
 
 #[test]
+fn blind_validation_hides_spans_from_the_fit_and_keeps_their_truth() {
+    let v = view();
+    let dir = common::scratch("doma-blind");
+    let path = dir.join("a.npz");
+    v.write(&path, Layout::TapVid3d).unwrap();
+    let plain = LoadOptions {
+        drop_unobserved: true,
+        ..LoadOptions::default()
+    };
+    let with_blind = LoadOptions {
+        blind_validation: Some(3),
+        ..plain.clone()
+    };
+    let sp = load_sequence_with(&path, &plain).unwrap();
+    let sb = load_sequence_with(&path, &with_blind).unwrap();
+    assert!(sp.blind.is_none());
+    let blind = sb.blind.expect("tracks with gaps get blind spans");
+    let (p, b) = (&sp.trajectories, &sb.trajectories);
+    let n = p.points();
+    let (po, bo) = (p.observed().unwrap(), b.observed().unwrap());
+    let seen = po.iter().filter(|&&o| o).count();
+    assert_eq!(
+        bo.iter().filter(|&&o| o).count(),
+        seen - blind.entries.len()
+    );
+    let share = blind.entries.len() as f64 / seen as f64;
+    assert!((0.05..=0.15).contains(&share), "{share}");
+    for (&(k, i), truth) in blind.entries.iter().zip(&blind.truth) {
+        assert!(po[k * n + i] && !bo[k * n + i], "({k}, {i})");
+        // The same input position, each in its own load's normalisation.
+        for (c, &v) in truth.iter().enumerate() {
+            let input = p.positions()[3 * (k * n + i) + c] * sp.scale + sp.center[c];
+            let kept = v * sb.scale + sb.center[c];
+            assert!(
+                (input - kept).abs() <= 1e-4 * input.abs().max(1.0),
+                "{input} {kept}"
+            );
+        }
+    }
+    // The same seed draws the same spans; complete tracks get none.
+    assert_eq!(
+        load_sequence_with(&path, &with_blind).unwrap().blind,
+        Some(blind)
+    );
+    let other = common::scratch("doma-blind-complete");
+    let complete = other.join("c.npy");
+    let (t, m) = (v.truth.frames(), v.truth.points());
+    doma::data::npy::write_npy(&complete, &[t, m, 3], &v.camera_positions()).unwrap();
+    let options = LoadOptions {
+        blind_validation: Some(3),
+        ..LoadOptions::default()
+    };
+    assert!(
+        load_sequence_with(&complete, &options)
+            .unwrap()
+            .blind
+            .is_none()
+    );
+}
+
+#[test]
 fn confidence_weights_are_read_from_their_key_and_checked_where_observed() {
     let dir = common::scratch("doma-confidence");
     let path = dir.join("clip.npz");
