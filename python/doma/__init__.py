@@ -587,8 +587,8 @@ def fit(
         drop_unobserved: go on without tracks never observed rather than refuse them.
         holdout_observations: hide this fraction of the observations, in spans, and
             report the EPE on them (``report["held_out_observations"]``).
-        blind_validation: on tracks with gaps, hide a tenth of the observations from the
-            fit and learn :meth:`Field.complete`'s blend on them, where the field has not
+        blind_validation: on tracks with gaps, hide a tenth of the gapped tracks'
+            observations from the fit and learn :meth:`Field.complete`'s blend on them, where the field has not
             seen the answer (default False: validated on spans the field was fitted to).
         robust: ``"huber[:delta]"`` or ``"charbonnier[:eps]"``, a robust trajectory loss.
         checkpoint_every: iterations between checkpoints (default 50).

@@ -6,8 +6,10 @@
 //! most cases, but a cubic spline wins short gaps of a fast, densely sampled motion; on
 //! hundreds or thousands of tracks of one skinned surface the neighbours' motion does
 //! better (docs/results.md, gap filling). So the weights are learned per data set: in each
-//! of [`VALIDATION_FOLDS`] draws, [`VALIDATION_FRACTION`] of the observed entries are
-//! hidden again, in spans as long as the data's own gaps; every filler fills them from
+//! of [`VALIDATION_FOLDS`] draws, [`VALIDATION_FRACTION`] of the observations of the
+//! tracks with gaps are hidden again, in spans as long as the data's own gaps
+//! ([`validation_spans`]: the tracks without a gap stay whole, as for the real gaps, since
+//! the donor fillers and Gløersen's depend on them); every filler fills them from
 //! what is left, and the convex combination with the least squared error over the draws is
 //! found: one for gaps of at most [`SPLINE_CARRY_FRAMES`](super::SPLINE_CARRY_FRAMES)
 //! frames, one for longer gaps pooled, and one for each [`length_class`] of the longer ones
@@ -32,7 +34,7 @@ use super::linalg::{quadratic, simplex_least_squares};
 use super::spans::{gap_sizes, validation_spans};
 use serde::{Deserialize, Serialize};
 
-/// The share of the observed entries hidden in each validation draw.
+/// The share of the observations of the tracks with gaps hidden in each validation draw.
 pub const VALIDATION_FRACTION: f64 = 0.1;
 
 /// The validation draws.
@@ -42,9 +44,9 @@ pub const VALIDATION_FOLDS: usize = 3;
 const BLIND_SEED: u64 = 0x5851_f42d_4c95_7f2d;
 
 /// The validation spans hidden from a fit with blind validation: [`VALIDATION_FRACTION`]
-/// of the observed entries of `tracks`, in spans as long as its own gaps
-/// ([`validation_spans`]), drawn with `seed`; none where no span fits. `(frame, track)`,
-/// sorted.
+/// of the observations of the tracks of `tracks` with gaps, in spans as long as its own
+/// gaps ([`validation_spans`]), drawn with `seed`; none where no span fits.
+/// `(frame, track)`, sorted.
 pub fn blind_spans(tracks: &Marked, seed: u64) -> Vec<(usize, usize)> {
     validation_spans(tracks, VALIDATION_FRACTION, seed ^ BLIND_SEED).unwrap_or_default()
 }

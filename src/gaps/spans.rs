@@ -127,30 +127,39 @@ pub fn hold_out_spans(
         ));
     }
     let t = tracks.frames;
-    hold_out_drawn(tracks, fraction, [shortest, longest], seed, |rng| {
+    let every: Vec<usize> = (0..tracks.points).collect();
+    hold_out_drawn(tracks, fraction, [shortest, longest], seed, &every, |rng| {
         rng.random_range(shortest..=longest.min(t - 2))
     })
 }
 
-/// A seeded choice of about `fraction` of the observed entries of `tracks` to
-/// hide for validating a gap fill: spans inside the tracks' observations, their lengths
-/// drawn from the tracks' own interior gaps (one draw per gap, so the spans are as long as
-/// the gaps to fill), or from [`DEFAULT_SPANS`] when there is no interior gap. Refuses
-/// what [`hold_out_spans`] refuses.
+/// A seeded choice of about `fraction` of the observed entries of the tracks with gaps to
+/// fill, to hide for validating a gap fill: spans inside those tracks' observations, their
+/// lengths drawn from the tracks' own interior gaps (one draw per gap, so the spans are as
+/// long as the gaps to fill). The tracks without a gap are left whole, as they are for the
+/// real gaps: they are the donors of pattern and rigid-body fill and the frame of
+/// reference of Gløersen's, which cannot run once every marker has a gap. Without an
+/// interior gap, every track, in spans of [`DEFAULT_SPANS`]. Refuses what
+/// [`hold_out_spans`] refuses.
 pub fn validation_spans(
     tracks: &Marked,
     fraction: f64,
     seed: u64,
 ) -> Result<Vec<(usize, usize)>, String> {
     let t = tracks.frames;
-    let mut lengths: Vec<usize> = gap_lengths(tracks)
-        .into_iter()
+    let interior: Vec<Gap> = gaps(tracks).filter(Gap::is_interior).collect();
+    let mut lengths: Vec<usize> = interior
+        .iter()
+        .map(Gap::len)
         .filter(|&l| l + 2 <= t)
         .collect();
+    let mut gapped: Vec<usize> = interior.iter().map(|g| g.track).collect();
+    gapped.dedup();
     if lengths.is_empty() {
         lengths = DEFAULT_SPANS.filter(|&l| l + 2 <= t).collect();
+        gapped = (0..tracks.points).collect();
     }
-    hold_out_lengths(tracks, fraction, &lengths, seed)
+    hold_out_lengths(tracks, fraction, &lengths, &gapped, seed)
 }
 
 /// [`hold_out_spans`] with each span's length
@@ -160,6 +169,7 @@ fn hold_out_lengths(
     tracks: &Marked,
     fraction: f64,
     lengths: &[usize],
+    eligible: &[usize],
     seed: u64,
 ) -> Result<Vec<(usize, usize)>, String> {
     let (Some(&shortest), Some(&longest)) = (lengths.iter().min(), lengths.iter().max()) else {
@@ -171,9 +181,14 @@ fn hold_out_lengths(
             "spans of {shortest} to {longest} frames do not fit inside {t} frames"
         ));
     }
-    hold_out_drawn(tracks, fraction, [shortest, longest], seed, |rng| {
-        lengths[rng.random_range(0..lengths.len())]
-    })
+    hold_out_drawn(
+        tracks,
+        fraction,
+        [shortest, longest],
+        seed,
+        eligible,
+        |rng| lengths[rng.random_range(0..lengths.len())],
+    )
 }
 
 fn check_fraction(fraction: f64) -> Result<(), String> {
@@ -186,18 +201,23 @@ fn check_fraction(fraction: f64) -> Result<(), String> {
     }
 }
 
-/// The draw of [`hold_out_spans`] and [`hold_out_lengths`]: `length` draws each span's
-/// length, `[shortest, longest]` bound it (for the checks and the message).
+/// The draw of [`hold_out_spans`] and [`hold_out_lengths`] in the `eligible` tracks
+/// (`fraction` of their observations): `length` draws each span's length,
+/// `[shortest, longest]` bound it (for the checks and the message).
 fn hold_out_drawn(
     tracks: &Marked,
     fraction: f64,
     [shortest, longest]: [usize; 2],
     seed: u64,
+    eligible: &[usize],
     mut length: impl FnMut(&mut ChaCha8Rng) -> usize,
 ) -> Result<Vec<(usize, usize)>, String> {
     let (t, n) = (tracks.frames, tracks.points);
     check_fraction(fraction)?;
-    let observed_count = tracks.observed.iter().filter(|&&o| o).count();
+    let observed_count = eligible
+        .iter()
+        .map(|&i| (0..t).filter(|&k| tracks.observed[k * n + i]).count())
+        .sum::<usize>();
     let target = (fraction * observed_count as f64).round() as usize;
     let mut observed = tracks.observed.to_vec();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -211,10 +231,10 @@ fn hold_out_drawn(
     };
     while hidden.len() < target {
         tries += 1;
-        if tries > 100 * (target + n) || t < shortest + 2 || n == 0 {
+        if tries > 100 * (target + n) || t < shortest + 2 || eligible.is_empty() {
             return Err(cannot(hidden.len()));
         }
-        let i = rng.random_range(0..n);
+        let i = eligible[rng.random_range(0..eligible.len())];
         // A frame before and one after the span.
         let len = length(&mut rng);
         let start = rng.random_range(1..=t - 1 - len);
@@ -290,6 +310,31 @@ mod tests {
         assert_eq!(sizes[30 * n], None);
         assert!(sizes.iter().skip(1).step_by(2).all(Option::is_none));
         assert_eq!(gap_lengths(&tracks), vec![3, 25, 8]);
+    }
+
+    #[test]
+    fn validation_spans_are_drawn_in_the_tracks_with_gaps_and_leave_the_others_whole() {
+        // Ten tracks of 60 frames; tracks 2 and 7 have a gap of 6 frames. The spans fall in
+        // those two alone, a tenth of their observations, 6 frames long; without a gap
+        // anywhere they fall in every track, 2 to 10 frames long.
+        let (t, n) = (60usize, 10usize);
+        let positions = vec![0f32; 3 * t * n];
+        let mut observed = vec![true; t * n];
+        for i in [2, 7] {
+            for k in 20..26 {
+                observed[k * n + i] = false;
+            }
+        }
+        let tracks = Marked::new(t, n, &positions, &observed);
+        let spans = validation_spans(&tracks, 0.1, 3).unwrap();
+        assert!(spans.iter().all(|&(_, i)| i == 2 || i == 7), "{spans:?}");
+        assert_eq!(spans.len(), (0.1f64 * 2.0 * 54.0).round() as usize);
+        let all = vec![true; t * n];
+        let whole = Marked::new(t, n, &positions, &all);
+        let spans = validation_spans(&whole, 0.1, 3).unwrap();
+        let touched: std::collections::BTreeSet<usize> = spans.iter().map(|&(_, i)| i).collect();
+        assert!(touched.len() > 2, "{touched:?}");
+        assert_eq!(spans.len(), 60);
     }
 
     #[test]

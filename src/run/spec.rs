@@ -215,8 +215,8 @@ pub struct RunSpec {
     #[arg(long, value_name = "A..=B", value_parser = span_lengths, help_heading = "Gap filling")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout_span: Option<[usize; 2]>,
-    /// On tracks with gaps, hide a tenth of the observations, in spans as long as the
-    /// data's gaps, from the fit itself, and learn doma's fill's blend on them alone: the
+    /// On tracks with gaps, hide a tenth of the gapped tracks' observations, in spans as
+    /// long as the data's gaps, from the fit itself, and learn doma's fill's blend on them alone: the
     /// field then fills them as it fills a real gap (by default the blend is validated on
     /// spans the field was fitted to).
     #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", help_heading = "Gap filling")]
