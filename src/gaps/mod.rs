@@ -37,7 +37,7 @@
 //! | `gloersen.rs` | Gløersen & Federolf's PCA fill (R2): a method of [`Marked`] |
 //! | `donors.rs` | pattern and rigid-body fill: methods of [`Marked`] |
 //! | `field_fill.rs` | [`FieldPrediction`], the lenders ([`Lending`]), the residual carry |
-//! | `blend.rs` | [`blend::Weights`] (one per filler), learning and applying a blend |
+//! | `blend.rs` | [`blend::Weights`] (one per filler), learning them per class of gap length and applying a blend (tests in `blend/tests.rs`) |
 //! | `spans.rs` | gaps and their classes and lengths, hidden and validation spans |
 //! | `linalg.rs` | the small solvers: the spline's system, simplex least squares |
 //! | `eigen.rs` | eigenproblems (Jacobi, Householder + QL) and principal components |
