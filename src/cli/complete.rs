@@ -95,13 +95,9 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
             eprintln!("  {name} gaps: the field's fill ({why})");
             continue;
         }
-        let weights: Vec<String> = w
-            .iter()
-            .map(|(f, v)| format!("{} {v:.2}", f.label()))
-            .collect();
         eprintln!(
             "  {name} gaps (weights from {count} validation entries): {}",
-            weights.join(", ")
+            listed(w)
         );
     }
     let mut shortest = crate::gaps::SPLINE_CARRY_FRAMES + 1;
@@ -119,17 +115,21 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
                 "    gaps of {lengths}: the field's fill (no blend beat it on {count} validation entries)"
             );
         } else {
-            let weights: Vec<String> = class
-                .weights
-                .iter()
-                .filter(|(_, v)| *v >= 0.005)
-                .map(|(f, v)| format!("{} {v:.2}", f.label()))
-                .collect();
             eprintln!(
                 "    gaps of {lengths} (from {count} validation entries): {}",
-                weights.join(", ")
+                listed(&class.weights)
             );
         }
     }
     Ok(())
+}
+
+/// The fillers with a weight that prints (0.005 or more), as `label weight`, in order.
+fn listed(w: &crate::gaps::blend::Weights) -> String {
+    let weights: Vec<String> = w
+        .iter()
+        .filter(|(_, v)| *v >= 0.005)
+        .map(|(f, v)| format!("{} {v:.2}", f.label()))
+        .collect();
+    weights.join(", ")
 }

@@ -15,7 +15,8 @@
 //! frames, one for longer gaps pooled, and one for each [`length_class`] of the longer ones
 //! seen in two draws or more (the pooled one serves the others). Each replaces the field's
 //! fill only if it also wins cross-fitted (weights learned on the other draws, judged on
-//! each draw in turn): a blend that won by chance on a few spans is not used. The real gaps are then filled from every observation (docs/design.md §7).
+//! each draw in turn): a blend that won by chance on a few spans is not used. The real
+//! gaps are then filled from every observation (docs/design.md §7).
 //!
 //! By default the field was fitted to the validation entries, so its fill is judged where
 //! it has seen the answer; that favours the field's fills. The field alone is not blended

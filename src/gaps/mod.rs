@@ -7,7 +7,7 @@
 //!
 //! - A **gap** ([`spans::Gap`]) is a run of frames in which a track is unobserved. It is
 //!   *interior* with an observation on both sides, *long* past [`SPLINE_CARRY_FRAMES`]
-//!   frames.
+//!   frames; long gaps fall in classes by length ([`blend::length_class`]).
 //! - A **span** is a run of observations hidden on purpose: to measure a fill
 //!   ([`spans::hold_out_spans`], `--holdout-observations`) or to validate a blend
 //!   ([`spans::validation_spans`]).

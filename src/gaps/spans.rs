@@ -9,7 +9,6 @@ use std::ops::Range;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::field_fill::SPLINE_CARRY_FRAMES;
 use super::fillers::Marked;
 
 /// A run of frames in which one track is unobserved, with the observed frames that border
@@ -41,12 +40,6 @@ impl Gap {
     /// run before the first or after the last observation.
     pub fn is_interior(&self) -> bool {
         self.before.is_some() && self.after.is_some()
-    }
-
-    /// Whether the gap is long: more than [`SPLINE_CARRY_FRAMES`] frames (a run past either
-    /// end counts its own length).
-    pub fn is_long(&self) -> bool {
-        self.len() > SPLINE_CARRY_FRAMES
     }
 }
 
@@ -93,14 +86,6 @@ pub fn gap_sizes(tracks: &Marked) -> Vec<Option<usize>> {
         }
     }
     out
-}
-
-/// The length of every interior gap of `tracks` (observed on both sides), track by track.
-pub fn gap_lengths(tracks: &Marked) -> Vec<usize> {
-    gaps(tracks)
-        .filter(Gap::is_interior)
-        .map(|g| g.len())
-        .collect()
 }
 
 /// The span lengths of [`hold_out_spans`] unless asked otherwise: 2 to 10 frames.
@@ -293,7 +278,7 @@ mod tests {
     }
 
     #[test]
-    fn gap_sizes_and_lengths_follow_the_gaps() {
+    fn gap_sizes_follow_the_gaps() {
         // One track of 40 frames: seen at 0, 4, 30, 39 (gaps of 3, 25 and 8), and one never
         // seen.
         let (t, n) = (40, 2);
@@ -309,7 +294,6 @@ mod tests {
         assert_eq!(sizes[35 * n], Some(8));
         assert_eq!(sizes[30 * n], None);
         assert!(sizes.iter().skip(1).step_by(2).all(Option::is_none));
-        assert_eq!(gap_lengths(&tracks), vec![3, 25, 8]);
     }
 
     #[test]

@@ -218,7 +218,7 @@ fn each_length_class_learns_its_own_weights() {
     // gap of 24 frames and one of 100. A spline is near exact across 24 frames and far
     // off across 100; the "field" is off by the same noise everywhere. Pooled, the long
     // gaps' squared errors would choose for both; by length, the 24-frame gaps go to
-    // the spline and the 100-frame ones to the field.
+    // the spline and the 100-frame ones away from it.
     let (t, n) = (400usize, 12usize);
     let truth: Vec<f32> = (0..t)
         .flat_map(|k| {
