@@ -27,7 +27,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from torch_synthetic import FRAMES, Siren, held_out_epe, sequence, warp, with_time  # noqa: E402
+from torch_synthetic import FRAMES, Siren, emit, held_out_epe, sequence, warp, with_time  # noqa: E402
 
 
 class Soap(torch.optim.Optimizer):
@@ -162,10 +162,7 @@ def main():
            "betas": betas, "soap_every": a.soap_every, "points": a.points,
            "samples": a.samples, "seed": a.seed, "epe_x1e4": curve[-1][1],
            "seconds": round(seconds, 2), "curve": curve, "torch": torch.__version__}
-    print(json.dumps(row), flush=True)
-    if a.json:
-        with open(a.json, "a") as fh:
-            fh.write(json.dumps(row) + "\n")
+    emit(row, a.json)
 
 
 if __name__ == "__main__":

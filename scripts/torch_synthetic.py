@@ -92,6 +92,14 @@ def held_out_epe(net, test, ts):
         return float(torch.stack(err).mean()) * 1e4
 
 
+def emit(row, path=None):
+    """Prints `row` as one JSON line, and appends it to `path` when given."""
+    print(json.dumps(row), flush=True)
+    if path:
+        with open(path, "a") as fh:
+            fh.write(json.dumps(row) + "\n")
+
+
 def write_dump(path, d):
     """The step-by-step record, float32 arrays (frames too) that doma's reader takes."""
     f32 = lambda v: np.asarray(v, dtype=np.float32)
@@ -174,10 +182,7 @@ def main():
             print(f"iteration {it + 1}: EPE x1e-4 {epe():.2f}", flush=True)
     row = {"motion": a.motion, "seed": a.seed, "iters": a.iters, "h_weight": a.h_weight,
            "epe_x1e4": epe(), "seconds": time.perf_counter() - start, "torch": torch.__version__}
-    print(json.dumps(row), flush=True)
-    if a.json:
-        with open(a.json, "a") as fh:
-            fh.write(json.dumps(row) + "\n")
+    emit(row, a.json)
 
 
 if __name__ == "__main__":
