@@ -502,8 +502,10 @@ def fill(tracks: Any, observed: Any, method: str = "rigid_body", *, time_axis: O
     one donor's motion), ``spline`` (natural cubic), ``linear``, ``neighbours`` (the mean
     motion of the 4 nearest), ``iterative_pca``, ``kalman`` (Burke & Lasenby's
     low-dimensional Kalman smoother, as pyCGM2 runs it), ``gloersen`` (Gløersen &
-    Federolf's PCA fill, strategy R2 of their ``PredictMissingMarkers``). Where a gap is
-    not interior or has too few donors, ``rigid_body`` and ``pattern`` give the linear
+    Federolf's PCA fill, strategy R2 of their ``PredictMissingMarkers``), ``segment``
+    (doma's: the rigid-body fill from the three donors that best carry the marker through
+    its own observations around the gap). Where a gap is
+    not interior or has too few donors, ``rigid_body``, ``segment`` and ``pattern`` give the linear
     fill; where no two frames see every marker, so does ``kalman``; where every marker has
     a gap, so does ``gloersen``.
 

@@ -26,46 +26,57 @@ impl Marked<'_> {
     /// The pattern fill at each entry `(k, i)` (module docs); an entry of a track never
     /// observed is whatever its position holds.
     pub fn pattern(&self, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
-        self.by_donors(entries, 1, |gap, k| {
-            let (a, b) = (gap.before, gap.after);
-            let w = (k - a) as f64 / (b - a) as f64;
-            let lerp = |j: usize, c: usize| {
-                let (p, q) = (self.at64(a, j)[c], self.at64(b, j)[c]);
-                p + w * (q - p)
-            };
-            let (i, d) = (gap.track, gap.donors[0]);
-            std::array::from_fn(|c| lerp(i, c) + self.at64(k, d)[c] - lerp(d, c))
-        })
+        self.by_donors(
+            entries,
+            |i, a, b| self.donors(i, a, b, 1),
+            |gap, k| {
+                let (a, b) = (gap.before, gap.after);
+                let w = (k - a) as f64 / (b - a) as f64;
+                let lerp = |j: usize, c: usize| {
+                    let (p, q) = (self.at64(a, j)[c], self.at64(b, j)[c]);
+                    p + w * (q - p)
+                };
+                let (i, d) = (gap.track, gap.donors[0]);
+                std::array::from_fn(|c| lerp(i, c) + self.at64(k, d)[c] - lerp(d, c))
+            },
+        )
     }
 
     /// The rigid-body fill at each entry `(k, i)` (module docs); an entry of a track never
     /// observed is whatever its position holds.
     pub fn rigid_body(&self, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
-        self.by_donors(entries, RIGID_BODY_DONORS, |gap, k| {
-            let (a, b) = (gap.before, gap.after);
-            let donors_at = |f: usize| -> Vec<[f64; 3]> {
-                gap.donors.iter().map(|&j| self.at64(f, j)).collect()
-            };
-            let now = donors_at(k);
-            let from = |f: usize| rigid_motion(&donors_at(f), &now).apply(self.at64(f, gap.track));
-            let (pa, pb) = (from(a), from(b));
-            let w = (k - a) as f64 / (b - a) as f64;
-            std::array::from_fn(|c| pa[c] + w * (pb[c] - pa[c]))
-        })
+        self.by_donors(
+            entries,
+            |i, a, b| self.donors(i, a, b, RIGID_BODY_DONORS),
+            |gap, k| self.rigid_fill(gap, k),
+        )
+    }
+
+    /// The rigid-body fill of `gap` at frame `k`: the track moved with its donors from
+    /// each border, the two blended linearly in time.
+    pub(super) fn rigid_fill(&self, gap: &DonorGap, k: usize) -> [f64; 3] {
+        let (a, b) = (gap.before, gap.after);
+        let donors_at =
+            |f: usize| -> Vec<[f64; 3]> { gap.donors.iter().map(|&j| self.at64(f, j)).collect() };
+        let now = donors_at(k);
+        let from = |f: usize| rigid_motion(&donors_at(f), &now).apply(self.at64(f, gap.track));
+        let (pa, pb) = (from(a), from(b));
+        let w = (k - a) as f64 / (b - a) as f64;
+        std::array::from_fn(|c| pa[c] + w * (pb[c] - pa[c]))
     }
 
     /// Track `i` at frame `k` in `f64`.
-    fn at64(&self, k: usize, i: usize) -> [f64; 3] {
+    pub(super) fn at64(&self, k: usize, i: usize) -> [f64; 3] {
         self.at(k, i).map(f64::from)
     }
 
-    /// `fill(gap, k)` at each entry of an interior gap with `count` donors; the linear
-    /// interpolation elsewhere, computed at that entry alone. The donors are found once per
-    /// gap.
-    fn by_donors(
+    /// `fill(gap, k)` at each entry of an interior gap whose donors `choose(track, before,
+    /// after)` finds; the linear interpolation elsewhere, computed at that entry alone. The
+    /// donors are found once per gap.
+    pub(super) fn by_donors(
         &self,
         entries: &[(usize, usize)],
-        count: usize,
+        choose: impl Fn(usize, usize, usize) -> Option<DonorGap>,
         fill: impl Fn(&DonorGap, usize) -> [f64; 3],
     ) -> Vec<[f32; 3]> {
         let mut gaps: HashMap<(usize, usize), Option<DonorGap>> = HashMap::new();
@@ -80,9 +91,7 @@ impl Marked<'_> {
                 let (Some(a), Some(b)) = (before, after) else {
                     return self.linear_at(k, i, before, after);
                 };
-                let gap = gaps
-                    .entry((i, a))
-                    .or_insert_with(|| self.donors(i, a, b, count));
+                let gap = gaps.entry((i, a)).or_insert_with(|| choose(i, a, b));
                 match gap {
                     Some(gap) => fill(gap, k).map(|v| v as f32),
                     None => self.linear_at(k, i, before, after),
@@ -94,7 +103,7 @@ impl Marked<'_> {
     /// The `count` donors of track `i`'s gap between its observations at `a` and `b`: the
     /// other tracks observed at every frame `a..=b`, nearest first by the mean distance to
     /// `i` at `a` and at `b` (the lower index of a tie); `None` if there are fewer.
-    fn donors(&self, i: usize, a: usize, b: usize, count: usize) -> Option<DonorGap> {
+    pub(super) fn donors(&self, i: usize, a: usize, b: usize, count: usize) -> Option<DonorGap> {
         let distance = |j: usize, f: usize| {
             let (p, q) = (self.at64(f, i), self.at64(f, j));
             (0..3).map(|c| (p[c] - q[c]).powi(2)).sum::<f64>().sqrt()
@@ -121,22 +130,24 @@ impl Marked<'_> {
 pub const RIGID_BODY_DONORS: usize = 3;
 
 /// An interior gap of a track with its donors.
-struct DonorGap {
-    track: usize,
-    before: usize,
-    after: usize,
-    donors: Vec<usize>,
+pub(super) struct DonorGap {
+    pub track: usize,
+    /// The track's last observation before the gap.
+    pub before: usize,
+    /// Its first observation after the gap.
+    pub after: usize,
+    pub donors: Vec<usize>,
 }
 
 /// A rotation `R` (row-major) and a translation `t`: `p ↦ R p + t`.
 #[derive(Clone, Copy, Debug)]
-struct RigidMotion {
+pub(super) struct RigidMotion {
     r: [[f64; 3]; 3],
     t: [f64; 3],
 }
 
 impl RigidMotion {
-    fn apply(&self, p: [f64; 3]) -> [f64; 3] {
+    pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
         std::array::from_fn(|row| (0..3).map(|c| self.r[row][c] * p[c]).sum::<f64>() + self.t[row])
     }
 }
@@ -145,7 +156,7 @@ impl RigidMotion {
 /// rotation is the unit quaternion of the largest eigenvalue of Horn's symmetric 4 × 4
 /// matrix of the cross-covariance (Horn 1987, J. Opt. Soc. Am. A 4(4)), the same optimum
 /// as the Kabsch SVD with its reflection corrected; the translation maps the centroids.
-fn rigid_motion(from: &[[f64; 3]], to: &[[f64; 3]]) -> RigidMotion {
+pub(super) fn rigid_motion(from: &[[f64; 3]], to: &[[f64; 3]]) -> RigidMotion {
     let n = from.len() as f64;
     let centroid = |p: &[[f64; 3]]| -> [f64; 3] {
         std::array::from_fn(|c| p.iter().map(|q| q[c]).sum::<f64>() / n)

@@ -99,11 +99,14 @@ pub enum Filler {
     /// Gløersen & Federolf's PCA fill, strategy R2 ([`Marked::gloersen`]; the linear fill
     /// where it cannot run).
     Gloersen,
+    /// The rigid-body fill from the three donors that best carry the track through its
+    /// own observations around the gap ([`Marked::segment`]).
+    Segment,
 }
 
 impl Filler {
     /// The number of fillers.
-    pub const COUNT: usize = 10;
+    pub const COUNT: usize = 11;
 
     /// Every filler, in the order of a blend's weights: a tie in the blend goes to the
     /// earlier (the field's fill first).
@@ -118,6 +121,7 @@ impl Filler {
         Filler::RigidBody,
         Filler::Kalman,
         Filler::Gloersen,
+        Filler::Segment,
     ];
 
     /// Its place in [`Filler::ALL`].
@@ -138,6 +142,7 @@ impl Filler {
             Filler::RigidBody => "rigid_body",
             Filler::Kalman => "kalman",
             Filler::Gloersen => "gloersen",
+            Filler::Segment => "segment",
         }
     }
 
@@ -154,6 +159,7 @@ impl Filler {
             Filler::RigidBody => "rigid body",
             Filler::Kalman => "Kalman smoother",
             Filler::Gloersen => "Gløersen PCA",
+            Filler::Segment => "segment (rigid body, donors judged)",
         }
     }
 
@@ -214,6 +220,7 @@ impl Filler {
             Filler::Neighbours => return Some(marked.neighbours(entries)),
             Filler::Pattern => return Some(marked.pattern(entries)),
             Filler::RigidBody => return Some(marked.rigid_body(entries)),
+            Filler::Segment => return Some(marked.segment(entries)),
         };
         Some(pick(&whole, entries, marked.points))
     }

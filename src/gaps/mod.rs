@@ -14,7 +14,8 @@
 //! - A **filler** ([`Filler`]) fills every gap from the observations alone: the classic
 //!   ones (linear, spline, the neighbours' motion, iterative PCA), capture software's that
 //!   borrow *donor* markers' motion (pattern and rigid-body fill), Burke & Lasenby's
-//!   Kalman smoother, Gløersen & Federolf's PCA fill, and the field's two.
+//!   Kalman smoother, Gløersen & Federolf's PCA fill, the rigid-body fill with its donors
+//!   judged on the track's own observations (the *segment* fill), and the field's two.
 //! - The **field's fill** ([`field_fill::field_fill`]) is the field's prediction corrected
 //!   by the residual of the track's nearest tracks at that frame (its *lenders*), then by
 //!   the track's own residual carried across the gap ([`field_fill::carry_residuals`],
@@ -36,6 +37,7 @@
 //! | `kalman.rs` | Burke & Lasenby's Kalman smoother: a method of [`Marked`] |
 //! | `gloersen.rs` | Gløersen & Federolf's PCA fill (R2): a method of [`Marked`] |
 //! | `donors.rs` | pattern and rigid-body fill: methods of [`Marked`] |
+//! | `segment.rs` | the segment fill: rigid-body fill from the donors that carry the track best around its gap |
 //! | `field_fill.rs` | [`FieldPrediction`], the lenders ([`Lending`]), the residual carry |
 //! | `blend.rs` | [`blend::Weights`] (one per filler), learning them per class of gap length and applying a blend (tests in `blend/tests.rs`) |
 //! | `spans.rs` | gaps and their classes and lengths, hidden and validation spans |
@@ -56,6 +58,7 @@ pub mod fillers;
 pub mod gloersen;
 pub mod kalman;
 pub mod linalg;
+pub mod segment;
 pub mod spans;
 
 pub use field_fill::{FieldPrediction, Lending, SPLINE_CARRY_FRAMES};
