@@ -35,7 +35,7 @@ pub struct CompleteArgs {
     pub extrapolate: bool,
     /// Fill with one filler alone instead of doma's fill (the blend): field_fill,
     /// field_fill_framewise, spline, linear, neighbours, iterative_pca, pattern,
-    /// rigid_body, kalman or gloersen.
+    /// rigid_body, kalman, gloersen or segment.
     #[arg(long, value_name = "FILLER", value_parser = Filler::parse)]
     pub method: Option<Filler>,
     /// The device.
@@ -86,13 +86,15 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
     for (k, name) in ["short", "long"].iter().enumerate() {
         let w = if k == 0 { &b.short } else { &b.long };
         let count = b.validated[k];
-        if count == 0 || !b.cross_fitted[k] {
-            let why = if count == 0 {
-                "nothing to validate".to_string()
-            } else {
-                format!("no blend beat it on {count} validation entries")
-            };
-            eprintln!("  {name} gaps: the field's fill ({why})");
+        if count == 0 {
+            eprintln!("  {name} gaps: the field's fill (nothing to validate)");
+            continue;
+        }
+        if !b.cross_fitted[k] {
+            eprintln!(
+                "  {name} gaps: {} alone (no blend beat it on {count} validation entries)",
+                alone(w)
+            );
             continue;
         }
         eprintln!(
@@ -112,7 +114,8 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
             eprintln!("    gaps of {lengths}: the long gaps' weights ({count} validation entries)");
         } else if !class.cross_fitted {
             eprintln!(
-                "    gaps of {lengths}: the field's fill (no blend beat it on {count} validation entries)"
+                "    gaps of {lengths}: {} alone (no blend beat it on {count} validation entries)",
+                alone(&class.weights)
             );
         } else {
             eprintln!(
@@ -122,6 +125,14 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The label of the filler that holds the most weight (all of it, where it fills alone).
+fn alone(w: &crate::gaps::blend::Weights) -> &'static str {
+    Filler::ALL
+        .into_iter()
+        .max_by(|&x, &y| w[x].total_cmp(&w[y]).then(y.cmp(&x)))
+        .map_or("the field's fill", |f| f.label())
 }
 
 /// The fillers with a weight that prints (0.005 or more), as `label weight`, in order.

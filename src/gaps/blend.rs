@@ -7,16 +7,19 @@
 //! hundreds or thousands of tracks of one skinned surface the neighbours' motion does
 //! better (docs/results.md, gap filling). So the weights are learned per data set: in each
 //! of [`VALIDATION_FOLDS`] draws, [`VALIDATION_FRACTION`] of the observations of the
-//! tracks with gaps are hidden again, in spans as long as the data's own gaps
-//! ([`validation_spans`]: the tracks without a gap stay whole, as for the real gaps, since
-//! the donor fillers and Gløersen's depend on them); every filler fills them from
-//! what is left, and the convex combination with the least squared error over the draws is
-//! found: one for gaps of at most [`SPLINE_CARRY_FRAMES`](super::SPLINE_CARRY_FRAMES)
-//! frames, one for longer gaps pooled, and one for each [`length_class`] of the longer ones
-//! seen in two draws or more (the pooled one serves the others). Each replaces the field's
-//! fill only if it also wins cross-fitted (weights learned on the other draws, judged on
-//! each draw in turn): a blend that won by chance on a few spans is not used. The real
-//! gaps are then filled from every observation (docs/design.md §7).
+//! tracks with gaps are hidden again, in the pattern of the data's own gaps moved in time
+//! ([`validation_spans`]: as long as they are, and as many tracks at once; the tracks
+//! without a gap stay whole, as for the real gaps, since the donor fillers and Gløersen's
+//! depend on them); every filler fills them from
+//! what is left, and the convex combination with the least mean distance over the draws
+//! (each span counted once, as the literature counts each gap; `learn.rs`) is found: one
+//! for gaps of at most [`SPLINE_CARRY_FRAMES`](super::SPLINE_CARRY_FRAMES) frames, one for
+//! longer gaps pooled, and one for each [`length_class`] of the longer ones seen in two
+//! draws or more (the pooled one serves the others). Each is used only if it also beats
+//! every filler alone cross-fitted (weights learned on the other draws, judged on each draw
+//! in turn): a blend that won by chance on a few spans is not used, and the filler that
+//! did best alone fills that class instead. The real gaps are then filled from every
+//! observation (docs/design.md §7).
 //!
 //! By default the field was fitted to the validation entries, so its fill is judged where
 //! it has seen the answer; that favours the field's fills. The field alone is not blended
@@ -31,15 +34,15 @@
 
 use super::field_fill::{FieldPrediction, Lending, field_fill};
 use super::fillers::{Filler, Marked, PerFiller, Sources};
-use super::linalg::{quadratic, simplex_least_squares};
 use super::spans::{gap_sizes, validation_spans};
+use learn::learn;
 use serde::{Deserialize, Serialize};
 
 /// The share of the observations of the tracks with gaps hidden in each validation draw.
 pub const VALIDATION_FRACTION: f64 = 0.1;
 
 /// The validation draws.
-pub const VALIDATION_FOLDS: usize = 3;
+pub const VALIDATION_FOLDS: usize = 6;
 
 /// Keeps the seed of the spans hidden from a fit ([`blind_spans`]) apart from the draws'.
 const BLIND_SEED: u64 = 0x5851_f42d_4c95_7f2d;
@@ -101,8 +104,8 @@ pub struct Blend {
     /// The validation entries behind `short` and `long`, over the draws (0: that class had
     /// none and took the other's weights, or the field's fill alone if neither had any).
     pub validated: [usize; 2],
-    /// Whether each class's blend beat the field's fill cross-fitted; where not, that
-    /// class fills with the field's fill alone.
+    /// Whether each class's blend beat every filler alone cross-fitted; where not, that
+    /// class fills with the filler that did best alone (its weights all on it).
     pub cross_fitted: [bool; 2],
     /// The long gaps by length ([`LENGTH_CLASSES`]; empty where there was no long
     /// validation entry, and in reports written before).
@@ -122,8 +125,8 @@ pub struct LengthBlend {
     /// Whether the weights are the class's own: it had validation entries in at least
     /// two draws (else it takes the pooled long weights).
     pub own: bool,
-    /// Whether its own blend beat the field's fill cross-fitted (else its own weights are
-    /// the field's fill alone).
+    /// Whether its own blend beat every filler alone cross-fitted (else its own weights
+    /// are all on the filler that did best alone).
     pub cross_fitted: bool,
 }
 
@@ -259,221 +262,7 @@ impl Blend {
     }
 }
 
-/// The classes whose weights [`learn`] solves for: short gaps, long gaps pooled, then each
-/// length class of the long ones.
-const CLASSES: usize = 2 + LENGTH_CLASSES;
-
-/// The classes a validation entry in a gap of `len` frames counts in.
-fn classes_of(len: usize) -> impl Iterator<Item = usize> {
-    match length_class(len) {
-        None => [Some(0), None],
-        Some(c) => [Some(1), Some(2 + c)],
-    }
-    .into_iter()
-    .flatten()
-}
-
-/// The weights: in each draw, validation spans hidden (drawn with `seed`, or the folds of
-/// `blind`) and every filler filling them from the rest; the least-squares convex
-/// combination per class over the draws, kept where it beats the field's fill
-/// cross-fitted. Short gaps and long ones pooled, then each length class of the long ones
-/// with validation entries in two draws or more.
-fn learn(tracks: &Marked, field: &FieldPrediction, seed: u64, blind: &[(usize, usize)]) -> Blend {
-    let (t, n, observed) = (tracks.frames, tracks.points, tracks.observed);
-    let field_only = Weights::only(Filler::FieldFill);
-    let carried_only = Blend {
-        short: field_only,
-        long: field_only,
-        validated: [0, 0],
-        cross_fitted: [false, false],
-        by_length: Vec::new(),
-    };
-    if t < 3 || observed.iter().all(|&o| o) {
-        return carried_only;
-    }
-    // Per draw and class, E[m][l] = Σ (p_m − y)·(p_l − y).
-    let mut grams = Vec::with_capacity(VALIDATION_FOLDS);
-    let mut counts = [0usize; CLASSES];
-    // The draws in which each class has a validation entry.
-    let mut drawn = [0usize; CLASSES];
-    for (hidden, left) in draws(tracks, seed, blind) {
-        // Each validation entry's gap length in what is left.
-        let left_tracks = tracks.with_observed(&left);
-        let left_sizes = gap_sizes(&left_tracks);
-        let entries: Vec<(usize, usize, usize)> = hidden
-            .iter()
-            .filter_map(|&(k, i)| left_sizes[k * n + i].map(|len| (k, i, len)))
-            .collect();
-        let mut gram = [[[0f64; M]; M]; CLASSES];
-        let before = counts;
-        accumulate(
-            &Sources::new(left_tracks, field),
-            &entries,
-            &mut gram,
-            &mut counts,
-        );
-        for c in 0..CLASSES {
-            drawn[c] += usize::from(counts[c] > before[c]);
-        }
-        grams.push(gram);
-    }
-    // The field's fill's row and column of each Gram matrix.
-    let f = Filler::FieldFill.index();
-    let solve = |class: usize| -> (Weights, bool) {
-        let sum = |skip: Option<usize>| {
-            let mut e = [[0f64; M]; M];
-            for (fold, g) in grams.iter().enumerate() {
-                if Some(fold) != skip {
-                    for m in 0..M {
-                        for l in 0..M {
-                            e[m][l] += g[class][m][l];
-                        }
-                    }
-                }
-            }
-            e
-        };
-        // Cross-fitted: each draw judged with the weights of the others.
-        let (mut blended, mut alone) = (0f64, 0f64);
-        for (fold, g) in grams.iter().enumerate() {
-            let rest = sum(Some(fold));
-            if rest[f][f] == 0.0 && rest.iter().flatten().all(|&v| v == 0.0) {
-                continue;
-            }
-            let w = simplex_least_squares(&rest);
-            blended += quadratic(&w, &g[class]);
-            alone += g[class][f][f];
-        }
-        if blended < alone {
-            (PerFiller(simplex_least_squares(&sum(None))), true)
-        } else {
-            (field_only, false)
-        }
-    };
-    let mut weights = [field_only; 2];
-    let mut cross_fitted = [false; 2];
-    for class in 0..2 {
-        if counts[class] > 0 {
-            (weights[class], cross_fitted[class]) = solve(class);
-        }
-    }
-    // A class with no validation entry takes the other's weights.
-    match [counts[0], counts[1]] {
-        [0, 0] => return carried_only,
-        [0, _] => (weights[0], cross_fitted[0]) = (weights[1], cross_fitted[1]),
-        [_, 0] => (weights[1], cross_fitted[1]) = (weights[0], cross_fitted[0]),
-        _ => {}
-    }
-    let by_length = if counts[1] == 0 {
-        Vec::new()
-    } else {
-        (0..LENGTH_CLASSES)
-            .map(|c| {
-                let class = 2 + c;
-                let own = drawn[class] >= 2;
-                let (w, beat) = if own {
-                    solve(class)
-                } else {
-                    (weights[1], false)
-                };
-                LengthBlend {
-                    longest: class_longest(c),
-                    weights: w,
-                    validated: counts[class],
-                    own,
-                    cross_fitted: beat,
-                }
-            })
-            .collect()
-    };
-    Blend {
-        short: weights[0],
-        long: weights[1],
-        validated: [counts[0], counts[1]],
-        cross_fitted,
-        by_length,
-    }
-}
-
-/// One validation draw: the entries hidden, and the `[T, N]` mask of what is left observed.
-type Draw = (Vec<(usize, usize)>, Vec<bool>);
-
-/// The validation draws of [`learn`], each its hidden entries and what is left observed:
-/// [`VALIDATION_FOLDS`] draws of spans with `seed`, or, where `blind` holds observed
-/// entries, those alone hidden and split into the folds span by span.
-fn draws(tracks: &Marked, seed: u64, blind: &[(usize, usize)]) -> Vec<Draw> {
-    let (n, observed) = (tracks.points, tracks.observed);
-    let hide = |hidden: &[(usize, usize)]| {
-        let mut left = observed.to_vec();
-        for &(k, i) in hidden {
-            left[k * n + i] = false;
-        }
-        left
-    };
-    let mut blind: Vec<(usize, usize)> = blind
-        .iter()
-        .copied()
-        .filter(|&(k, i)| observed[k * n + i])
-        .collect();
-    if blind.is_empty() {
-        return (0..VALIDATION_FOLDS)
-            .filter_map(|fold| {
-                let fold_seed = seed ^ 0x9e37_79b9_7f4a_7c15u64.wrapping_mul(fold as u64 + 1);
-                let hidden = validation_spans(tracks, VALIDATION_FRACTION, fold_seed).ok()?;
-                let left = hide(&hidden);
-                Some((hidden, left))
-            })
-            .collect();
-    }
-    let left = hide(&blind);
-    // Span by span (a track's consecutive frames), so that a fold never judges a span
-    // whose other half another fold learned from.
-    blind.sort_unstable_by_key(|&(k, i)| (i, k));
-    let mut folds = vec![Vec::new(); VALIDATION_FOLDS];
-    let mut span = 0;
-    for (r, &(k, i)) in blind.iter().enumerate() {
-        if r > 0 && blind[r - 1] != (k.wrapping_sub(1), i) {
-            span += 1;
-        }
-        folds[span % VALIDATION_FOLDS].push((k, i));
-    }
-    folds
-        .into_iter()
-        .filter(|f| !f.is_empty())
-        .map(|f| (f, left.clone()))
-        .collect()
-}
-
-/// Adds to each class's `E[m][l] = Σ (p_m − y)·(p_l − y)` (over the entries and their
-/// coordinates) the fillers' errors at `entries` `(frame, track, gap length)`, filled from
-/// the observations of `sources`.
-fn accumulate(
-    sources: &Sources,
-    entries: &[(usize, usize, usize)],
-    gram: &mut [[[f64; M]; M]; CLASSES],
-    counts: &mut [usize; CLASSES],
-) {
-    let (positions, n) = (sources.marked.positions, sources.marked.points);
-    for (p, &(k, i, len)) in candidates(sources, entries).iter().zip(entries) {
-        let e = 3 * (k * n + i);
-        let d: Vec<[f64; 3]> = p
-            .iter()
-            .map(|pm| std::array::from_fn(|c| pm[c] as f64 - positions[e + c] as f64))
-            .collect();
-        if d.iter().flatten().any(|v| !v.is_finite()) {
-            continue;
-        }
-        for class in classes_of(len) {
-            let g = &mut gram[class];
-            for m in 0..M {
-                for l in 0..M {
-                    g[m][l] += (0..3).map(|c| d[m][c] * d[l][c]).sum::<f64>();
-                }
-            }
-            counts[class] += 1;
-        }
-    }
-}
+mod learn;
 
 #[cfg(test)]
 mod tests;

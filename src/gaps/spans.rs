@@ -119,32 +119,100 @@ pub fn hold_out_spans(
 }
 
 /// A seeded choice of about `fraction` of the observed entries of the tracks with gaps to
-/// fill, to hide for validating a gap fill: spans inside those tracks' observations, their
-/// lengths drawn from the tracks' own interior gaps (one draw per gap, so the spans are as
-/// long as the gaps to fill). The tracks without a gap are left whole, as they are for the
-/// real gaps: they are the donors of pattern and rigid-body fill and the frame of
-/// reference of Gløersen's, which cannot run once every marker has a gap. Without an
-/// interior gap, every track, in spans of [`DEFAULT_SPANS`]. Refuses what
-/// [`hold_out_spans`] refuses.
+/// fill, to hide for validating a gap fill: the data's own gaps moved in time. Each draw
+/// takes one interior gap and the interior gaps of other tracks that overlap it (markers
+/// lost together, as an occlusion or a gap "in several markers at once" hides them), and
+/// hides the same pattern at a random other time, each span inside its track's
+/// observations (a member that does not fit there is left out). So the spans are as long
+/// as the gaps to fill and hidden together as they are: a donor filler validated on one
+/// marker at a time while the gaps take three at once would be judged with donors it will
+/// not have. The tracks without a gap are left whole, as they are for the real gaps: they
+/// are the donors of pattern and rigid-body fill and the frame of reference of Gløersen's,
+/// which cannot run once every marker has a gap. Without an interior gap, every track, in
+/// spans of [`DEFAULT_SPANS`]. Refuses what [`hold_out_spans`] refuses.
 pub fn validation_spans(
     tracks: &Marked,
     fraction: f64,
     seed: u64,
 ) -> Result<Vec<(usize, usize)>, String> {
     let t = tracks.frames;
-    let interior: Vec<Gap> = gaps(tracks).filter(Gap::is_interior).collect();
-    let mut lengths: Vec<usize> = interior
-        .iter()
-        .map(Gap::len)
-        .filter(|&l| l + 2 <= t)
+    let mut interior: Vec<Gap> = gaps(tracks)
+        .filter(|g| g.is_interior() && g.len() + 2 <= t)
         .collect();
-    let mut gapped: Vec<usize> = interior.iter().map(|g| g.track).collect();
-    gapped.dedup();
-    if lengths.is_empty() {
-        lengths = DEFAULT_SPANS.filter(|&l| l + 2 <= t).collect();
-        gapped = (0..tracks.points).collect();
+    if interior.is_empty() {
+        let lengths: Vec<usize> = DEFAULT_SPANS.filter(|&l| l + 2 <= t).collect();
+        let every: Vec<usize> = (0..tracks.points).collect();
+        return hold_out_lengths(tracks, fraction, &lengths, &every, seed);
     }
-    hold_out_lengths(tracks, fraction, &lengths, &gapped, seed)
+    interior.sort_by_key(|g| (g.frames.start, g.track));
+    hold_out_groups(tracks, fraction, &interior, seed)
+}
+
+/// The draw of [`validation_spans`] from the `interior` gaps, sorted by start.
+fn hold_out_groups(
+    tracks: &Marked,
+    fraction: f64,
+    interior: &[Gap],
+    seed: u64,
+) -> Result<Vec<(usize, usize)>, String> {
+    let (t, n) = (tracks.frames, tracks.points);
+    check_fraction(fraction)?;
+    let mut gapped: Vec<usize> = interior.iter().map(|g| g.track).collect();
+    gapped.sort_unstable();
+    gapped.dedup();
+    let observed_count = gapped
+        .iter()
+        .map(|&i| (0..t).filter(|&k| tracks.observed[k * n + i]).count())
+        .sum::<usize>();
+    let target = (fraction * observed_count as f64).round() as usize;
+    let longest = interior.iter().map(Gap::len).max().unwrap_or(0);
+    let mut observed = tracks.observed.to_vec();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut hidden = Vec::with_capacity(target);
+    let mut tries = 0usize;
+    while hidden.len() < target {
+        tries += 1;
+        if tries > 100 * (target + n) {
+            return Err(format!(
+                "cannot hide {fraction} of the {observed_count} observations of the tracks \
+                 with gaps in the pattern of their gaps (hid {} of {target})",
+                hidden.len()
+            ));
+        }
+        let g = &interior[rng.random_range(0..interior.len())];
+        let start = rng.random_range(1..=t - 1 - g.len());
+        // The gaps that overlap it: they start less than the longest gap before it ends.
+        let from = interior.partition_point(|h| h.frames.start + longest < g.frames.start);
+        let to = interior.partition_point(|h| h.frames.start < g.frames.end);
+        for h in &interior[from..to] {
+            if h.frames.end <= g.frames.start {
+                continue;
+            }
+            let Some(first) = (start + h.frames.start).checked_sub(g.frames.start) else {
+                continue;
+            };
+            let i = h.track;
+            let seen = |k: usize| observed[k * n + i];
+            if first == 0
+                || first + h.len() >= t
+                || !(0..first).any(seen)
+                || !(first + h.len()..t).any(seen)
+            {
+                continue;
+            }
+            for k in first..first + h.len() {
+                if hidden.len() == target {
+                    break;
+                }
+                if observed[k * n + i] {
+                    observed[k * n + i] = false;
+                    hidden.push((k, i));
+                }
+            }
+        }
+    }
+    hidden.sort_unstable();
+    Ok(hidden)
 }
 
 /// [`hold_out_spans`] with each span's length
@@ -313,6 +381,18 @@ mod tests {
         let spans = validation_spans(&tracks, 0.1, 3).unwrap();
         assert!(spans.iter().all(|&(_, i)| i == 2 || i == 7), "{spans:?}");
         assert_eq!(spans.len(), (0.1f64 * 2.0 * 54.0).round() as usize);
+        // Their gaps are at the same frames: so are the spans (the second cut at the
+        // fraction).
+        let frames =
+            |i: usize| -> Vec<usize> { spans.iter().filter(|s| s.1 == i).map(|s| s.0).collect() };
+        let (a, b) = (frames(2), frames(7));
+        let (short, long) = if a.len() < b.len() {
+            (&a, &b)
+        } else {
+            (&b, &a)
+        };
+        assert_eq!((short.len(), long.len()), (5, 6), "{spans:?}");
+        assert!(short.iter().all(|k| long.contains(k)), "{spans:?}");
         let all = vec![true; t * n];
         let whole = Marked::new(t, n, &positions, &all);
         let spans = validation_spans(&whole, 0.1, 3).unwrap();
