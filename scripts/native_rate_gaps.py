@@ -11,19 +11,22 @@ entries hidden), and each set is fitted once, at `doma fit`'s defaults. Every me
 the same set's mask: doma's fill (`Field.complete()`), the field's fill alone, and the
 classic fillers (`doma.fill`): spline, linear, pattern and rigid-body fill (Vicon Nexus's),
 the Kalman smoother (Burke & Lasenby, as pyCGM2 runs it), Gløersen & Federolf's PCA fill
-(strategy R2) and iterative PCA. The error of an
+(strategy R2), iterative PCA, and doma's segment fill (the rigid-body fill with its donors
+judged on the track's own observations around the gap; not a named filler). The error of an
 event is the mean Euclidean distance over its hidden entries, in the file's units (mm);
 a case's figure is the mean over its events.
 
     python scripts/native_rate_gaps.py MOCAP_DIR [--draws 20] [--recordings A,B] [--out DIR]
-        [--add FILLER,...] [--blind-validation]
+        [--add FILLER,...] [--blind-validation] [--fits DIR]
 
 Needs the doma wheel (scripts/build_wheel.sh), numpy and `c3d` (for the rate). Writes one
 JSON per recording to --out (default results/native) and prints the table. A recording
 whose JSON exists is not run again; `--add` fills its draw sets (the same, drawn from the
 same seed) with the fillers named and adds their columns, without fitting.
 `--blind-validation` fits with `blind_validation=True` (doma's blend learned on spans hidden
-from the field).
+from the field). `--fits DIR` keeps each fitted run there and loads it on the next run
+instead of fitting: the blend's weights are learned by `complete()`, so a change to the
+blend or a filler reruns without a fit.
 """
 
 import argparse
@@ -38,7 +41,8 @@ import doma
 
 LENGTHS = [0.1, 0.25, 0.5, 1.0, 2.0]
 COUNTS = [1, 3]
-METHODS = ["spline", "linear", "pattern", "rigid_body", "kalman", "gloersen", "iterative_pca"]
+METHODS = ["spline", "linear", "pattern", "rigid_body", "kalman", "gloersen", "iterative_pca", "segment"]
+# "segment" is doma's own: the rigid-body fill with its donors judged around the gap.
 # The named fillers of the literature, and those that give the linear fill where they cannot
 # run (Kalman: no two frames see every marker; Gløersen: every marker has a gap).
 NAMED = ["spline", "pattern", "rigid_body", "kalman", "gloersen"]
@@ -133,7 +137,7 @@ def add_fillers(path, report, methods, draws, seed):
     return report
 
 
-def run_recording(path, draws, seed, blind=False):
+def run_recording(path, draws, seed, blind=False, fits=None):
     seq = doma.read_tracks(path)
     tracks, observed = seq.tracks, seq.observed
     truth = tracks.astype(np.float64)
@@ -141,9 +145,16 @@ def run_recording(path, draws, seed, blind=False):
     out = {"recording": path.stem, "rate": rate, "frames": int(tracks.shape[0]), "markers": int(tracks.shape[1]),
            "cases": {}, "fits": []}
     errors = {}
-    for count, events_of_set, mask in masks(observed, rate, draws, seed):
+    for set_index, (count, events_of_set, mask) in enumerate(masks(observed, rate, draws, seed)):
+        saved = None if fits is None else fits / path.stem / f"set{set_index}"
         started = time.time()
-        field = doma.fit(tracks, mask, drop_unobserved=True, seed=seed, progress=False, blind_validation=blind)
+        loaded = saved is not None and saved.exists()
+        if loaded:
+            field = doma.load(saved)
+        else:
+            field = doma.fit(tracks, mask, drop_unobserved=True, seed=seed, progress=False, blind_validation=blind)
+            if saved is not None:
+                field.save(saved)
         fit_s = time.time() - started
         started = time.time()
         done = field.complete()
@@ -167,9 +178,9 @@ def run_recording(path, draws, seed, blind=False):
             for name, f in fills.items():
                 errors.setdefault(key, {}).setdefault(name, []).append(event_errors(f, truth, e))
         out["fits"].append({"markers_at_once": count, "events": len(events_of_set), "hidden": int((~mask & observed).sum()),
-                            "fit_s": round(fit_s, 1), "complete_s": round(complete_s, 1),
+                            "fit_s": None if loaded else round(fit_s, 1), "complete_s": round(complete_s, 1),
                             "filler_s": {k: round(v, 2) for k, v in filler_s.items()}})
-        print(f"  {path.stem}: {count} at once, {len(events_of_set)} events, fit {fit_s:.0f} s, complete {complete_s:.0f} s",
+        print(f"  {path.stem}: {count} at once, {len(events_of_set)} events, {'loaded' if loaded else f'fit {fit_s:.0f} s'}, complete {complete_s:.0f} s",
               file=sys.stderr, flush=True)
     for key, per in errors.items():
         out["cases"][key] = {name: float(np.mean(v)) for name, v in per.items()}
@@ -211,6 +222,9 @@ def main():
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=pathlib.Path, default=pathlib.Path("results/native"))
     p.add_argument("--add", default="", help="fillers to add to existing reports, comma-separated")
+    p.add_argument("--fits", type=pathlib.Path,
+                   help="keep each fitted run here, and load it instead of fitting where it is already there "
+                        "(the blend's weights are learned by complete(), so a change to the blend reruns in minutes)")
     p.add_argument("--blind-validation", action="store_true",
                    help="fit with blind_validation=True: the blend learned on spans hidden from the field")
     args = p.parse_args()
@@ -230,7 +244,7 @@ def main():
                 report.write_text(json.dumps(r, indent=1))
             results.append(r)
             continue
-        r = run_recording(path, args.draws, args.seed, args.blind_validation)
+        r = run_recording(path, args.draws, args.seed, args.blind_validation, args.fits)
         r["blind_validation"] = args.blind_validation
         report.write_text(json.dumps(r, indent=1))
         results.append(r)
