@@ -23,11 +23,11 @@
 use super::donors::{DonorGap, RIGID_BODY_DONORS, rigid_motion};
 use super::fillers::Marked;
 
-/// The candidates whose triples [`Marked::segment`] judges (8: 56 triples).
-pub const SEGMENT_CANDIDATES: usize = 8;
+/// The candidates whose triples [`Marked::segment`] judges (6: 20 triples).
+pub const SEGMENT_CANDIDATES: usize = 6;
 
 /// The observed frames on each side of a gap that a triple is judged on, at most.
-pub const SEGMENT_SAMPLES: usize = 32;
+pub const SEGMENT_SAMPLES: usize = 16;
 
 /// The weight of a candidate's distance to the track in its rank, against the spread of
 /// that distance.
@@ -253,7 +253,8 @@ mod tests {
         let many: Vec<usize> = (0..64).collect();
         let judged = sample(many);
         assert_eq!(judged.len(), SEGMENT_SAMPLES);
-        assert_eq!(&judged[..3], &[0, 2, 4]);
+        let step = 64 / SEGMENT_SAMPLES;
+        assert_eq!(&judged[..3], &[0, step, 2 * step]);
         assert_eq!(window(10, 12), 20);
         assert_eq!(window(10, 60), 50);
     }

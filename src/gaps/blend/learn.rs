@@ -11,6 +11,10 @@
 // Index loops over small matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
+use std::sync::Arc;
+
+use rayon::prelude::*;
+
 use super::{
     Blend, LENGTH_CLASSES, LengthBlend, M, VALIDATION_FOLDS, VALIDATION_FRACTION, Weights,
     candidates, class_longest, length_class,
@@ -27,6 +31,11 @@ const CLASSES: usize = 2 + LENGTH_CLASSES;
 /// The reweighting steps of [`mean_distance`] after its least-squares start.
 const REWEIGHTS: usize = 16;
 
+/// The entries [`mean_distance`] solves on, at most: every k-th past that. A minute of
+/// capture holds hundreds of thousands per class, each solve builds a Gram matrix of
+/// them per step, and a span's neighbouring entries say nearly the same.
+const SOLVED_ENTRIES: usize = 1 << 14;
+
 /// The classes a validation entry in a gap of `len` frames counts in.
 fn classes_of(len: usize) -> impl Iterator<Item = usize> {
     match length_class(len) {
@@ -37,12 +46,17 @@ fn classes_of(len: usize) -> impl Iterator<Item = usize> {
     .flatten()
 }
 
-/// One validation entry: every filler's error there, `p_m − y`, and its weight in the
-/// objective, one over the length of its gap, so that each gap counts once.
+/// One validation entry: every filler's error there, `p_m − y` (in `f32`, as the fills
+/// are: a long recording's draws hold millions), and its weight in the objective, one over
+/// the length of its gap, so that each gap counts once.
 pub(super) struct Residual {
-    errors: [[f64; 3]; M],
+    errors: [[f32; 3]; M],
     weight: f64,
 }
+
+/// A fold's residuals per class: an entry counts in two (its length class and the pooled
+/// long gaps, or the short gaps alone), held once.
+type Classes = [Vec<Arc<Residual>>; CLASSES];
 
 impl Residual {
     /// The distance of the blend `w` to the truth.
@@ -50,7 +64,7 @@ impl Residual {
         (0..3)
             .map(|c| {
                 (0..M)
-                    .map(|m| w[m] * self.errors[m][c])
+                    .map(|m| w[m] * self.errors[m][c] as f64)
                     .sum::<f64>()
                     .powi(2)
             })
@@ -64,18 +78,24 @@ fn cost<'a>(residuals: impl Iterator<Item = &'a Residual>, w: &[f64; M]) -> f64 
     residuals.map(|r| r.weight * r.distance(w)).sum()
 }
 
-/// The convex weights with the least [`cost`] over `residuals`: least squares, then
+/// The convex weights with the least [`cost`] over `all` (at most [`SOLVED_ENTRIES`] of
+/// them, evenly spaced): least squares, then
 /// [`REWEIGHTS`] steps that weigh each entry by one over its distance (a majorisation of
 /// the distance, minimised exactly over the simplex each step, so the cost never rises;
 /// the best seen is kept).
-fn mean_distance(residuals: &[&Residual]) -> [f64; M] {
+fn mean_distance(all: &[&Residual]) -> [f64; M] {
+    let stride = all.len().div_ceil(SOLVED_ENTRIES).max(1);
+    let residuals: Vec<&Residual> = all.iter().step_by(stride).copied().collect();
     let gram = |scale: &dyn Fn(&Residual) -> f64| {
         let mut e = [[0f64; M]; M];
-        for r in residuals {
+        for r in &residuals {
             let s = r.weight * scale(r);
             for m in 0..M {
                 for l in m..M {
-                    e[m][l] += s * (0..3).map(|c| r.errors[m][c] * r.errors[l][c]).sum::<f64>();
+                    e[m][l] += s
+                        * (0..3)
+                            .map(|c| r.errors[m][c] as f64 * r.errors[l][c] as f64)
+                            .sum::<f64>();
                 }
             }
         }
@@ -131,18 +151,21 @@ pub(super) fn learn(
     if t < 3 || observed.iter().all(|&o| o) {
         return carried_only;
     }
-    // Per draw and class, the validation entries' residuals.
-    let mut folds: Vec<[Vec<Residual>; CLASSES]> = Vec::with_capacity(VALIDATION_FOLDS);
-    for (hidden, left) in draws(tracks, seed, blind) {
-        // Each validation entry's gap length in what is left.
-        let left_tracks = tracks.with_observed(&left);
-        let left_sizes = gap_sizes(&left_tracks);
-        let entries: Vec<(usize, usize, usize)> = hidden
-            .iter()
-            .filter_map(|&(k, i)| left_sizes[k * n + i].map(|len| (k, i, len)))
-            .collect();
-        folds.push(residuals(&Sources::new(left_tracks, field), &entries));
-    }
+    // Per draw and class, the validation entries' residuals; the draws are independent,
+    // so they run on every core (in order: the result does not depend on the split).
+    let folds: Vec<Classes> = draws(tracks, seed, blind)
+        .into_par_iter()
+        .map(|(hidden, left)| {
+            // Each validation entry's gap length in what is left.
+            let left_tracks = tracks.with_observed(&left);
+            let left_sizes = gap_sizes(&left_tracks);
+            let entries: Vec<(usize, usize, usize)> = hidden
+                .iter()
+                .filter_map(|&(k, i)| left_sizes[k * n + i].map(|len| (k, i, len)))
+                .collect();
+            residuals(&Sources::new(left_tracks, field), &entries)
+        })
+        .collect();
     let counts: [usize; CLASSES] = std::array::from_fn(|c| folds.iter().map(|f| f[c].len()).sum());
     // The draws in which each class has a validation entry.
     let drawn: [usize; CLASSES] =
@@ -153,7 +176,7 @@ pub(super) fn learn(
                 .iter()
                 .enumerate()
                 .filter(|&(fold, _)| Some(fold) != skip)
-                .flat_map(|(_, f)| f[class].iter())
+                .flat_map(|(_, f)| f[class].iter().map(|r| &**r))
                 .collect()
         };
         // Cross-fitted: each draw judged with the weights of the others, beside every
@@ -164,9 +187,10 @@ pub(super) fn learn(
             if rest.is_empty() || f[class].is_empty() {
                 continue;
             }
-            blended += cost(f[class].iter(), &mean_distance(&rest));
+            let judged = || f[class].iter().map(|r| &**r);
+            blended += cost(judged(), &mean_distance(&rest));
             for m in 0..M {
-                alone[m] += cost(f[class].iter(), &Weights::only(Filler::ALL[m]).0);
+                alone[m] += cost(judged(), &Weights::only(Filler::ALL[m]).0);
             }
         }
         // Ties go to the earlier filler (the field's fill first).
@@ -276,22 +300,22 @@ pub(super) fn draws(tracks: &Marked, seed: u64, blind: &[(usize, usize)]) -> Vec
 /// Every filler's error at `entries` `(frame, track, gap length)`, filled from the
 /// observations of `sources`, per class; an entry where a filler has no finite value is
 /// left out.
-fn residuals(sources: &Sources, entries: &[(usize, usize, usize)]) -> [Vec<Residual>; CLASSES] {
+fn residuals(sources: &Sources, entries: &[(usize, usize, usize)]) -> Classes {
     let (positions, n) = (sources.marked.positions, sources.marked.points);
-    let mut out: [Vec<Residual>; CLASSES] = std::array::from_fn(|_| Vec::new());
+    let mut out: Classes = std::array::from_fn(|_| Vec::new());
     for (p, &(k, i, len)) in candidates(sources, entries).iter().zip(entries) {
         let e = 3 * (k * n + i);
-        let errors: [[f64; 3]; M] = std::array::from_fn(|m| {
-            std::array::from_fn(|c| p[m][c] as f64 - positions[e + c] as f64)
-        });
+        let errors: [[f32; 3]; M] =
+            std::array::from_fn(|m| std::array::from_fn(|c| p[m][c] - positions[e + c]));
         if errors.iter().flatten().any(|v| !v.is_finite()) {
             continue;
         }
+        let residual = Arc::new(Residual {
+            errors,
+            weight: 1.0 / len.max(1) as f64,
+        });
         for class in classes_of(len) {
-            out[class].push(Residual {
-                errors,
-                weight: 1.0 / len.max(1) as f64,
-            });
+            out[class].push(Arc::clone(&residual));
         }
     }
     out
@@ -302,7 +326,7 @@ mod tests {
     use super::*;
 
     /// Residuals of 1-D errors: filler 0's `a`, filler 1's `b`, every other filler far off.
-    fn residuals_of(a: &[f64], b: &[f64]) -> Vec<Residual> {
+    fn residuals_of(a: &[f32], b: &[f32]) -> Vec<Residual> {
         a.iter()
             .zip(b)
             .map(|(&a, &b)| Residual {
