@@ -200,19 +200,39 @@ fn hold_out_groups(
             {
                 continue;
             }
-            for k in first..first + h.len() {
-                if hidden.len() == target {
-                    break;
-                }
-                if observed[k * n + i] {
-                    observed[k * n + i] = false;
-                    hidden.push((k, i));
-                }
-            }
+            hide_span(
+                &mut observed,
+                n,
+                i,
+                first..first + h.len(),
+                &mut hidden,
+                target,
+            );
         }
     }
     hidden.sort_unstable();
     Ok(hidden)
+}
+
+/// Hides track `i`'s observed entries at `frames` in `observed` (`[T, N]`, `n` tracks),
+/// adding them to `hidden`, until it holds `target`.
+fn hide_span(
+    observed: &mut [bool],
+    n: usize,
+    i: usize,
+    frames: Range<usize>,
+    hidden: &mut Vec<(usize, usize)>,
+    target: usize,
+) {
+    for k in frames {
+        if hidden.len() == target {
+            break;
+        }
+        if observed[k * n + i] {
+            observed[k * n + i] = false;
+            hidden.push((k, i));
+        }
+    }
 }
 
 /// [`hold_out_spans`] with each span's length
@@ -295,15 +315,7 @@ fn hold_out_drawn(
         if !(0..start).any(seen) || !(start + len..t).any(seen) {
             continue;
         }
-        for k in start..start + len {
-            if hidden.len() == target {
-                break;
-            }
-            if observed[k * n + i] {
-                observed[k * n + i] = false;
-                hidden.push((k, i));
-            }
-        }
+        hide_span(&mut observed, n, i, start..start + len, &mut hidden, target);
     }
     hidden.sort_unstable();
     Ok(hidden)
