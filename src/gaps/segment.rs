@@ -34,7 +34,7 @@ pub const SEGMENT_SAMPLES: usize = 16;
 pub const NEARNESS: f64 = 0.05;
 
 /// The shortest window, in frames.
-const MIN_WINDOW: usize = 20;
+pub const MIN_WINDOW: usize = 20;
 
 /// The frames on each side of a gap between observations at `a` and `b` that its donors
 /// are ranked and judged on: as many as the gap spans, at least [`MIN_WINDOW`].
