@@ -5,9 +5,10 @@
 //! donors are the triple that best carries the track through its own observations next to
 //! the gap:
 //!
-//! 1. the candidates, the other tracks seen through the gap, are ranked by how rigidly
-//!    they keep their distance to the track around it: the standard deviation of that
-//!    distance over the frames within the window ([`window`]) where both are seen, plus
+//! 1. the candidates, the [`SEGMENT_POOL`] nearest of the other tracks seen through the
+//!    gap, are ranked by how rigidly they keep their distance to the track around it: the
+//!    standard deviation of that distance over the frames within the window ([`window`])
+//!    where both are seen, plus
 //!    [`NEARNESS`] times their mean distance at the gap's borders (a near marker's rigid
 //!    motion carries less lever error); the first [`SEGMENT_CANDIDATES`] are kept;
 //! 2. every triple of them moves the track, as the rigid-body fill would, from the gap's
@@ -22,6 +23,9 @@
 
 use super::donors::{DonorGap, RIGID_BODY_DONORS, rigid_motion};
 use super::fillers::Marked;
+
+/// The nearest tracks seen through a gap whose rigidity [`Marked::segment`] ranks.
+pub const SEGMENT_POOL: usize = 64;
 
 /// The candidates whose triples [`Marked::segment`] judges (6: 20 triples).
 pub const SEGMENT_CANDIDATES: usize = 6;
@@ -63,9 +67,18 @@ impl Marked<'_> {
             let (p, q) = (self.at64(f, i), self.at64(f, j));
             (0..3).map(|c| (p[c] - q[c]).powi(2)).sum::<f64>().sqrt()
         };
-        let mut ranked: Vec<(f64, usize)> = (0..self.points)
+        // The nearest first: on thousands of dense tracks the spreads of all of them would
+        // cost far more than the fill.
+        let mut pool: Vec<(f64, usize)> = (0..self.points)
             .filter(|&j| j != i && (a..=b).all(|f| self.seen(f, j)))
-            .map(|j| {
+            .map(|j| ((distance(a, j) + distance(b, j)) / 2.0, j))
+            .filter(|(near, _)| !near.is_nan())
+            .collect();
+        pool.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+        pool.truncate(SEGMENT_POOL);
+        let mut ranked: Vec<(f64, usize)> = pool
+            .into_iter()
+            .map(|(near, j)| {
                 let d: Vec<f64> = (lo..=hi)
                     .filter(|&f| self.seen(f, i) && self.seen(f, j))
                     .map(|f| distance(f, j))
@@ -76,7 +89,6 @@ impl Marked<'_> {
                     let mean = d.iter().sum::<f64>() / d.len() as f64;
                     (d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / d.len() as f64).sqrt()
                 };
-                let near = (distance(a, j) + distance(b, j)) / 2.0;
                 (spread + NEARNESS * near, j)
             })
             .filter(|(score, _)| !score.is_nan())
