@@ -233,6 +233,19 @@ pub fn fills_at(
 }
 
 impl Blend {
+    /// `filler` alone for every gap, nothing validated: what a fill with one filler
+    /// reports, and the blend where no validation entry can be drawn.
+    pub fn only(filler: Filler) -> Blend {
+        let only = Weights::only(filler);
+        Blend {
+            short: only,
+            long: only,
+            validated: [0, 0],
+            cross_fitted: [false, false],
+            by_length: Vec::new(),
+        }
+    }
+
     /// The weights for a gap of `len` frames.
     pub fn weights_for(&self, len: usize) -> &Weights {
         match length_class(len) {

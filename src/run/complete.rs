@@ -10,7 +10,7 @@ use super::{RunConfig, RunDir, field_everywhere};
 use crate::data::c3d::{C3d, c3d_tracks, read_c3d_bytes, write_c3d_patched};
 use crate::data::layout::Layout;
 use crate::data::sequence::read_tracks;
-use crate::gaps::blend::{Blend, Weights, blended_fill};
+use crate::gaps::blend::{Blend, blended_fill};
 use crate::gaps::{FieldPrediction, Filler, Marked, Sources};
 use crate::io::write_atomic;
 use crate::{DomaError, Result};
@@ -303,15 +303,7 @@ fn complete_with(
             for (&(k, i), v) in gaps.iter().zip(fill) {
                 values[3 * (k * n + i)..3 * (k * n + i) + 3].copy_from_slice(&v);
             }
-            let only = Weights::only(filler);
-            let blend = Blend {
-                short: only,
-                long: only,
-                validated: [0, 0],
-                cross_fitted: [false, false],
-                by_length: Vec::new(),
-            };
-            (values, blend)
+            (values, Blend::only(filler))
         }
     };
     let stride = config.stride.max(1);

@@ -141,13 +141,7 @@ pub(super) fn learn(
 ) -> Blend {
     let (t, n, observed) = (tracks.frames, tracks.points, tracks.observed);
     let field_only = Weights::only(Filler::FieldFill);
-    let carried_only = Blend {
-        short: field_only,
-        long: field_only,
-        validated: [0, 0],
-        cross_fitted: [false, false],
-        by_length: Vec::new(),
-    };
+    let carried_only = Blend::only(Filler::FieldFill);
     if t < 3 || observed.iter().all(|&o| o) {
         return carried_only;
     }
