@@ -77,44 +77,88 @@ impl Marked<'_> {
         let q = random_walk_covariance(&full, &value, v, cols);
         let sigma = KALMAN_OBSERVATION_NOISE_MM2;
 
-        // Forward: the filtered states, and the smoother's gain at each frame,
-        // `P_k P⁻_k⁻¹`, as pyCGM2 smooths (the textbook Rauch–Tung–Striebel gain has
-        // `P⁻_{k+1}`; the two differ by ~10⁻⁴ mm on the shipped knee recording, and this
-        // follows the implementation users run).
-        let mut states = Vec::with_capacity(t);
-        let mut gains = Vec::with_capacity(t);
-        let mut state = vec![0f64; d];
-        let mut cov = scaled_identity(d, INITIAL_COVARIANCE);
-        for k in 0..t {
+        // Hᵀ H / σ of the coordinates seen at a frame: the same for a run of frames that
+        // see the same tracks, so it is summed once per run.
+        let seen_at = |k: usize| -> Vec<bool> { tracks.iter().map(|&i| self.seen(k, i)).collect() };
+        let information = |seen: &[bool]| -> Vec<f64> {
+            let mut h = vec![0f64; d * d];
+            for c in (0..cols).filter(|&c| seen[c / 3]) {
+                for i in 0..d {
+                    for j in 0..d {
+                        h[i * d + j] += v[i][c] * v[j][c] / sigma;
+                    }
+                }
+            }
+            h
+        };
+        // The covariance through one frame: the filtered `P` from the last one, and the
+        // inverse of the predicted `P⁻`. The gains depend on nothing else.
+        let step = |cov: &[f64], h: &[f64]| -> Option<(Vec<f64>, Vec<f64>)> {
             let predicted: Vec<f64> = cov.iter().zip(&q).map(|(p, q)| p + q).collect();
             let inverse = spd_inverse(&predicted, d)?;
-            // A = P⁻¹ + Hᵀ H / σ and b = Hᵀ (z − H x − m) / σ.
-            let mut a = inverse.clone();
+            let a: Vec<f64> = inverse.iter().zip(h).map(|(p, h)| p + h).collect();
+            Some((spd_inverse(&a, d)?, inverse))
+        };
+        // The smoother's gains, `d × d` a frame, would hold many times the data on a long
+        // recording: the forward pass keeps the covariance every `block` frames, and the
+        // backward pass recomputes a block's gains from it (the same operations, so the
+        // same gains to the bit).
+        let block = (t as f64).sqrt().ceil().max(1.0) as usize;
+        let mut checkpoints = Vec::with_capacity(t.div_ceil(block));
+        let mut states = Vec::with_capacity(t);
+        let mut state = vec![0f64; d];
+        let mut cov = scaled_identity(d, INITIAL_COVARIANCE);
+        let (mut seen, mut h) = (Vec::new(), Vec::new());
+        for k in 0..t {
+            if k % block == 0 {
+                checkpoints.push(cov.clone());
+            }
+            let now = seen_at(k);
+            if k == 0 || now != seen {
+                h = information(&now);
+                seen = now;
+            }
+            cov = step(&cov, &h)?.0;
+            // x += P b, b = Hᵀ (z − H x − m) / σ.
             let mut b = vec![0f64; d];
-            for c in (0..cols).filter(|&c| self.seen(k, tracks[c / 3])) {
+            for c in (0..cols).filter(|&c| seen[c / 3]) {
                 let innovation =
                     value(k, c) - mean[c] - (0..d).map(|j| v[j][c] * state[j]).sum::<f64>();
                 for i in 0..d {
                     b[i] += v[i][c] * innovation / sigma;
-                    for j in 0..d {
-                        a[i * d + j] += v[i][c] * v[j][c] / sigma;
-                    }
                 }
             }
-            cov = spd_inverse(&a, d)?;
             for i in 0..d {
                 state[i] += (0..d).map(|j| cov[i * d + j] * b[j]).sum::<f64>();
             }
             states.push(state.clone());
-            gains.push(mat_mul(&cov, &inverse, d));
         }
-        // Backward, from the second-to-last frame to the first:
-        // x_k += G_k (x_{k+1} − x̂_k), the prediction of k + 1 being the filtered x̂_k.
+        // Backward, block by block from the last, frame by frame from the second-to-last:
+        // x_k += G_k (x_{k+1} − x̂_k), the prediction of k + 1 being the filtered x̂_k, with
+        // the gain `G_k = P_k P⁻_k⁻¹` as pyCGM2 smooths (the textbook Rauch–Tung–Striebel
+        // gain has `P⁻_{k+1}`; the two differ by ~10⁻⁴ mm on the shipped knee recording,
+        // and this follows the implementation users run).
         let mut smoothed = states.clone();
-        for k in (0..t.saturating_sub(1)).rev() {
-            let step: Vec<f64> = (0..d).map(|j| smoothed[k + 1][j] - states[k][j]).collect();
-            for i in 0..d {
-                smoothed[k][i] += (0..d).map(|j| gains[k][i * d + j] * step[j]).sum::<f64>();
+        for (b, checkpoint) in checkpoints.iter().enumerate().rev() {
+            let frames = b * block..((b + 1) * block).min(t);
+            let mut gains = Vec::with_capacity(frames.len());
+            let mut cov = checkpoint.clone();
+            for k in frames.clone() {
+                let now = seen_at(k);
+                if k == frames.start || now != seen {
+                    h = information(&now);
+                    seen = now;
+                }
+                let (filtered, inverse) = step(&cov, &h)?;
+                gains.push(mat_mul(&filtered, &inverse, d));
+                cov = filtered;
+            }
+            for k in frames.clone().rev().filter(|&k| k + 1 < t) {
+                let gain = &gains[k - frames.start];
+                let step: Vec<f64> = (0..d).map(|j| smoothed[k + 1][j] - states[k][j]).collect();
+                for i in 0..d {
+                    smoothed[k][i] += (0..d).map(|j| gain[i * d + j] * step[j]).sum::<f64>();
+                }
             }
         }
         let mut out = self.positions.to_vec();
