@@ -83,24 +83,20 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
         eprintln!("  {} entries left unfilled: {why}", c.unfilled);
     }
     let b = &c.blend;
+    // One filler alone, or the blend's weights.
+    let weights = |w: &crate::gaps::blend::Weights, count: usize| {
+        if w.0.contains(&1.0) {
+            format!(": {} alone ({count} validation entries)", alone(w))
+        } else {
+            format!(" (weights from {count} validation entries): {}", listed(w))
+        }
+    };
     for (k, name) in ["short", "long"].iter().enumerate() {
         let w = if k == 0 { &b.short } else { &b.long };
-        let count = b.validated[k];
-        if count == 0 {
-            eprintln!("  {name} gaps: the field's fill (nothing to validate)");
-            continue;
+        match b.validated[k] {
+            0 => eprintln!("  {name} gaps: the field's fill (nothing to validate)"),
+            count => eprintln!("  {name} gaps{}", weights(w, count)),
         }
-        if !b.cross_fitted[k] {
-            eprintln!(
-                "  {name} gaps: {} alone (no blend beat it on {count} validation entries)",
-                alone(w)
-            );
-            continue;
-        }
-        eprintln!(
-            "  {name} gaps (weights from {count} validation entries): {}",
-            listed(w)
-        );
     }
     let mut shortest = crate::gaps::SPLINE_CARRY_FRAMES + 1;
     for class in b.by_length.iter() {
@@ -110,18 +106,21 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
         };
         shortest = class.longest.map_or(shortest, |l| l + 1);
         let count = class.validated;
-        if !class.own {
-            eprintln!("    gaps of {lengths}: the long gaps' weights ({count} validation entries)");
-        } else if !class.cross_fitted {
-            eprintln!(
-                "    gaps of {lengths}: {} alone (no blend beat it on {count} validation entries)",
-                alone(&class.weights)
-            );
+        if class.own {
+            eprintln!("    gaps of {lengths}{}", weights(&class.weights, count));
         } else {
-            eprintln!(
-                "    gaps of {lengths} (from {count} validation entries): {}",
-                listed(&class.weights)
-            );
+            eprintln!("    gaps of {lengths}: the long gaps' weights ({count} validation entries)");
+        }
+    }
+    if b.validated != [0, 0] {
+        match b.field_validated {
+            0 => eprintln!(
+                "  the field's fills: not weighed (no observation was hidden from the fit; \
+                 `doma fit --blind-validation` hides some)"
+            ),
+            count => {
+                eprintln!("  the field's fills weighed on {count} entries hidden from the fit")
+            }
         }
     }
     Ok(())

@@ -5,29 +5,34 @@
 //! No filler wins everywhere. On sparse markers the field's fill beats every baseline in
 //! most cases, but a cubic spline wins short gaps of a fast, densely sampled motion; on
 //! hundreds or thousands of tracks of one skinned surface the neighbours' motion does
-//! better (docs/results.md, gap filling). So the weights are learned per data set: in each
-//! of [`VALIDATION_FOLDS`] draws, [`VALIDATION_FRACTION`] of the observations of the
-//! tracks with gaps are hidden again, in the pattern of the data's own gaps moved in time
+//! better, and on dense marker sets the donors' rigid motion (docs/results.md, gap
+//! filling). So the weights are learned per data set, in two stages (`learn.rs`).
+//!
+//! First the classic fillers: in each of at least [`VALIDATION_FOLDS`] draws (more, up to
+//! [`MAX_VALIDATION_DRAWS`], until each class of gap length to fill holds
+//! [`VALIDATION_SPANS`] spans), [`VALIDATION_FRACTION`] of the observations of the tracks
+//! with gaps are hidden again, in the pattern of the data's own gaps moved in time
 //! ([`validation_spans`]: as long as they are, and as many tracks at once; the tracks
 //! without a gap stay whole, as for the real gaps, since the donor fillers and Gløersen's
-//! depend on them); every filler fills them from
-//! what is left, and the convex combination with the least mean distance over the draws
-//! (each span counted once, as the literature counts each gap; `learn.rs`) is found: one
-//! for gaps of at most [`SPLINE_CARRY_FRAMES`](super::SPLINE_CARRY_FRAMES) frames, one for
-//! longer gaps pooled, and one for each [`length_class`] of the longer ones seen in two
-//! draws or more (the pooled one serves the others). Each is used only if it also beats
-//! every filler alone cross-fitted (weights learned on the other draws, judged on each draw
-//! in turn): a blend that won by chance on a few spans is not used, and the filler that
-//! did best alone fills that class instead. The real gaps are then filled from every
-//! observation (docs/design.md §7).
+//! depend on them); every filler fills them from what is left, and the convex combination
+//! with the least mean distance over the draws (each span counted once, as the literature
+//! counts each gap) is found: one for gaps of at most
+//! [`SPLINE_CARRY_FRAMES`](super::SPLINE_CARRY_FRAMES) frames, one for longer gaps pooled,
+//! and one for each [`length_class`] of the longer ones seen in two draws or more (the
+//! pooled one serves the others). Each is used only if it also beats every filler alone
+//! cross-fitted (weights learned on the other draws, judged on the rest in turn): a blend
+//! that won by chance on a few spans is not used, and the filler that did best alone fills
+//! that class instead.
 //!
-//! By default the field was fitted to the validation entries, so its fill is judged where
-//! it has seen the answer; that favours the field's fills. The field alone is not blended
-//! for that reason: judged on entries it was fitted to, it looks far better than inside a
-//! gap. A fit with blind validation (`--blind-validation`) hides one draw of validation
-//! spans from the field itself ([`blind_spans`]); the weights are then learned on those
-//! spans alone, split into [`VALIDATION_FOLDS`] folds by span, where every filler, the
-//! field's fills included, fills them as it fills a real gap.
+//! Then the field's fills, on spans the field was not fitted to. The field was fitted to
+//! every observation, the validation spans of the first stage included: judged there it
+//! has seen the answer and looks far better than inside a gap (on the shared motion-capture
+//! recordings, by up to twice). A fit with blind validation hides one draw of validation
+//! spans from the field itself ([`blind_spans`]); on those spans alone, split into
+//! [`VALIDATION_FOLDS`] folds by span, the first stage's blend and the field's two fills
+//! are blended per class the same way. Without blind spans the field's fills take no
+//! weight (its fill alone is still `--method field_fill`). The real gaps are then filled
+//! from every observation (docs/design.md §7).
 
 // Index loops over 6 × 6 matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
@@ -41,8 +46,18 @@ use serde::{Deserialize, Serialize};
 /// The share of the observations of the tracks with gaps hidden in each validation draw.
 pub const VALIDATION_FRACTION: f64 = 0.1;
 
-/// The validation draws.
+/// The validation draws at least, and the groups of draws that cross-fitting holds out in
+/// turn.
 pub const VALIDATION_FOLDS: usize = 6;
+
+/// The validation draws at most: past [`VALIDATION_FOLDS`], draws are added until every
+/// class of gap length that has a gap to fill holds [`VALIDATION_SPANS`] validation spans.
+/// A short recording hides only a few spans per draw (a tenth of a 2-second clip is a
+/// couple of one-second gaps), too few to weigh the fillers by.
+pub const MAX_VALIDATION_DRAWS: usize = 30;
+
+/// The validation spans wanted in each class of gap length with a gap to fill.
+pub const VALIDATION_SPANS: usize = 24;
 
 /// Keeps the seed of the spans hidden from a fit ([`blind_spans`]) apart from the draws'.
 const BLIND_SEED: u64 = 0x5851_f42d_4c95_7f2d;
@@ -52,7 +67,13 @@ const BLIND_SEED: u64 = 0x5851_f42d_4c95_7f2d;
 /// gaps ([`validation_spans`]), drawn with `seed`; none where no span fits.
 /// `(frame, track)`, sorted.
 pub fn blind_spans(tracks: &Marked, seed: u64) -> Vec<(usize, usize)> {
-    validation_spans(tracks, VALIDATION_FRACTION, seed ^ BLIND_SEED).unwrap_or_default()
+    validation_spans(tracks, VALIDATION_FRACTION, seed ^ BLIND_SEED, span_class).unwrap_or_default()
+}
+
+/// The class of a gap of `len` frames among the short gaps (0) and the [`LENGTH_CLASSES`]
+/// of the long ones (1 on): the strata of the validation spans.
+fn span_class(len: usize) -> usize {
+    length_class(len).map_or(0, |c| c + 1)
 }
 
 /// The number of fillers blended.
@@ -111,6 +132,15 @@ pub struct Blend {
     /// validation entry, and in reports written before).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub by_length: Vec<LengthBlend>,
+    /// The blind validation entries that weighed the field's fills against the classic
+    /// fillers' blend (0: none, and the field's fills take no weight where anything was
+    /// validated).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub field_validated: usize,
+}
+
+fn is_zero(v: &usize) -> bool {
+    *v == 0
 }
 
 /// The weights of one length class of long gaps ([`length_class`]).
@@ -243,6 +273,7 @@ impl Blend {
             validated: [0, 0],
             cross_fitted: [false, false],
             by_length: Vec::new(),
+            field_validated: 0,
         }
     }
 

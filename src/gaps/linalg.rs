@@ -40,11 +40,13 @@ pub fn spline_at(x: &[f64], y: &[f64], m: &[f64], j: usize, v: f64) -> f64 {
 }
 
 /// The weights `w ≥ 0`, `Σ w = 1` that minimise `wᵀ E w`, for `E` the Gram matrix of the
-/// fillers' errors: the exact minimum over every support (2^M − 1 of them), each solved
-/// with its equality constraint by the KKT system `[E_S 1; 1ᵀ 0] [w; λ] = [0; 1]`.
-pub fn simplex_least_squares<const M: usize>(e: &[[f64; M]; M]) -> [f64; M] {
+/// fillers' errors, with weight only on the fillers whose bits are set in `allowed`: the
+/// exact minimum over every support within it (at most 2^M − 1), each solved with its
+/// equality constraint by the KKT system `[E_S 1; 1ᵀ 0] [w; λ] = [0; 1]`. All zeros when
+/// `allowed` holds none of the `M`.
+pub fn simplex_least_squares<const M: usize>(e: &[[f64; M]; M], allowed: u32) -> [f64; M] {
     let mut best = ([0f64; M], f64::INFINITY);
-    for support in 1u32..(1 << M) {
+    for support in (1u32..(1 << M)).filter(|s| s & !allowed == 0) {
         let idx: Vec<usize> = (0..M).filter(|&m| support & (1 << m) != 0).collect();
         let s = idx.len();
         // The KKT system, (s + 1) × (s + 1), augmented with its right-hand side.
@@ -139,7 +141,7 @@ mod tests {
         for m in 2..M {
             e[m][m] = 100.0;
         }
-        let w = simplex_least_squares(&e);
+        let w = simplex_least_squares(&e, u32::MAX);
         let want = [1.0, 0.25, 0.01, 0.01, 0.01, 0.01].map(|v| v / 1.29);
         for m in 0..M {
             assert!((w[m] - want[m]).abs() < 1e-12, "{w:?}");
@@ -153,8 +155,15 @@ mod tests {
             e[3][l] = 0.0;
             e[l][3] = 0.0;
         }
-        let w = simplex_least_squares(&e);
+        let w = simplex_least_squares(&e, u32::MAX);
         assert_eq!(w, [0.0, 0.0, 0.0, 1.0, 0.0, 0.0]);
+        // Without filler 3, the other five share the weight equally: wᵀ E w = 1 + 1/5.
+        let w = simplex_least_squares(&e, !(1 << 3));
+        for m in [0, 1, 2, 4, 5] {
+            assert!((w[m] - 0.2).abs() < 1e-12, "{w:?}");
+        }
+        assert_eq!(w[3], 0.0);
+        assert_eq!(simplex_least_squares(&e, 0), [0.0; M]);
         // Perfectly anti-correlated errors cancel: (1, −1) → (0.5, 0.5) with zero error,
         // which a negative weight elsewhere cannot improve on.
         let mut e = [[0f64; M]; M];
@@ -165,7 +174,7 @@ mod tests {
         for m in 2..M {
             e[m][m] = 3.0;
         }
-        let w = simplex_least_squares(&e);
+        let w = simplex_least_squares(&e, u32::MAX);
         assert!(
             (w[0] - 0.5).abs() < 1e-12 && (w[1] - 0.5).abs() < 1e-12,
             "{w:?}"

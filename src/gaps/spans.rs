@@ -123,7 +123,10 @@ pub fn hold_out_spans(
 /// takes one interior gap and the interior gaps of other tracks that overlap it (markers
 /// lost together, as an occlusion or a gap "in several markers at once" hides them), and
 /// hides the same pattern at a random other time, each span inside its track's
-/// observations (a member that does not fit there is left out). So the spans are as long
+/// observations (a member that does not fit there is left out). The gap that leads a draw
+/// is drawn by its class, `stratum` of its length, uniformly among the classes, then
+/// uniformly within its class: where a few short gaps sit among many long ones, the long
+/// ones would otherwise take nearly every validation entry. So the spans are as long
 /// as the gaps to fill and hidden together as they are: a donor filler validated on one
 /// marker at a time while the gaps take three at once would be judged with donors it will
 /// not have. The tracks without a gap are left whole, as they are for the real gaps: they
@@ -134,6 +137,7 @@ pub fn validation_spans(
     tracks: &Marked,
     fraction: f64,
     seed: u64,
+    stratum: impl Fn(usize) -> usize,
 ) -> Result<Vec<(usize, usize)>, String> {
     let t = tracks.frames;
     let mut interior: Vec<Gap> = gaps(tracks)
@@ -145,7 +149,7 @@ pub fn validation_spans(
         return hold_out_lengths(tracks, fraction, &lengths, &every, seed);
     }
     interior.sort_by_key(|g| (g.frames.start, g.track));
-    hold_out_groups(tracks, fraction, &interior, seed)
+    hold_out_groups(tracks, fraction, &interior, seed, stratum)
 }
 
 /// The draw of [`validation_spans`] from the `interior` gaps, sorted by start.
@@ -154,9 +158,19 @@ fn hold_out_groups(
     fraction: f64,
     interior: &[Gap],
     seed: u64,
+    stratum: impl Fn(usize) -> usize,
 ) -> Result<Vec<(usize, usize)>, String> {
     let (t, n) = (tracks.frames, tracks.points);
     check_fraction(fraction)?;
+    // The interior gaps by class, in the order the classes first appear.
+    let mut strata: Vec<(usize, Vec<usize>)> = Vec::new();
+    for (j, g) in interior.iter().enumerate() {
+        let class = stratum(g.len());
+        match strata.iter_mut().find(|(c, _)| *c == class) {
+            Some((_, members)) => members.push(j),
+            None => strata.push((class, vec![j])),
+        }
+    }
     let mut gapped: Vec<usize> = interior.iter().map(|g| g.track).collect();
     gapped.sort_unstable();
     gapped.dedup();
@@ -179,7 +193,8 @@ fn hold_out_groups(
                 hidden.len()
             ));
         }
-        let g = &interior[rng.random_range(0..interior.len())];
+        let members = &strata[rng.random_range(0..strata.len())].1;
+        let g = &interior[members[rng.random_range(0..members.len())]];
         let start = rng.random_range(1..=t - 1 - g.len());
         // The gaps that overlap it: they start less than the longest gap before it ends.
         let from = interior.partition_point(|h| h.frames.start + longest < g.frames.start);
@@ -390,7 +405,7 @@ mod tests {
             }
         }
         let tracks = Marked::new(t, n, &positions, &observed);
-        let spans = validation_spans(&tracks, 0.1, 3).unwrap();
+        let spans = validation_spans(&tracks, 0.1, 3, |_| 0).unwrap();
         assert!(spans.iter().all(|&(_, i)| i == 2 || i == 7), "{spans:?}");
         assert_eq!(spans.len(), (0.1f64 * 2.0 * 54.0).round() as usize);
         // Their gaps are at the same frames: so are the spans (the second cut at the
@@ -407,7 +422,7 @@ mod tests {
         assert!(short.iter().all(|k| long.contains(k)), "{spans:?}");
         let all = vec![true; t * n];
         let whole = Marked::new(t, n, &positions, &all);
-        let spans = validation_spans(&whole, 0.1, 3).unwrap();
+        let spans = validation_spans(&whole, 0.1, 3, |_| 0).unwrap();
         let touched: std::collections::BTreeSet<usize> = spans.iter().map(|&(_, i)| i).collect();
         assert!(touched.len() > 2, "{touched:?}");
         assert_eq!(spans.len(), 60);

@@ -1,6 +1,17 @@
-//! Learning a blend's weights: validation draws, every filler's error on them, and per
-//! class of gap length the convex combination with the least mean distance, kept where it
-//! beats every filler alone cross-fitted.
+//! Learning a blend's weights, in two stages.
+//!
+//! 1. **The classic fillers** (every filler but the field's two fills), on validation
+//!    draws: spans of the observations hidden, every filler filling them from the rest;
+//!    per class of gap length, the convex combination with the least mean distance, kept
+//!    where it beats every filler alone cross-fitted. These fillers see nothing but the
+//!    observations left, so a span hidden from them is a gap to them.
+//! 2. **The field's fills**, on the blind spans alone, where there are any: observations
+//!    the field was fitted without ([`super::blind_spans`]). The field was fitted to every
+//!    other observation, so judged on a validation span of stage 1 it would be judged
+//!    where it has seen the answer; there it looks far better than inside a gap. Per
+//!    class, stage 1's blend and the field's two fills are blended again, three weights
+//!    learned and cross-fitted the same way on the blind spans. Without blind spans the
+//!    field's fills take no weight: nothing measured them as they fill a gap.
 //!
 //! The objective is the literature's: the mean Euclidean distance of each gap, averaged
 //! over the gaps ([`Residual::weight`]: every validation span counts once, whatever its
@@ -16,13 +27,14 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::{
-    Blend, LENGTH_CLASSES, LengthBlend, M, VALIDATION_FOLDS, VALIDATION_FRACTION, Weights,
-    candidates, class_longest, length_class,
+    Blend, LENGTH_CLASSES, LengthBlend, M, MAX_VALIDATION_DRAWS, VALIDATION_FOLDS,
+    VALIDATION_FRACTION, VALIDATION_SPANS, Weights, candidates, class_longest, length_class,
+    span_class,
 };
 use crate::gaps::field_fill::FieldPrediction;
 use crate::gaps::fillers::{Filler, Marked, PerFiller, Sources};
 use crate::gaps::linalg::simplex_least_squares;
-use crate::gaps::spans::{gap_sizes, validation_spans};
+use crate::gaps::spans::{gap_sizes, gaps, validation_spans};
 
 /// The classes whose weights [`learn`] solves for: short gaps, long gaps pooled, then each
 /// length class of the long ones.
@@ -36,6 +48,14 @@ const REWEIGHTS: usize = 16;
 /// them per step, and a span's neighbouring entries say nearly the same.
 const SOLVED_ENTRIES: usize = 1 << 14;
 
+/// The blind folds with entries of a class that stage 2 needs to weigh the field's fills
+/// there (fewer give no measure of the gain's spread).
+const FIELD_FOLDS: usize = 3;
+
+/// The candidates of stage 2: stage 1's blend, the field's fill with fixed lenders and
+/// with lenders chosen frame by frame.
+const STAGE_TWO: usize = 3;
+
 /// The classes a validation entry in a gap of `len` frames counts in.
 fn classes_of(len: usize) -> impl Iterator<Item = usize> {
     match length_class(len) {
@@ -46,24 +66,29 @@ fn classes_of(len: usize) -> impl Iterator<Item = usize> {
     .flatten()
 }
 
-/// One validation entry: every filler's error there, `p_m − y` (in `f32`, as the fills
-/// are: a long recording's draws hold millions), and its weight in the objective, one over
-/// the length of its gap, so that each gap counts once.
-pub(super) struct Residual {
-    errors: [[f32; 3]; M],
-    weight: f64,
+/// One validation entry: each of `K` candidates' error there, `p − y` (in `f32`, as the
+/// fills are: a long recording's draws hold millions), and the length of its gap.
+pub(super) struct Residual<const K: usize> {
+    errors: [[f32; 3]; K],
+    len: usize,
 }
 
-/// A fold's residuals per class: an entry counts in two (its length class and the pooled
+/// A draw's residuals per class: an entry counts in two (its length class and the pooled
 /// long gaps, or the short gaps alone), held once.
-type Classes = [Vec<Arc<Residual>>; CLASSES];
+type Classes<const K: usize> = [Vec<Arc<Residual<K>>>; CLASSES];
 
-impl Residual {
+impl<const K: usize> Residual<K> {
+    /// Its weight in the objective: one over the length of its gap, so that each gap
+    /// counts once.
+    fn weight(&self) -> f64 {
+        1.0 / self.len.max(1) as f64
+    }
+
     /// The distance of the blend `w` to the truth.
-    fn distance(&self, w: &[f64; M]) -> f64 {
+    fn distance(&self, w: &[f64; K]) -> f64 {
         (0..3)
             .map(|c| {
-                (0..M)
+                (0..K)
                     .map(|m| w[m] * self.errors[m][c] as f64)
                     .sum::<f64>()
                     .powi(2)
@@ -74,24 +99,24 @@ impl Residual {
 }
 
 /// The objective: `Σ weight · distance` of the blend `w` over `residuals`.
-fn cost<'a>(residuals: impl Iterator<Item = &'a Residual>, w: &[f64; M]) -> f64 {
-    residuals.map(|r| r.weight * r.distance(w)).sum()
+fn cost<'a, const K: usize>(residuals: impl Iterator<Item = &'a Residual<K>>, w: &[f64; K]) -> f64 {
+    residuals.map(|r| r.weight() * r.distance(w)).sum()
 }
 
-/// The convex weights with the least [`cost`] over `all` (at most [`SOLVED_ENTRIES`] of
-/// them, evenly spaced): least squares, then
-/// [`REWEIGHTS`] steps that weigh each entry by one over its distance (a majorisation of
-/// the distance, minimised exactly over the simplex each step, so the cost never rises;
-/// the best seen is kept).
-fn mean_distance(all: &[&Residual]) -> [f64; M] {
+/// The convex weights, on the candidates whose bits are set in `allowed`, with the least
+/// [`cost`] over `all` (at most [`SOLVED_ENTRIES`] of them, evenly spaced): least squares,
+/// then [`REWEIGHTS`] steps that weigh each entry by one over its distance (a
+/// majorisation of the distance, minimised exactly over the simplex each step, so the
+/// cost never rises; the best seen is kept).
+fn mean_distance<const K: usize>(all: &[&Residual<K>], allowed: u32) -> [f64; K] {
     let stride = all.len().div_ceil(SOLVED_ENTRIES).max(1);
-    let residuals: Vec<&Residual> = all.iter().step_by(stride).copied().collect();
-    let gram = |scale: &dyn Fn(&Residual) -> f64| {
-        let mut e = [[0f64; M]; M];
+    let residuals: Vec<&Residual<K>> = all.iter().step_by(stride).copied().collect();
+    let gram = |scale: &dyn Fn(&Residual<K>) -> f64| {
+        let mut e = [[0f64; K]; K];
         for r in &residuals {
-            let s = r.weight * scale(r);
-            for m in 0..M {
-                for l in m..M {
+            let s = r.weight() * scale(r);
+            for m in 0..K {
+                for l in m..K {
                     e[m][l] += s
                         * (0..3)
                             .map(|c| r.errors[m][c] as f64 * r.errors[l][c] as f64)
@@ -99,16 +124,16 @@ fn mean_distance(all: &[&Residual]) -> [f64; M] {
                 }
             }
         }
-        for m in 0..M {
+        for m in 0..K {
             for l in 0..m {
                 e[m][l] = e[l][m];
             }
         }
         e
     };
-    let mut w = simplex_least_squares(&gram(&|_| 1.0));
+    let mut w = simplex_least_squares(&gram(&|_| 1.0), allowed);
     let mut best = (w, cost(residuals.iter().copied(), &w));
-    let total: f64 = residuals.iter().map(|r| r.weight).sum();
+    let total: f64 = residuals.iter().map(|r| r.weight()).sum();
     for _ in 0..REWEIGHTS {
         if best.1 <= 0.0 || total <= 0.0 {
             break;
@@ -116,7 +141,7 @@ fn mean_distance(all: &[&Residual]) -> [f64; M] {
         // Distances below a thousandth of the mean are held there: an entry filled
         // exactly would otherwise take all the weight.
         let floor = 1e-3 * best.1 / total;
-        w = simplex_least_squares(&gram(&|r| 1.0 / r.distance(&w).max(floor)));
+        w = simplex_least_squares(&gram(&|r| 1.0 / r.distance(&w).max(floor)), allowed);
         let c = cost(residuals.iter().copied(), &w);
         if c < best.1 * (1.0 - 1e-9) {
             best = (w, c);
@@ -127,12 +152,51 @@ fn mean_distance(all: &[&Residual]) -> [f64; M] {
     best.0
 }
 
-/// The weights: in each draw, validation spans hidden (drawn with `seed`, or the folds of
-/// `blind`) and every filler filling them from the rest; per class over the draws, the
-/// convex combination with the least mean distance ([`mean_distance`]), kept where it
-/// beats every filler alone cross-fitted, else the filler that does best alone. Short gaps
-/// and long ones pooled, then each length class of the long ones with validation entries
-/// in two draws or more.
+/// The whole weight on candidate `k`.
+fn one_hot<const K: usize>(k: usize) -> [f64; K] {
+    std::array::from_fn(|m| if m == k { 1.0 } else { 0.0 })
+}
+
+/// One class's weights over `draws` (each draw's residuals per class), on the
+/// candidates of `allowed`: the blend with the least mean distance if it beats every
+/// allowed candidate alone cross-fitted (each group of draws, draw `d` in group
+/// `d % groups`, judged with the weights of the others), else the candidate that did
+/// best alone; and whether the blend won.
+fn solve<const K: usize>(draws: &[Classes<K>], class: usize, allowed: u32) -> ([f64; K], bool) {
+    let groups = draws.len().min(VALIDATION_FOLDS);
+    let of = |group: Option<usize>, held: bool| -> Vec<&Residual<K>> {
+        draws
+            .iter()
+            .enumerate()
+            .filter(|&(d, _)| group.is_none_or(|g| (d % groups == g) == held))
+            .flat_map(|(_, f)| f[class].iter().map(|r| &**r))
+            .collect()
+    };
+    let (mut blended, mut alone) = (0f64, [0f64; K]);
+    for group in 0..groups {
+        let (rest, judged) = (of(Some(group), false), of(Some(group), true));
+        if rest.is_empty() || judged.is_empty() {
+            continue;
+        }
+        blended += cost(judged.iter().copied(), &mean_distance(&rest, allowed));
+        for k in 0..K {
+            alone[k] += cost(judged.iter().copied(), &one_hot::<K>(k));
+        }
+    }
+    // Ties go to the earlier candidate.
+    let single = (0..K)
+        .filter(|&k| allowed & (1 << k) != 0)
+        .min_by(|&x, &y| alone[x].total_cmp(&alone[y]).then(x.cmp(&y)))
+        .unwrap_or(0);
+    if blended < alone[single] {
+        (mean_distance(&of(None, true), allowed), true)
+    } else {
+        (one_hot::<K>(single), false)
+    }
+}
+
+/// The weights (module docs): stage 1 on validation draws with `seed`, stage 2 on the
+/// observed entries of `blind`, observations the field was fitted without.
 pub(super) fn learn(
     tracks: &Marked,
     field: &FieldPrediction,
@@ -140,73 +204,71 @@ pub(super) fn learn(
     blind: &[(usize, usize)],
 ) -> Blend {
     let (t, n, observed) = (tracks.frames, tracks.points, tracks.observed);
-    let field_only = Weights::only(Filler::FieldFill);
-    let carried_only = Blend::only(Filler::FieldFill);
     if t < 3 || observed.iter().all(|&o| o) {
-        return carried_only;
+        return Blend::only(Filler::FieldFill);
     }
     // Per draw and class, the validation entries' residuals; the draws are independent,
     // so they run on every core (in order: the result does not depend on the split).
-    let folds: Vec<Classes> = draws(tracks, seed, blind)
+    let folds: Vec<Classes<M>> = draws(tracks, seed)
         .into_par_iter()
-        .map(|(hidden, left)| {
-            // Each validation entry's gap length in what is left.
+        .map(|hidden| {
+            let mut left = observed.to_vec();
+            for &(k, i) in &hidden {
+                left[k * n + i] = false;
+            }
             let left_tracks = tracks.with_observed(&left);
-            let left_sizes = gap_sizes(&left_tracks);
-            let entries: Vec<(usize, usize, usize)> = hidden
-                .iter()
-                .filter_map(|&(k, i)| left_sizes[k * n + i].map(|len| (k, i, len)))
-                .collect();
-            residuals(&Sources::new(left_tracks, field), &entries)
+            residuals(&Sources::new(left_tracks, field), &hidden)
+                .into_iter()
+                .flatten()
+                .fold(empty_classes(), |mut classes, r| {
+                    for class in classes_of(r.len) {
+                        classes[class].push(Arc::clone(&r));
+                    }
+                    classes
+                })
         })
         .collect();
+    let Some(mut blend) = classic_blend(&folds) else {
+        // Nothing to validate on: the field's fill, as it is fitted.
+        return Blend::only(Filler::FieldFill);
+    };
+    let blind_folds = blind_residuals(tracks, field, blind, &blend);
+    if !blind_folds.is_empty() {
+        judge_field(&mut blend, &blind_folds);
+    }
+    blend
+}
+
+fn empty_classes<const K: usize>() -> Classes<K> {
+    std::array::from_fn(|_| Vec::new())
+}
+
+/// Stage 1: the blend of the classic fillers on `folds`, per class; `None` where no draw
+/// holds a validation entry.
+fn classic_blend(folds: &[Classes<M>]) -> Option<Blend> {
+    let classic = Filler::ALL
+        .iter()
+        .enumerate()
+        .filter(|(_, f)| !f.is_field())
+        .fold(0u32, |bits, (m, _)| bits | 1 << m);
     let counts: [usize; CLASSES] = std::array::from_fn(|c| folds.iter().map(|f| f[c].len()).sum());
     // The draws in which each class has a validation entry.
     let drawn: [usize; CLASSES] =
         std::array::from_fn(|c| folds.iter().filter(|f| !f[c].is_empty()).count());
-    let solve = |class: usize| -> (Weights, bool) {
-        let of = |skip: Option<usize>| -> Vec<&Residual> {
-            folds
-                .iter()
-                .enumerate()
-                .filter(|&(fold, _)| Some(fold) != skip)
-                .flat_map(|(_, f)| f[class].iter().map(|r| &**r))
-                .collect()
-        };
-        // Cross-fitted: each draw judged with the weights of the others, beside every
-        // filler alone on the same draws.
-        let (mut blended, mut alone) = (0f64, [0f64; M]);
-        for (fold, f) in folds.iter().enumerate() {
-            let rest = of(Some(fold));
-            if rest.is_empty() || f[class].is_empty() {
-                continue;
-            }
-            let judged = || f[class].iter().map(|r| &**r);
-            blended += cost(judged(), &mean_distance(&rest));
-            for m in 0..M {
-                alone[m] += cost(judged(), &Weights::only(Filler::ALL[m]).0);
-            }
-        }
-        // Ties go to the earlier filler (the field's fill first).
-        let single = (0..M)
-            .min_by(|&x, &y| alone[x].total_cmp(&alone[y]).then(x.cmp(&y)))
-            .unwrap_or(0);
-        if blended < alone[single] {
-            (PerFiller(mean_distance(&of(None))), true)
-        } else {
-            (Weights::only(Filler::ALL[single]), false)
-        }
+    let solved = |class: usize| {
+        let (w, beat) = solve(folds, class, classic);
+        (PerFiller(w), beat)
     };
-    let mut weights = [field_only; 2];
+    let mut weights = [Weights::only(Filler::FieldFill); 2];
     let mut cross_fitted = [false; 2];
     for class in 0..2 {
         if counts[class] > 0 {
-            (weights[class], cross_fitted[class]) = solve(class);
+            (weights[class], cross_fitted[class]) = solved(class);
         }
     }
     // A class with no validation entry takes the other's weights.
     match [counts[0], counts[1]] {
-        [0, 0] => return carried_only,
+        [0, 0] => return None,
         [0, _] => (weights[0], cross_fitted[0]) = (weights[1], cross_fitted[1]),
         [_, 0] => (weights[1], cross_fitted[1]) = (weights[0], cross_fitted[0]),
         _ => {}
@@ -219,7 +281,7 @@ pub(super) fn learn(
                 let class = 2 + c;
                 let own = drawn[class] >= 2;
                 let (w, beat) = if own {
-                    solve(class)
+                    solved(class)
                 } else {
                     (weights[1], false)
                 };
@@ -233,46 +295,185 @@ pub(super) fn learn(
             })
             .collect()
     };
-    Blend {
+    Some(Blend {
         short: weights[0],
         long: weights[1],
         validated: [counts[0], counts[1]],
         cross_fitted,
         by_length,
-    }
+        field_validated: 0,
+    })
 }
 
-/// One validation draw: the entries hidden, and the `[T, N]` mask of what is left observed.
-type Draw = (Vec<(usize, usize)>, Vec<bool>);
-
-/// The validation draws of [`learn`], each its hidden entries and what is left observed:
-/// [`VALIDATION_FOLDS`] draws of spans with `seed`, or, where `blind` holds observed
-/// entries, those alone hidden and split into the folds span by span.
-pub(super) fn draws(tracks: &Marked, seed: u64, blind: &[(usize, usize)]) -> Vec<Draw> {
-    let (n, observed) = (tracks.points, tracks.observed);
-    let hide = |hidden: &[(usize, usize)]| {
-        let mut left = observed.to_vec();
-        for &(k, i) in hidden {
-            left[k * n + i] = false;
-        }
-        left
+/// The blind spans' residuals for stage 2, split into [`VALIDATION_FOLDS`] folds span by
+/// span: stage 1's blend by `blend`'s weights for each entry's gap, and the field's two
+/// fills. Empty where `blind` holds no observed entry.
+fn blind_residuals(
+    tracks: &Marked,
+    field: &FieldPrediction,
+    blind: &[(usize, usize)],
+    blend: &Blend,
+) -> Vec<Classes<STAGE_TWO>> {
+    let folds = blind_draws(tracks, blind);
+    let Some((_, left)) = folds.first() else {
+        return Vec::new();
     };
+    // Every fold hides all the blind spans: the fills are the same for each.
+    let all: Vec<(usize, usize)> = folds.iter().flat_map(|(f, _)| f.iter().copied()).collect();
+    let fold_of: std::collections::HashMap<(usize, usize), usize> = folds
+        .iter()
+        .enumerate()
+        .flat_map(|(d, (f, _))| f.iter().map(move |&e| (e, d)))
+        .collect();
+    let sources = Sources::new(tracks.with_observed(left), field);
+    let (fixed, framewise) = (
+        Filler::FieldFill.index(),
+        Filler::FieldFillFramewise.index(),
+    );
+    let mut out: Vec<Classes<STAGE_TWO>> = (0..folds.len()).map(|_| empty_classes()).collect();
+    for (r, e) in residuals(&sources, &all).into_iter().zip(&all) {
+        let Some(r) = r else { continue };
+        let w = blend.weights_for(r.len).0;
+        let classic: [f32; 3] = std::array::from_fn(|c| {
+            (0..M)
+                .filter(|&m| w[m] > 0.0)
+                .map(|m| w[m] * r.errors[m][c] as f64)
+                .sum::<f64>() as f32
+        });
+        let three = Arc::new(Residual {
+            errors: [classic, r.errors[fixed], r.errors[framewise]],
+            len: r.len,
+        });
+        let fold = &mut out[fold_of[e]];
+        for class in classes_of(r.len) {
+            fold[class].push(Arc::clone(&three));
+        }
+    }
+    out
+}
+
+/// Stage 2: each class's weights become the blend of its stage-1 weights and the field's
+/// two fills learned on the blind spans (`folds`), where the class has blind entries in
+/// [`FIELD_FOLDS`] folds or more and that blend, cross-fitted, beats the first stage's by
+/// more than two standard errors of its gain per fold. A blind draw holds few spans on a
+/// short recording: a share that wins on some folds and loses on others by as much is
+/// the spans' noise. A class that does not
+/// qualify keeps its stage-1 weights (the pooled long gaps' share of the field would be
+/// judged on gaps of other lengths).
+fn judge_field(blend: &mut Blend, folds: &[Classes<STAGE_TWO>]) {
+    let counts: [usize; CLASSES] = std::array::from_fn(|c| folds.iter().map(|f| f[c].len()).sum());
+    let drawn: [usize; CLASSES] =
+        std::array::from_fn(|c| folds.iter().filter(|f| !f[c].is_empty()).count());
+    let share = |class: usize| -> Option<[f64; STAGE_TWO]> {
+        if drawn[class] < FIELD_FOLDS {
+            return None;
+        }
+        let classic = one_hot::<STAGE_TWO>(0);
+        let (s, _) = solve(folds, class, u32::MAX);
+        // Each fold judged with the weights the others choose, against the first stage's
+        // blend: the field's share holds only where it gains by more than two standard
+        // errors of the folds' gains.
+        let gains: Vec<f64> = (0..folds.len())
+            .filter(|&d| !folds[d][class].is_empty())
+            .map(|d| {
+                let others: Vec<Classes<STAGE_TWO>> = folds
+                    .iter()
+                    .enumerate()
+                    .filter(|&(e, _)| e != d)
+                    .map(|(_, f)| f.clone())
+                    .collect();
+                let (w, _) = solve(&others, class, u32::MAX);
+                let judged = || folds[d][class].iter().map(|r| &**r);
+                cost(judged(), &classic) - cost(judged(), &w)
+            })
+            .collect();
+        (s != classic && clearly_positive(&gains)).then_some(s)
+    };
+    let with_field = |classic: &Weights, s: [f64; STAGE_TWO]| -> Weights {
+        PerFiller::from_fn(|f| {
+            s[0] * classic[f]
+                + match f {
+                    Filler::FieldFill => s[1],
+                    Filler::FieldFillFramewise => s[2],
+                    _ => 0.0,
+                }
+        })
+    };
+    if let Some(s) = share(0) {
+        blend.short = with_field(&blend.short, s);
+    }
+    for (c, class) in blend.by_length.iter_mut().enumerate() {
+        if let Some(s) = share(2 + c) {
+            class.weights = with_field(&class.weights, s);
+        }
+    }
+    if let Some(s) = share(1) {
+        blend.long = with_field(&blend.long, s);
+    }
+    blend.field_validated = counts[0] + counts[1];
+}
+
+/// Whether the mean of `gains` exceeds two of its standard errors (so is positive).
+fn clearly_positive(gains: &[f64]) -> bool {
+    let n = gains.len() as f64;
+    if gains.len() < 2 {
+        return false;
+    }
+    let mean = gains.iter().sum::<f64>() / n;
+    let variance = gains.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    mean > 0.0 && mean > 2.0 * (variance / n).sqrt()
+}
+
+/// One validation draw's hidden entries, `(frame, track)`.
+type Hidden = Vec<(usize, usize)>;
+
+/// Stage 1's validation draws, each its hidden entries: at least [`VALIDATION_FOLDS`],
+/// then more until every class of gap length with a gap to fill holds
+/// [`VALIDATION_SPANS`] validation spans, at most [`MAX_VALIDATION_DRAWS`].
+pub(super) fn draws(tracks: &Marked, seed: u64) -> Vec<Hidden> {
+    // The classes of the gaps to fill, and the validation spans drawn in each.
+    let mut wanted = [false; 1 + LENGTH_CLASSES];
+    for g in gaps(tracks).filter(|g| g.is_interior()) {
+        wanted[span_class(g.len())] = true;
+    }
+    let mut spans = [0usize; 1 + LENGTH_CLASSES];
+    let (mut out, mut failed) = (Vec::new(), 0);
+    for draw in 0..MAX_VALIDATION_DRAWS {
+        let enough = (0..spans.len()).all(|c| !wanted[c] || spans[c] >= VALIDATION_SPANS);
+        if draw >= VALIDATION_FOLDS && enough || failed == VALIDATION_FOLDS {
+            break;
+        }
+        let draw_seed = seed ^ 0x9e37_79b9_7f4a_7c15u64.wrapping_mul(draw as u64 + 1);
+        let Ok(hidden) = validation_spans(tracks, VALIDATION_FRACTION, draw_seed, span_class)
+        else {
+            failed += 1;
+            continue;
+        };
+        for len in span_lengths(&hidden) {
+            spans[span_class(len)] += 1;
+        }
+        out.push(hidden);
+    }
+    out
+}
+
+/// One blind fold: the entries it judges, and the `[T, N]` mask of what is left observed
+/// (every blind entry hidden).
+type Draw = (Hidden, Vec<bool>);
+
+/// The observed entries of `blind`, split into [`VALIDATION_FOLDS`] folds span by span,
+/// each with the mask that hides them all; none where `blind` holds no observed entry.
+pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> Vec<Draw> {
+    let (n, observed) = (tracks.points, tracks.observed);
     let mut blind: Vec<(usize, usize)> = blind
         .iter()
         .copied()
         .filter(|&(k, i)| observed[k * n + i])
         .collect();
-    if blind.is_empty() {
-        return (0..VALIDATION_FOLDS)
-            .filter_map(|fold| {
-                let fold_seed = seed ^ 0x9e37_79b9_7f4a_7c15u64.wrapping_mul(fold as u64 + 1);
-                let hidden = validation_spans(tracks, VALIDATION_FRACTION, fold_seed).ok()?;
-                let left = hide(&hidden);
-                Some((hidden, left))
-            })
-            .collect();
+    let mut left = observed.to_vec();
+    for &(k, i) in &blind {
+        left[k * n + i] = false;
     }
-    let left = hide(&blind);
     // Span by span (a track's consecutive frames), so that a fold never judges a span
     // whose other half another fold learned from.
     blind.sort_unstable_by_key(|&(k, i)| (i, k));
@@ -291,28 +492,42 @@ pub(super) fn draws(tracks: &Marked, seed: u64, blind: &[(usize, usize)]) -> Vec
         .collect()
 }
 
-/// Every filler's error at `entries` `(frame, track, gap length)`, filled from the
-/// observations of `sources`, per class; an entry where a filler has no finite value is
-/// left out.
-fn residuals(sources: &Sources, entries: &[(usize, usize, usize)]) -> Classes {
-    let (positions, n) = (sources.marked.positions, sources.marked.points);
-    let mut out: Classes = std::array::from_fn(|_| Vec::new());
-    for (p, &(k, i, len)) in candidates(sources, entries).iter().zip(entries) {
-        let e = 3 * (k * n + i);
-        let errors: [[f32; 3]; M] =
-            std::array::from_fn(|m| std::array::from_fn(|c| p[m][c] - positions[e + c]));
-        if errors.iter().flatten().any(|v| !v.is_finite()) {
-            continue;
-        }
-        let residual = Arc::new(Residual {
-            errors,
-            weight: 1.0 / len.max(1) as f64,
-        });
-        for class in classes_of(len) {
-            out[class].push(Arc::clone(&residual));
+/// The lengths of the spans of `hidden` `(frame, track)`: each track's runs of
+/// consecutive frames.
+fn span_lengths(hidden: &[(usize, usize)]) -> Vec<usize> {
+    let mut by_track: Vec<(usize, usize)> = hidden.iter().map(|&(k, i)| (i, k)).collect();
+    by_track.sort_unstable();
+    let mut out: Vec<usize> = Vec::new();
+    for (r, &(i, k)) in by_track.iter().enumerate() {
+        match out.last_mut() {
+            Some(last) if r > 0 && by_track[r - 1] == (i, k.wrapping_sub(1)) => *last += 1,
+            _ => out.push(1),
         }
     }
     out
+}
+
+/// Every filler's error at `hidden` `(frame, track)`, entries observed in `tracks` that
+/// `sources` lacks, filled from the observations of `sources`, each with the length of
+/// its gap there; `None` where a filler has no finite value.
+fn residuals(sources: &Sources, hidden: &[(usize, usize)]) -> Vec<Option<Arc<Residual<M>>>> {
+    let (positions, n) = (sources.marked.positions, sources.marked.points);
+    let sizes = gap_sizes(&sources.marked);
+    let entries: Vec<(usize, usize, usize)> = hidden
+        .iter()
+        .filter_map(|&(k, i)| sizes[k * n + i].map(|len| (k, i, len)))
+        .collect();
+    candidates(sources, &entries)
+        .iter()
+        .zip(&entries)
+        .map(|(p, &(k, i, len))| {
+            let e = 3 * (k * n + i);
+            let errors: [[f32; 3]; M] =
+                std::array::from_fn(|m| std::array::from_fn(|c| p[m][c] - positions[e + c]));
+            (!errors.iter().flatten().any(|v| !v.is_finite()))
+                .then(|| Arc::new(Residual { errors, len }))
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -320,7 +535,7 @@ mod tests {
     use super::*;
 
     /// Residuals of 1-D errors: filler 0's `a`, filler 1's `b`, every other filler far off.
-    fn residuals_of(a: &[f32], b: &[f32]) -> Vec<Residual> {
+    fn residuals_of(a: &[f32], b: &[f32]) -> Vec<Residual<M>> {
         a.iter()
             .zip(b)
             .map(|(&a, &b)| Residual {
@@ -329,7 +544,7 @@ mod tests {
                     1 => [b, 0.0, 0.0],
                     _ => [1e3, 0.0, 0.0],
                 }),
-                weight: 1.0,
+                len: 1,
             })
             .collect()
     }
@@ -340,8 +555,8 @@ mod tests {
         // Mean distance, w₀ + w₁ = 1: 4·3w₁ + |10w₀ + 3w₁| = 10 + 5w₁, least at w₁ = 0.
         // Squared: 4·9w₁² + (10 − 7w₁)², least at w₁ = 140/170.
         let r = residuals_of(&[0.0, 0.0, 0.0, 0.0, 10.0], &[3.0; 5]);
-        let refs: Vec<&Residual> = r.iter().collect();
-        let w = mean_distance(&refs);
+        let refs: Vec<&Residual<M>> = r.iter().collect();
+        let w = mean_distance(&refs, u32::MAX);
         // Reweighting nears a vertex of the simplex slowly: within a few hundredths.
         assert!(w[0] > 0.97 && w[0] + w[1] > 1.0 - 1e-9, "{w:?}");
         assert!(cost(r.iter(), &w) < 10.15, "{w:?}");
@@ -359,7 +574,7 @@ mod tests {
                 1 => [-3.0, 8.0, 0.0],
                 _ => [0.0; 3],
             }),
-            weight: 0.5,
+            len: 2,
         };
         let mut w = [0.0; M];
         (w[0], w[1]) = (0.5, 0.5);

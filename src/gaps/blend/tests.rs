@@ -109,9 +109,9 @@ fn blind_spans_judge_a_field_that_only_memorised_what_it_saw() {
     // A camera-shake translation of 20 tracks, each with a real gap of 4 frames and a
     // blind span of 3 frames elsewhere. The "field" is exact where it was fitted and
     // 3 units off everywhere else, as an overfitted field is.
-    // Validated on spans it was fitted to, it looks exact and keeps the weight; on
-    // the blind spans it is seen as it is inside a gap, and the weight goes to the
-    // fillers that follow the other tracks.
+    // Validated on spans it was fitted to, it would look exact; without blind spans it
+    // is not judged and takes no weight, and on the blind spans it is seen as it is
+    // inside a gap, and the weight goes to the fillers that follow the other tracks.
     let (t, n) = (30usize, 20usize);
     let truth = camera_shake(t, n);
     let mut observed = vec![true; t * n];
@@ -155,12 +155,20 @@ fn blind_spans_judge_a_field_that_only_memorised_what_it_saw() {
         predicted: &memorised,
         neighbours: vec![Vec::new(); n],
     };
-    let (seen, fooled) = blended_fill(&tracks, &memorised, 7, &[]);
-    assert!(fooled.short[Filler::FieldFill] > 0.5, "{fooled:?}");
-    assert!(worst(&seen) > 1.0, "{}", worst(&seen));
+    // Judged on the validation spans it was fitted to, it would look exact and take the
+    // weight: without blind spans its fills take none.
+    let (seen, unjudged) = blended_fill(&tracks, &memorised, 7, &[]);
+    assert_eq!(unjudged.field_validated, 0);
+    for weights in [unjudged.short, unjudged.long] {
+        assert_eq!(
+            weights[Filler::FieldFill] + weights[Filler::FieldFillFramewise],
+            0.0
+        );
+    }
+    assert!(worst(&seen) < 0.1, "{}", worst(&seen));
 
     // Each blind span lands whole in one fold, and every fold hides all of them.
-    let folds = learn::draws(&tracks, 7, &blind);
+    let folds = learn::blind_draws(&tracks, &blind);
     assert_eq!(folds.len(), VALIDATION_FOLDS);
     let mut all: Vec<(usize, usize)> = folds.iter().flat_map(|(h, _)| h.clone()).collect();
     all.sort_unstable();
@@ -176,11 +184,7 @@ fn blind_spans_judge_a_field_that_only_memorised_what_it_saw() {
     }
 
     let (filled, blend) = blended_fill(&tracks, &field, 7, &blind);
-    assert_eq!(
-        blend.validated.iter().sum::<usize>(),
-        blind.len(),
-        "{blend:?}"
-    );
+    assert_eq!(blend.field_validated, blind.len(), "{blend:?}");
     let exact = [
         Filler::Neighbours,
         Filler::Pattern,
@@ -260,7 +264,8 @@ fn each_length_class_learns_its_own_weights() {
         neighbours: vec![Vec::new(); n],
     };
     let tracks = Marked::new(t, n, &truth, &observed);
-    let (filled, blend) = blended_fill(&tracks, &field, 5, &[]);
+    // The field judged where it was not fitted, as it is inside a gap.
+    let (filled, blend) = blended_fill(&tracks, &field, 5, &blind_spans(&tracks, 5));
     let of = |len: usize| blend.by_length[length_class(len).unwrap()];
     let (medium, long) = (of(24), of(100));
     assert!(medium.own && long.own, "{blend:?}");
@@ -300,9 +305,9 @@ fn each_length_class_learns_its_own_weights() {
 
 #[test]
 fn an_exact_field_keeps_the_whole_weight() {
-    // The field is the truth: its carried fill is exact, so it wins every validation
-    // entry and the real gaps are filled exactly.
-    let (t, n) = (25usize, 6usize);
+    // The field is the truth: its carried fill is exact, so it wins every blind entry
+    // and the real gaps are filled exactly.
+    let (t, n) = (60usize, 12usize);
     let truth: Vec<f32> = (0..t)
         .flat_map(|k| {
             (0..n).flat_map(move |i| {
@@ -318,8 +323,12 @@ fn an_exact_field_keeps_the_whole_weight() {
         }
     }
     let field = FieldPrediction::new(n, &truth, &truth[..3 * n], &observed);
-    let (filled, blend) = blended_fill(&Marked::new(t, n, &truth, &observed), &field, 1, &[]);
+    let tracks = Marked::new(t, n, &truth, &observed);
+    let blind = blind_spans(&tracks, 1);
+    assert!(!blind.is_empty());
+    let (filled, blend) = blended_fill(&tracks, &field, 1, &blind);
     assert_eq!(blend.short, Weights::only(Filler::FieldFill), "{blend:?}");
+    assert_eq!(blend.field_validated, blind.len());
     for (a, b) in filled.iter().zip(&truth) {
         assert!((a - b).abs() < 1e-5);
     }
