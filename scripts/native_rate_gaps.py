@@ -17,14 +17,14 @@ event is the mean Euclidean distance over its hidden entries, in the file's unit
 a case's figure is the mean over its events.
 
     python scripts/native_rate_gaps.py MOCAP_DIR [--draws 20] [--recordings A,B] [--out DIR]
-        [--add FILLER,...] [--blind-validation] [--fits DIR]
+        [--add FILLER,...] [--no-blind-validation] [--fits DIR]
 
 Needs the doma wheel (scripts/build_wheel.sh), numpy and `c3d` (for the rate). Writes one
 JSON per recording to --out (default results/native) and prints the table. A recording
 whose JSON exists is not run again; `--add` fills its draw sets (the same, drawn from the
 same seed) with the fillers named and adds their columns, without fitting.
-`--blind-validation` fits with `blind_validation=True` (doma's blend learned on spans hidden
-from the field). `--fits DIR` keeps each fitted run there and loads it on the next run
+`--no-blind-validation` fits with `blind_validation=False` (every observation fitted, the
+field's fills left out of doma's blend). `--fits DIR` keeps each fitted run there and loads it on the next run
 instead of fitting: the blend's weights are learned by `complete()`, so a change to the
 blend or a filler reruns without a fit.
 """
@@ -137,7 +137,7 @@ def add_fillers(path, report, methods, draws, seed):
     return report
 
 
-def run_recording(path, draws, seed, blind=False, fits=None):
+def run_recording(path, draws, seed, blind=True, fits=None):
     seq = doma.read_tracks(path)
     tracks, observed = seq.tracks, seq.observed
     truth = tracks.astype(np.float64)
@@ -225,8 +225,8 @@ def main():
     p.add_argument("--fits", type=pathlib.Path,
                    help="keep each fitted run here, and load it instead of fitting where it is already there "
                         "(the blend's weights are learned by complete(), so a change to the blend reruns in minutes)")
-    p.add_argument("--blind-validation", action="store_true",
-                   help="fit with blind_validation=True: the blend learned on spans hidden from the field")
+    p.add_argument("--no-blind-validation", dest="blind_validation", action="store_false",
+                   help="fit with blind_validation=False: every observation fitted, the field's fills left out of the blend")
     args = p.parse_args()
     added = [m for m in args.add.split(",") if m]
     for m in added:

@@ -590,8 +590,9 @@ def fit(
         holdout_observations: hide this fraction of the observations, in spans, and
             report the EPE on them (``report["held_out_observations"]``).
         blind_validation: on tracks with gaps, hide a tenth of the gapped tracks'
-            observations from the fit and learn :meth:`Field.complete`'s blend on them, where the field has not
-            seen the answer (default False: validated on spans the field was fitted to).
+            observations from the fit and weigh the field's fills in :meth:`Field.complete`'s
+            blend on them, where the field has not seen the answer (default True; False fits
+            every observation, and the blend holds the classic fillers alone).
         robust: ``"huber[:delta]"`` or ``"charbonnier[:eps]"``, a robust trajectory loss.
         checkpoint_every: iterations between checkpoints (default 50).
         progress: True: a bar on a terminal, else (a notebook, a log) a line every tenth

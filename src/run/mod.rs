@@ -104,8 +104,9 @@ pub struct RunConfig {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout_span: Option<[usize; 2]>,
     /// On tracks with gaps, hide one draw of doma's fill's validation spans from the fit
-    /// (seeded by the fit's seed), so that `complete` learns the blend's weights where the
-    /// field has not seen the answer ([`crate::gaps::blend`]).
+    /// (seeded by the fit's seed), so that `complete` weighs the field's fills where the
+    /// field has not seen the answer ([`crate::gaps::blend`]). A new fit's default; absent
+    /// (false) in runs fitted before it was.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub blind_validation: bool,
     /// A digest of the data as the fit read it ([`data_digest`]), so that a run whose data
@@ -170,7 +171,7 @@ impl RunConfig {
             drop_unobserved: false,
             holdout_observations: None,
             holdout_span: None,
-            blind_validation: false,
+            blind_validation: true,
             data_digest: None,
         }
     }

@@ -216,9 +216,10 @@ pub struct RunSpec {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout_span: Option<[usize; 2]>,
     /// On tracks with gaps, hide a tenth of the gapped tracks' observations, in spans as
-    /// long as the data's gaps, from the fit itself, and learn doma's fill's blend on them alone: the
-    /// field then fills them as it fills a real gap (by default the blend is validated on
-    /// spans the field was fitted to).
+    /// long as the data's gaps, from the fit itself, and weigh the field's fills in doma's
+    /// fill on them alone, where the field fills them as it fills a real gap (default true;
+    /// `=false` fits every observation, and doma's fill then blends the classic fillers
+    /// alone).
     #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", help_heading = "Gap filling")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub blind_validation: Option<bool>,

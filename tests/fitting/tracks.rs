@@ -174,8 +174,9 @@ fn held_out_observations_are_reported_beside_every_baseline_and_eval_repeats_the
     );
 }
 
-/// With blind validation the fit never sees the validation spans, the blend is learned on
-/// them alone, and the completion still returns them as observed.
+/// With blind validation (a new fit's default) the fit never sees the validation spans,
+/// the field's fills are weighed on them alone, and the completion still returns them as
+/// observed.
 #[test]
 fn blind_validation_spans_are_hidden_from_the_fit_and_validate_the_blend() {
     let v = view();
@@ -187,7 +188,6 @@ fn blind_validation_spans_are_hidden_from_the_fit_and_validate_the_blend() {
         c.drop_unobserved = true;
         c.test_fraction = 0.0;
         c.holdout_observations = Some(0.2);
-        c.blind_validation = true;
     });
     let config = run.load_config().unwrap();
     assert!(config.blind_validation);
@@ -203,16 +203,13 @@ fn blind_validation_spans_are_hidden_from_the_fit_and_validate_the_blend() {
             .iter()
             .all(|e| held.entries.binary_search(e).is_err())
     );
-    // The report's blend is learned on the blind spans alone.
+    // The report's blend weighs the field's fills on the blind spans alone.
     let gaps = report.held_out_observations.expect("a gap report");
     let learned = gaps.blend.expect("the fill's weights");
-    assert_eq!(learned.validated.iter().sum::<usize>(), blind.entries.len());
+    assert_eq!(learned.field_validated, blind.entries.len());
 
     let done = doma::run::complete_tracks(&run, FillPolicy::default(), &Device::flex()).unwrap();
-    assert_eq!(
-        done.blend.validated.iter().sum::<usize>(),
-        blind.entries.len()
-    );
+    assert_eq!(done.blend.field_validated, blind.entries.len());
     let (input, _) = doma::data::sequence::read_tracks(&npz, &TrackFile::default()).unwrap();
     let kept = data.kept.clone().unwrap_or_else(|| (0..n).collect());
     let input = input.select_points(&kept);

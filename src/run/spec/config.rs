@@ -210,7 +210,7 @@ impl RunSpec {
         config.drop_unobserved = self.drop_unobserved.unwrap_or(false);
         config.holdout_observations = self.holdout_observations;
         config.holdout_span = self.holdout_span;
-        config.blind_validation = self.blind_validation.unwrap_or(false);
+        config.blind_validation = self.blind_validation.unwrap_or(true);
         if let Some([a, b]) = self.frames
             && a >= b
         {
