@@ -306,6 +306,7 @@ impl Blend {
     }
 }
 
+mod blind;
 mod learn;
 
 #[cfg(test)]

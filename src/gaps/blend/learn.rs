@@ -5,10 +5,11 @@
 //!    per class of gap length, the convex combination with the least mean distance, kept
 //!    where it beats every filler alone cross-fitted. These fillers see nothing but the
 //!    observations left, so a span hidden from them is a gap to them.
-//! 2. **The field's fills**, on the blind spans alone, where there are any: observations
-//!    the field was fitted without ([`super::blind_spans`]). The field was fitted to every
-//!    other observation, so judged on a validation span of stage 1 it would be judged
-//!    where it has seen the answer; there it looks far better than inside a gap. Per
+//! 2. **The field's fills** (`blind.rs`), on the blind spans alone, where there are any:
+//!    observations the field was fitted without ([`super::blind_spans`]). The field was
+//!    fitted to every other observation, so judged on a validation span of stage 1 it
+//!    would be judged where it has seen the answer; there it looks far better than inside
+//!    a gap. Per
 //!    class, stage 1's blend and the field's two fills are blended again, three weights
 //!    learned and cross-fitted the same way on the blind spans. Without blind spans the
 //!    field's fills take no weight: nothing measured them as they fill a gap.
@@ -26,6 +27,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
+use super::blind::{blind_residuals, judge_field};
 use super::{
     Blend, LENGTH_CLASSES, LengthBlend, M, MAX_VALIDATION_DRAWS, VALIDATION_FOLDS,
     VALIDATION_FRACTION, VALIDATION_SPANS, Weights, candidates, class_longest, length_class,
@@ -38,7 +40,7 @@ use crate::gaps::spans::{gap_sizes, gaps, validation_spans};
 
 /// The classes whose weights [`learn`] solves for: short gaps, long gaps pooled, then each
 /// length class of the long ones.
-const CLASSES: usize = 2 + LENGTH_CLASSES;
+pub(super) const CLASSES: usize = 2 + LENGTH_CLASSES;
 
 /// The reweighting steps of [`mean_distance`] after its least-squares start.
 const REWEIGHTS: usize = 16;
@@ -48,16 +50,8 @@ const REWEIGHTS: usize = 16;
 /// them per step, and a span's neighbouring entries say nearly the same.
 const SOLVED_ENTRIES: usize = 1 << 14;
 
-/// The blind folds with entries of a class that stage 2 needs to weigh the field's fills
-/// there (fewer give no measure of the gain's spread).
-const FIELD_FOLDS: usize = 3;
-
-/// The candidates of stage 2: stage 1's blend, the field's fill with fixed lenders and
-/// with lenders chosen frame by frame.
-const STAGE_TWO: usize = 3;
-
 /// The classes a validation entry in a gap of `len` frames counts in.
-fn classes_of(len: usize) -> impl Iterator<Item = usize> {
+pub(super) fn classes_of(len: usize) -> impl Iterator<Item = usize> {
     match length_class(len) {
         None => [Some(0), None],
         Some(c) => [Some(1), Some(2 + c)],
@@ -69,13 +63,13 @@ fn classes_of(len: usize) -> impl Iterator<Item = usize> {
 /// One validation entry: each of `K` candidates' error there, `p − y` (in `f32`, as the
 /// fills are: a long recording's draws hold millions), and the length of its gap.
 pub(super) struct Residual<const K: usize> {
-    errors: [[f32; 3]; K],
-    len: usize,
+    pub(super) errors: [[f32; 3]; K],
+    pub(super) len: usize,
 }
 
 /// A draw's residuals per class: an entry counts in two (its length class and the pooled
 /// long gaps, or the short gaps alone), held once.
-type Classes<const K: usize> = [Vec<Arc<Residual<K>>>; CLASSES];
+pub(super) type Classes<const K: usize> = [Vec<Arc<Residual<K>>>; CLASSES];
 
 impl<const K: usize> Residual<K> {
     /// Its weight in the objective: one over the length of its gap, so that each gap
@@ -99,7 +93,10 @@ impl<const K: usize> Residual<K> {
 }
 
 /// The objective: `Σ weight · distance` of the blend `w` over `residuals`.
-fn cost<'a, const K: usize>(residuals: impl Iterator<Item = &'a Residual<K>>, w: &[f64; K]) -> f64 {
+pub(super) fn cost<'a, const K: usize>(
+    residuals: impl Iterator<Item = &'a Residual<K>>,
+    w: &[f64; K],
+) -> f64 {
     residuals.map(|r| r.weight() * r.distance(w)).sum()
 }
 
@@ -153,7 +150,7 @@ fn mean_distance<const K: usize>(all: &[&Residual<K>], allowed: u32) -> [f64; K]
 }
 
 /// The whole weight on candidate `k`.
-fn one_hot<const K: usize>(k: usize) -> [f64; K] {
+pub(super) fn one_hot<const K: usize>(k: usize) -> [f64; K] {
     std::array::from_fn(|m| if m == k { 1.0 } else { 0.0 })
 }
 
@@ -162,7 +159,11 @@ fn one_hot<const K: usize>(k: usize) -> [f64; K] {
 /// allowed candidate alone cross-fitted (each group of draws, draw `d` in group
 /// `d % groups`, judged with the weights of the others), else the candidate that did
 /// best alone; and whether the blend won.
-fn solve<const K: usize>(draws: &[Classes<K>], class: usize, allowed: u32) -> ([f64; K], bool) {
+pub(super) fn solve<const K: usize>(
+    draws: &[Classes<K>],
+    class: usize,
+    allowed: u32,
+) -> ([f64; K], bool) {
     let groups = draws.len().min(VALIDATION_FOLDS);
     let of = |group: Option<usize>, held: bool| -> Vec<&Residual<K>> {
         draws
@@ -239,7 +240,7 @@ pub(super) fn learn(
     blend
 }
 
-fn empty_classes<const K: usize>() -> Classes<K> {
+pub(super) fn empty_classes<const K: usize>() -> Classes<K> {
     std::array::from_fn(|_| Vec::new())
 }
 
@@ -305,127 +306,8 @@ fn classic_blend(folds: &[Classes<M>]) -> Option<Blend> {
     })
 }
 
-/// The blind spans' residuals for stage 2, split into [`VALIDATION_FOLDS`] folds span by
-/// span: stage 1's blend by `blend`'s weights for each entry's gap, and the field's two
-/// fills. Empty where `blind` holds no observed entry.
-fn blind_residuals(
-    tracks: &Marked,
-    field: &FieldPrediction,
-    blind: &[(usize, usize)],
-    blend: &Blend,
-) -> Vec<Classes<STAGE_TWO>> {
-    let folds = blind_draws(tracks, blind);
-    let Some((_, left)) = folds.first() else {
-        return Vec::new();
-    };
-    // Every fold hides all the blind spans: the fills are the same for each.
-    let all: Vec<(usize, usize)> = folds.iter().flat_map(|(f, _)| f.iter().copied()).collect();
-    let fold_of: std::collections::HashMap<(usize, usize), usize> = folds
-        .iter()
-        .enumerate()
-        .flat_map(|(d, (f, _))| f.iter().map(move |&e| (e, d)))
-        .collect();
-    let sources = Sources::new(tracks.with_observed(left), field);
-    let (fixed, framewise) = (
-        Filler::FieldFill.index(),
-        Filler::FieldFillFramewise.index(),
-    );
-    let mut out: Vec<Classes<STAGE_TWO>> = (0..folds.len()).map(|_| empty_classes()).collect();
-    for (r, e) in residuals(&sources, &all).into_iter().zip(&all) {
-        let Some(r) = r else { continue };
-        let w = blend.weights_for(r.len).0;
-        let classic: [f32; 3] = std::array::from_fn(|c| {
-            (0..M)
-                .filter(|&m| w[m] > 0.0)
-                .map(|m| w[m] * r.errors[m][c] as f64)
-                .sum::<f64>() as f32
-        });
-        let three = Arc::new(Residual {
-            errors: [classic, r.errors[fixed], r.errors[framewise]],
-            len: r.len,
-        });
-        let fold = &mut out[fold_of[e]];
-        for class in classes_of(r.len) {
-            fold[class].push(Arc::clone(&three));
-        }
-    }
-    out
-}
-
-/// Stage 2: each class's weights become the blend of its stage-1 weights and the field's
-/// two fills learned on the blind spans (`folds`), where the class has blind entries in
-/// [`FIELD_FOLDS`] folds or more and that blend, cross-fitted, beats the first stage's by
-/// more than two standard errors of its gain per fold. A blind draw holds few spans on a
-/// short recording: a share that wins on some folds and loses on others by as much is
-/// the spans' noise. A class that does not
-/// qualify keeps its stage-1 weights (the pooled long gaps' share of the field would be
-/// judged on gaps of other lengths).
-fn judge_field(blend: &mut Blend, folds: &[Classes<STAGE_TWO>]) {
-    let counts: [usize; CLASSES] = std::array::from_fn(|c| folds.iter().map(|f| f[c].len()).sum());
-    let drawn: [usize; CLASSES] =
-        std::array::from_fn(|c| folds.iter().filter(|f| !f[c].is_empty()).count());
-    let share = |class: usize| -> Option<[f64; STAGE_TWO]> {
-        if drawn[class] < FIELD_FOLDS {
-            return None;
-        }
-        let classic = one_hot::<STAGE_TWO>(0);
-        let (s, _) = solve(folds, class, u32::MAX);
-        // Each fold judged with the weights the others choose, against the first stage's
-        // blend: the field's share holds only where it gains by more than two standard
-        // errors of the folds' gains.
-        let gains: Vec<f64> = (0..folds.len())
-            .filter(|&d| !folds[d][class].is_empty())
-            .map(|d| {
-                let others: Vec<Classes<STAGE_TWO>> = folds
-                    .iter()
-                    .enumerate()
-                    .filter(|&(e, _)| e != d)
-                    .map(|(_, f)| f.clone())
-                    .collect();
-                let (w, _) = solve(&others, class, u32::MAX);
-                let judged = || folds[d][class].iter().map(|r| &**r);
-                cost(judged(), &classic) - cost(judged(), &w)
-            })
-            .collect();
-        (s != classic && clearly_positive(&gains)).then_some(s)
-    };
-    let with_field = |classic: &Weights, s: [f64; STAGE_TWO]| -> Weights {
-        PerFiller::from_fn(|f| {
-            s[0] * classic[f]
-                + match f {
-                    Filler::FieldFill => s[1],
-                    Filler::FieldFillFramewise => s[2],
-                    _ => 0.0,
-                }
-        })
-    };
-    if let Some(s) = share(0) {
-        blend.short = with_field(&blend.short, s);
-    }
-    for (c, class) in blend.by_length.iter_mut().enumerate() {
-        if let Some(s) = share(2 + c) {
-            class.weights = with_field(&class.weights, s);
-        }
-    }
-    if let Some(s) = share(1) {
-        blend.long = with_field(&blend.long, s);
-    }
-    blend.field_validated = counts[0] + counts[1];
-}
-
-/// Whether the mean of `gains` exceeds two of its standard errors (so is positive).
-fn clearly_positive(gains: &[f64]) -> bool {
-    let n = gains.len() as f64;
-    if gains.len() < 2 {
-        return false;
-    }
-    let mean = gains.iter().sum::<f64>() / n;
-    let variance = gains.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    mean > 0.0 && mean > 2.0 * (variance / n).sqrt()
-}
-
 /// One validation draw's hidden entries, `(frame, track)`.
-type Hidden = Vec<(usize, usize)>;
+pub(super) type Hidden = Vec<(usize, usize)>;
 
 /// Stage 1's validation draws, each its hidden entries: at least [`VALIDATION_FOLDS`],
 /// then more until every class of gap length with a gap to fill holds
@@ -457,41 +339,6 @@ pub(super) fn draws(tracks: &Marked, seed: u64) -> Vec<Hidden> {
     out
 }
 
-/// One blind fold: the entries it judges, and the `[T, N]` mask of what is left observed
-/// (every blind entry hidden).
-type Draw = (Hidden, Vec<bool>);
-
-/// The observed entries of `blind`, split into [`VALIDATION_FOLDS`] folds span by span,
-/// each with the mask that hides them all; none where `blind` holds no observed entry.
-pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> Vec<Draw> {
-    let (n, observed) = (tracks.points, tracks.observed);
-    let mut blind: Vec<(usize, usize)> = blind
-        .iter()
-        .copied()
-        .filter(|&(k, i)| observed[k * n + i])
-        .collect();
-    let mut left = observed.to_vec();
-    for &(k, i) in &blind {
-        left[k * n + i] = false;
-    }
-    // Span by span (a track's consecutive frames), so that a fold never judges a span
-    // whose other half another fold learned from.
-    blind.sort_unstable_by_key(|&(k, i)| (i, k));
-    let mut folds = vec![Vec::new(); VALIDATION_FOLDS];
-    let mut span = 0;
-    for (r, &(k, i)) in blind.iter().enumerate() {
-        if r > 0 && blind[r - 1] != (k.wrapping_sub(1), i) {
-            span += 1;
-        }
-        folds[span % VALIDATION_FOLDS].push((k, i));
-    }
-    folds
-        .into_iter()
-        .filter(|f| !f.is_empty())
-        .map(|f| (f, left.clone()))
-        .collect()
-}
-
 /// The lengths of the spans of `hidden` `(frame, track)`: each track's runs of
 /// consecutive frames.
 fn span_lengths(hidden: &[(usize, usize)]) -> Vec<usize> {
@@ -510,7 +357,10 @@ fn span_lengths(hidden: &[(usize, usize)]) -> Vec<usize> {
 /// Every filler's error at `hidden` `(frame, track)`, entries observed in `tracks` that
 /// `sources` lacks, filled from the observations of `sources`, each with the length of
 /// its gap there; `None` where a filler has no finite value.
-fn residuals(sources: &Sources, hidden: &[(usize, usize)]) -> Vec<Option<Arc<Residual<M>>>> {
+pub(super) fn residuals(
+    sources: &Sources,
+    hidden: &[(usize, usize)],
+) -> Vec<Option<Arc<Residual<M>>>> {
     let (positions, n) = (sources.marked.positions, sources.marked.points);
     let sizes = gap_sizes(&sources.marked);
     let entries: Vec<(usize, usize, usize)> = hidden

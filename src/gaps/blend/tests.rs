@@ -168,7 +168,7 @@ fn blind_spans_judge_a_field_that_only_memorised_what_it_saw() {
     assert!(worst(&seen) < 0.1, "{}", worst(&seen));
 
     // Each blind span lands whole in one fold, and every fold hides all of them.
-    let folds = learn::blind_draws(&tracks, &blind);
+    let folds = blind::blind_draws(&tracks, &blind);
     assert_eq!(folds.len(), VALIDATION_FOLDS);
     let mut all: Vec<(usize, usize)> = folds.iter().flat_map(|(h, _)| h.clone()).collect();
     all.sort_unstable();

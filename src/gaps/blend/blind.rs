@@ -1,0 +1,175 @@
+//! Stage 2 of a blend's learning (`learn.rs`): the field's two fills weighed against the
+//! classic fillers' blend on the blind spans, observations the field was fitted without,
+//! and kept only where they gain clearly.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use super::learn::{
+    CLASSES, Classes, Hidden, Residual, classes_of, cost, empty_classes, one_hot, residuals, solve,
+};
+use super::{Blend, M, VALIDATION_FOLDS, Weights};
+use crate::gaps::field_fill::FieldPrediction;
+use crate::gaps::fillers::{Filler, Marked, PerFiller, Sources};
+
+/// The blind folds with entries of a class that stage 2 needs to weigh the field's fills
+/// there (fewer give no measure of the gain's spread).
+const FIELD_FOLDS: usize = 3;
+
+/// The candidates of stage 2: stage 1's blend, the field's fill with fixed lenders and
+/// with lenders chosen frame by frame.
+const STAGE_TWO: usize = 3;
+
+/// The blind spans' residuals for stage 2, split into [`VALIDATION_FOLDS`] folds span by
+/// span: stage 1's blend by `blend`'s weights for each entry's gap, and the field's two
+/// fills. Empty where `blind` holds no observed entry.
+pub(super) fn blind_residuals(
+    tracks: &Marked,
+    field: &FieldPrediction,
+    blind: &[(usize, usize)],
+    blend: &Blend,
+) -> Vec<Classes<STAGE_TWO>> {
+    let folds = blind_draws(tracks, blind);
+    let Some((_, left)) = folds.first() else {
+        return Vec::new();
+    };
+    // Every fold hides all the blind spans: the fills are the same for each.
+    let all: Vec<(usize, usize)> = folds.iter().flat_map(|(f, _)| f.iter().copied()).collect();
+    let fold_of: HashMap<(usize, usize), usize> = folds
+        .iter()
+        .enumerate()
+        .flat_map(|(d, (f, _))| f.iter().map(move |&e| (e, d)))
+        .collect();
+    let sources = Sources::new(tracks.with_observed(left), field);
+    let (fixed, framewise) = (
+        Filler::FieldFill.index(),
+        Filler::FieldFillFramewise.index(),
+    );
+    let mut out: Vec<Classes<STAGE_TWO>> = (0..folds.len()).map(|_| empty_classes()).collect();
+    for (r, e) in residuals(&sources, &all).into_iter().zip(&all) {
+        let Some(r) = r else { continue };
+        let w = blend.weights_for(r.len).0;
+        let classic: [f32; 3] = std::array::from_fn(|c| {
+            (0..M)
+                .filter(|&m| w[m] > 0.0)
+                .map(|m| w[m] * r.errors[m][c] as f64)
+                .sum::<f64>() as f32
+        });
+        let three = Arc::new(Residual {
+            errors: [classic, r.errors[fixed], r.errors[framewise]],
+            len: r.len,
+        });
+        let fold = &mut out[fold_of[e]];
+        for class in classes_of(r.len) {
+            fold[class].push(Arc::clone(&three));
+        }
+    }
+    out
+}
+
+/// Stage 2: each class's weights become the blend of its stage-1 weights and the field's
+/// two fills learned on the blind spans (`folds`), where the class has blind entries in
+/// [`FIELD_FOLDS`] folds or more and that blend, cross-fitted, beats the first stage's by
+/// more than two standard errors of its gain per fold. A blind draw holds few spans on a
+/// short recording: a share that wins on some folds and loses on others by as much is
+/// the spans' noise. A class that does not
+/// qualify keeps its stage-1 weights (the pooled long gaps' share of the field would be
+/// judged on gaps of other lengths).
+pub(super) fn judge_field(blend: &mut Blend, folds: &[Classes<STAGE_TWO>]) {
+    let counts: [usize; CLASSES] = std::array::from_fn(|c| folds.iter().map(|f| f[c].len()).sum());
+    let drawn: [usize; CLASSES] =
+        std::array::from_fn(|c| folds.iter().filter(|f| !f[c].is_empty()).count());
+    let share = |class: usize| -> Option<[f64; STAGE_TWO]> {
+        if drawn[class] < FIELD_FOLDS {
+            return None;
+        }
+        let classic = one_hot::<STAGE_TWO>(0);
+        let (s, _) = solve(folds, class, u32::MAX);
+        // Each fold judged with the weights the others choose, against the first stage's
+        // blend: the field's share holds only where it gains by more than two standard
+        // errors of the folds' gains.
+        let gains: Vec<f64> = (0..folds.len())
+            .filter(|&d| !folds[d][class].is_empty())
+            .map(|d| {
+                let others: Vec<Classes<STAGE_TWO>> = folds
+                    .iter()
+                    .enumerate()
+                    .filter(|&(e, _)| e != d)
+                    .map(|(_, f)| f.clone())
+                    .collect();
+                let (w, _) = solve(&others, class, u32::MAX);
+                let judged = || folds[d][class].iter().map(|r| &**r);
+                cost(judged(), &classic) - cost(judged(), &w)
+            })
+            .collect();
+        (s != classic && clearly_positive(&gains)).then_some(s)
+    };
+    let with_field = |classic: &Weights, s: [f64; STAGE_TWO]| -> Weights {
+        PerFiller::from_fn(|f| {
+            s[0] * classic[f]
+                + match f {
+                    Filler::FieldFill => s[1],
+                    Filler::FieldFillFramewise => s[2],
+                    _ => 0.0,
+                }
+        })
+    };
+    if let Some(s) = share(0) {
+        blend.short = with_field(&blend.short, s);
+    }
+    for (c, class) in blend.by_length.iter_mut().enumerate() {
+        if let Some(s) = share(2 + c) {
+            class.weights = with_field(&class.weights, s);
+        }
+    }
+    if let Some(s) = share(1) {
+        blend.long = with_field(&blend.long, s);
+    }
+    blend.field_validated = counts[0] + counts[1];
+}
+
+/// Whether the mean of `gains` exceeds two of its standard errors (so is positive).
+fn clearly_positive(gains: &[f64]) -> bool {
+    let n = gains.len() as f64;
+    if gains.len() < 2 {
+        return false;
+    }
+    let mean = gains.iter().sum::<f64>() / n;
+    let variance = gains.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    mean > 0.0 && mean > 2.0 * (variance / n).sqrt()
+}
+
+/// One blind fold: the entries it judges, and the `[T, N]` mask of what is left observed
+/// (every blind entry hidden).
+type Draw = (Hidden, Vec<bool>);
+
+/// The observed entries of `blind`, split into [`VALIDATION_FOLDS`] folds span by span,
+/// each with the mask that hides them all; none where `blind` holds no observed entry.
+pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> Vec<Draw> {
+    let (n, observed) = (tracks.points, tracks.observed);
+    let mut blind: Vec<(usize, usize)> = blind
+        .iter()
+        .copied()
+        .filter(|&(k, i)| observed[k * n + i])
+        .collect();
+    let mut left = observed.to_vec();
+    for &(k, i) in &blind {
+        left[k * n + i] = false;
+    }
+    // Span by span (a track's consecutive frames), so that a fold never judges a span
+    // whose other half another fold learned from.
+    blind.sort_unstable_by_key(|&(k, i)| (i, k));
+    let mut folds = vec![Vec::new(); VALIDATION_FOLDS];
+    let mut span = 0;
+    for (r, &(k, i)) in blind.iter().enumerate() {
+        if r > 0 && blind[r - 1] != (k.wrapping_sub(1), i) {
+            span += 1;
+        }
+        folds[span % VALIDATION_FOLDS].push((k, i));
+    }
+    folds
+        .into_iter()
+        .filter(|f| !f.is_empty())
+        .map(|f| (f, left.clone()))
+        .collect()
+}
