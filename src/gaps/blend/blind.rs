@@ -173,3 +173,22 @@ pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> Vec<Draw
         .map(|f| (f, left.clone()))
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_gain_is_clear_past_two_standard_errors() {
+        // Every fold gains the same: no spread, clear.
+        assert!(clearly_positive(&[1.0, 1.0, 1.0]));
+        // Mean 1/3, standard deviation √(4/3), standard error 2/3: 1/3 < 4/3.
+        assert!(!clearly_positive(&[1.0, -1.0, 1.0]));
+        // Mean 3, standard deviation 0.1, standard error 0.1/√3: clear.
+        assert!(clearly_positive(&[2.9, 3.0, 3.1]));
+        // A loss is never clear, however steady; one fold gives no spread.
+        assert!(!clearly_positive(&[-1.0, -1.0, -1.0]));
+        assert!(!clearly_positive(&[5.0]));
+        assert!(!clearly_positive(&[]));
+    }
+}

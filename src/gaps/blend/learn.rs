@@ -417,6 +417,16 @@ mod tests {
     }
 
     #[test]
+    fn spans_are_each_track_s_runs_of_consecutive_frames() {
+        // Track 0: frames 2–4 and 7; track 1: frame 3; unsorted.
+        let hidden = [(7, 0), (3, 1), (2, 0), (4, 0), (3, 0)];
+        let mut lengths = span_lengths(&hidden);
+        lengths.sort_unstable();
+        assert_eq!(lengths, [1, 1, 3]);
+        assert!(span_lengths(&[]).is_empty());
+    }
+
+    #[test]
     fn a_distance_is_the_norm_of_the_blended_errors() {
         let r = Residual {
             errors: std::array::from_fn(|m| match m {
