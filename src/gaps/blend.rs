@@ -295,7 +295,7 @@ impl Blend {
 
     /// The blend of one entry's filler values `p`, in a gap of `len` frames, by the
     /// weights of its class.
-    fn combine(&self, len: usize, p: &[[f32; 3]; M]) -> [f32; 3] {
+    pub(super) fn combine(&self, len: usize, p: &[[f32; 3]; M]) -> [f32; 3] {
         let w = self.weights_for(len).0;
         std::array::from_fn(|c| {
             (0..M)

@@ -2,13 +2,12 @@
 //! classic fillers' blend on the blind spans, observations the field was fitted without,
 //! and kept only where they gain clearly.
 
-use std::collections::HashMap;
 use std::sync::Arc;
 
 use super::learn::{
     CLASSES, Classes, Hidden, Residual, classes_of, cost, empty_classes, one_hot, residuals, solve,
 };
-use super::{Blend, M, VALIDATION_FOLDS, Weights};
+use super::{Blend, VALIDATION_FOLDS, Weights};
 use crate::gaps::field_fill::FieldPrediction;
 use crate::gaps::fillers::{Filler, Marked, PerFiller, Sources};
 
@@ -29,42 +28,36 @@ pub(super) fn blind_residuals(
     blind: &[(usize, usize)],
     blend: &Blend,
 ) -> Vec<Classes<STAGE_TWO>> {
-    let folds = blind_draws(tracks, blind);
-    let Some((_, left)) = folds.first() else {
-        return Vec::new();
-    };
-    // Every fold hides all the blind spans: the fills are the same for each.
-    let all: Vec<(usize, usize)> = folds.iter().flat_map(|(f, _)| f.iter().copied()).collect();
-    let fold_of: HashMap<(usize, usize), usize> = folds
-        .iter()
-        .enumerate()
-        .flat_map(|(d, (f, _))| f.iter().map(move |&e| (e, d)))
-        .collect();
-    let sources = Sources::new(tracks.with_observed(left), field);
+    let (folds, left) = blind_draws(tracks, blind);
+    // Every fold hides all the blind spans, so one fill serves them all.
+    let all: Vec<(usize, usize)> = folds.concat();
+    let sources = Sources::new(tracks.with_observed(&left), field);
     let (fixed, framewise) = (
         Filler::FieldFill.index(),
         Filler::FieldFillFramewise.index(),
     );
-    let mut out: Vec<Classes<STAGE_TWO>> = (0..folds.len()).map(|_| empty_classes()).collect();
-    for (r, e) in residuals(&sources, &all).into_iter().zip(&all) {
-        let Some(r) = r else { continue };
-        let w = blend.weights_for(r.len).0;
-        let classic: [f32; 3] = std::array::from_fn(|c| {
-            (0..M)
-                .filter(|&m| w[m] > 0.0)
-                .map(|m| w[m] * r.errors[m][c] as f64)
-                .sum::<f64>() as f32
-        });
-        let three = Arc::new(Residual {
-            errors: [classic, r.errors[fixed], r.errors[framewise]],
-            len: r.len,
-        });
-        let fold = &mut out[fold_of[e]];
-        for class in classes_of(r.len) {
-            fold[class].push(Arc::clone(&three));
-        }
-    }
-    out
+    let mut residuals = residuals(&sources, &all).into_iter();
+    folds
+        .iter()
+        .map(|fold| {
+            let mut classes = empty_classes();
+            for r in residuals.by_ref().take(fold.len()).flatten() {
+                // Stage 1's blend of the values, less the truth: its blend of the errors.
+                let three = Arc::new(Residual {
+                    errors: [
+                        blend.combine(r.len, &r.errors),
+                        r.errors[fixed],
+                        r.errors[framewise],
+                    ],
+                    len: r.len,
+                });
+                for class in classes_of(r.len) {
+                    classes[class].push(Arc::clone(&three));
+                }
+            }
+            classes
+        })
+        .collect()
 }
 
 /// Stage 2: each class's weights become the blend of its stage-1 weights and the field's
@@ -72,9 +65,8 @@ pub(super) fn blind_residuals(
 /// [`FIELD_FOLDS`] folds or more and that blend, cross-fitted, beats the first stage's by
 /// more than two standard errors of its gain per fold. A blind draw holds few spans on a
 /// short recording: a share that wins on some folds and loses on others by as much is
-/// the spans' noise. A class that does not
-/// qualify keeps its stage-1 weights (the pooled long gaps' share of the field would be
-/// judged on gaps of other lengths).
+/// the spans' noise. A class that does not qualify keeps its stage-1 weights (the pooled
+/// long gaps' share of the field would be judged on gaps of other lengths).
 pub(super) fn judge_field(blend: &mut Blend, folds: &[Classes<STAGE_TWO>]) {
     let counts: [usize; CLASSES] = std::array::from_fn(|c| folds.iter().map(|f| f[c].len()).sum());
     let drawn: [usize; CLASSES] =
@@ -139,13 +131,10 @@ fn clearly_positive(gains: &[f64]) -> bool {
     mean > 0.0 && mean > 2.0 * (variance / n).sqrt()
 }
 
-/// One blind fold: the entries it judges, and the `[T, N]` mask of what is left observed
-/// (every blind entry hidden).
-type Draw = (Hidden, Vec<bool>);
-
-/// The observed entries of `blind`, split into [`VALIDATION_FOLDS`] folds span by span,
-/// each with the mask that hides them all; none where `blind` holds no observed entry.
-pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> Vec<Draw> {
+/// The observed entries of `blind`, split into [`VALIDATION_FOLDS`] folds span by span
+/// (none where `blind` holds no observed entry), and the `[T, N]` mask of what is left
+/// observed with all of them hidden.
+pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> (Vec<Hidden>, Vec<bool>) {
     let (n, observed) = (tracks.points, tracks.observed);
     let mut blind: Vec<(usize, usize)> = blind
         .iter()
@@ -167,11 +156,8 @@ pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> Vec<Draw
         }
         folds[span % VALIDATION_FOLDS].push((k, i));
     }
-    folds
-        .into_iter()
-        .filter(|f| !f.is_empty())
-        .map(|f| (f, left.clone()))
-        .collect()
+    folds.retain(|f| !f.is_empty());
+    (folds, left)
 }
 
 #[cfg(test)]

@@ -9,10 +9,9 @@
 //!    observations the field was fitted without ([`super::blind_spans`]). The field was
 //!    fitted to every other observation, so judged on a validation span of stage 1 it
 //!    would be judged where it has seen the answer; there it looks far better than inside
-//!    a gap. Per
-//!    class, stage 1's blend and the field's two fills are blended again, three weights
-//!    learned and cross-fitted the same way on the blind spans. Without blind spans the
-//!    field's fills take no weight: nothing measured them as they fill a gap.
+//!    a gap. Per class, stage 1's blend and the field's two fills are blended again, three
+//!    weights learned and cross-fitted the same way on the blind spans. Without blind
+//!    spans the field's fills take no weight: nothing measured them as they fill a gap.
 //!
 //! The objective is the literature's: the mean Euclidean distance of each gap, averaged
 //! over the gaps ([`Residual::weight`]: every validation span counts once, whatever its
@@ -356,7 +355,8 @@ fn span_lengths(hidden: &[(usize, usize)]) -> Vec<usize> {
 
 /// Every filler's error at `hidden` `(frame, track)`, entries observed in `tracks` that
 /// `sources` lacks, filled from the observations of `sources`, each with the length of
-/// its gap there; `None` where a filler has no finite value.
+/// its gap there: one per entry of `hidden`, in its order, `None` where the entry is no
+/// gap there or a filler has no finite value.
 pub(super) fn residuals(
     sources: &Sources,
     hidden: &[(usize, usize)],
@@ -367,10 +367,12 @@ pub(super) fn residuals(
         .iter()
         .filter_map(|&(k, i)| sizes[k * n + i].map(|len| (k, i, len)))
         .collect();
-    candidates(sources, &entries)
+    let mut filled = candidates(sources, &entries).into_iter().zip(&entries);
+    hidden
         .iter()
-        .zip(&entries)
-        .map(|(p, &(k, i, len))| {
+        .map(|&(k, i)| {
+            sizes[k * n + i]?;
+            let (p, &(_, _, len)) = filled.next()?;
             let e = 3 * (k * n + i);
             let errors: [[f32; 3]; M] =
                 std::array::from_fn(|m| std::array::from_fn(|c| p[m][c] - positions[e + c]));
@@ -424,6 +426,26 @@ mod tests {
         lengths.sort_unstable();
         assert_eq!(lengths, [1, 1, 3]);
         assert!(span_lengths(&[]).is_empty());
+    }
+
+    #[test]
+    fn residuals_keep_the_order_of_the_entries_asked_for() {
+        // Track 0 hidden at frames 3 and 4 of 10; the first entry asked for is observed,
+        // so no gap: its slot is `None` and the others stay where they were asked.
+        let (t, n) = (10usize, 2usize);
+        let positions: Vec<f32> = (0..3 * t * n).map(|v| (v as f32 * 0.3).sin()).collect();
+        let mut left = vec![true; t * n];
+        (left[3 * n], left[4 * n]) = (false, false);
+        let field = FieldPrediction::new(n, &positions, &positions[..3 * n], &left);
+        let sources = Sources::new(Marked::new(t, n, &positions, &left), &field);
+        let got = residuals(&sources, &[(0, 1), (3, 0), (4, 0)]);
+        assert_eq!(got.len(), 3);
+        assert!(got[0].is_none());
+        assert!(
+            got[1..]
+                .iter()
+                .all(|r| r.as_ref().is_some_and(|r| r.len == 2))
+        );
     }
 
     #[test]
