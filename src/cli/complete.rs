@@ -115,8 +115,8 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
     if b.validated != [0, 0] {
         match b.field_validated {
             0 => eprintln!(
-                "  the field's fills: not weighed (no observation was hidden from the fit; \
-                 `doma fit --blind-validation` hides some)"
+                "  the field's fills: not weighed (the fit saw every observation; a fit \
+                 without `--blind-validation=false` hides some to weigh them on)"
             ),
             count => {
                 eprintln!("  the field's fills weighed on {count} entries hidden from the fit")
