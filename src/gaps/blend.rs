@@ -32,14 +32,17 @@
 //! [`VALIDATION_FOLDS`] folds by span, the first stage's blend and the field's two fills
 //! are blended per class the same way. Without blind spans the field's fills take no
 //! weight (its fill alone is still `--method field_fill`). The real gaps are then filled
-//! from every observation (docs/design.md §7).
+//! from every observation (docs/design.md §7). On a recording longer than a window of time
+//! ([`super::window`]) each validation draw hides its spans in one window, and every filler
+//! fills each gap in the window that holds it.
 
 // Index loops over 6 × 6 matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
 use super::field_fill::{FieldPrediction, Lending, field_fill};
 use super::fillers::{Filler, Marked, PerFiller, Sources};
-use super::spans::{gap_sizes, validation_spans};
+use super::spans::{gap_len, gap_sizes, validation_spans};
+use super::window::windowed;
 use learn::learn;
 use serde::{Deserialize, Serialize};
 
@@ -172,21 +175,25 @@ pub fn blended_fill(
     blind: &[(usize, usize)],
 ) -> (Vec<f32>, Blend) {
     let n = tracks.points;
-    let sizes = gap_sizes(tracks);
     let blend = learn(tracks, field, seed, blind);
-    // The entries to fill: every gap of a track observed somewhere.
-    let entries: Vec<(usize, usize, usize)> = (0..tracks.frames)
-        .flat_map(|k| (0..n).map(move |i| (k, i)))
-        .filter_map(|(k, i)| sizes[k * n + i].map(|len| (k, i, len)))
-        .collect();
     if blend.is_field_only() {
         return (field_fill(tracks, field, Lending::Fixed), blend);
     }
+    let sizes = gap_sizes(tracks);
+    // The entries to fill: every gap of a track observed somewhere.
+    let entries: Vec<(usize, usize, usize)> = (0..tracks.frames)
+        .flat_map(|k| (0..n).map(move |i| (k, i)))
+        .filter_map(|(k, i)| gap_len(&sizes, k * n + i).map(|len| (k, i, len)))
+        .collect();
+    drop(sizes);
     let mut out = tracks.positions.to_vec();
-    if entries.is_empty() {
-        return (out, blend);
-    }
-    let (fills, _) = blend_at(&Sources::new(*tracks, field), &blend, &entries);
+    let fills = windowed(&Sources::new(*tracks, field), &entries, |s, local| {
+        let values = candidates_in(s, local);
+        let blended = values.iter().zip(local);
+        blended
+            .map(|(p, &(_, _, len))| blend.combine(len, p))
+            .collect()
+    });
     for (&(k, i, _), v) in entries.iter().zip(fills) {
         let e = 3 * (k * n + i);
         out[e..e + 3].copy_from_slice(&v);
@@ -211,8 +218,13 @@ fn blend_at(
 }
 
 /// Every filler's value at `entries` `(frame, track, gap length)`, in the order of
-/// [`Filler::ALL`].
+/// [`Filler::ALL`]: in windows of time on a long recording ([`windowed`]).
 fn candidates(sources: &Sources, entries: &[(usize, usize, usize)]) -> Vec<[[f32; 3]; M]> {
+    windowed(sources, entries, candidates_in)
+}
+
+/// [`candidates`] from `sources` as they are.
+fn candidates_in(sources: &Sources, entries: &[(usize, usize, usize)]) -> Vec<[[f32; 3]; M]> {
     let pairs: Vec<(usize, usize)> = entries.iter().map(|&(k, i, _)| (k, i)).collect();
     let columns = Filler::ALL.map(|f| f.fill_at(sources, &pairs));
     (0..entries.len())
@@ -252,7 +264,7 @@ pub fn fills_at(
     let blend = learn(tracks, field, seed, blind);
     let entries: Vec<(usize, usize, usize)> = entries
         .iter()
-        .map(|&(k, i)| (k, i, sizes[k * n + i].unwrap_or(0)))
+        .map(|&(k, i)| (k, i, gap_len(&sizes, k * n + i).unwrap_or(0)))
         .collect();
     let (doma, fillers) = blend_at(&Sources::new(*tracks, field), &blend, &entries);
     FillsAt {

@@ -25,7 +25,9 @@
 //!   own observations, used only where it beats the field's fill cross-fitted.
 //!
 //! Every function takes the tracks as one view, [`Marked`]: `positions` `[T, N, 3]` and
-//! `observed` `[T, N]`, frame-major. Only observed entries are read, so what an unobserved
+//! `observed` `[T, N]`, frame-major, so that a window of frames is a view too
+//! ([`Marked::window`]): past [`window::WINDOW_ENTRIES`] entries the fillers run on windows
+//! of time, and what a fill holds beyond the data does not grow with the recording. Only observed entries are read, so what an unobserved
 //! entry holds (NaN, zeros) never matters; a track never observed is left as it is.
 //!
 //! # The files
@@ -43,6 +45,7 @@
 //! | `spans.rs` | gaps and their classes and lengths, hidden and validation spans |
 //! | `linalg.rs` | the small solvers: the spline's system, simplex least squares |
 //! | `eigen.rs` | eigenproblems (Jacobi, Householder + QL) and principal components |
+//! | `window.rs` | long recordings in windows of time: where each gap is filled, each validation draw drawn |
 //!
 //! Adding a filler: a variant of [`Filler`], its name and label, its arm in
 //! [`Filler::fill_at`] (its function in a file of its own or in `classic.rs`), and tests.
@@ -60,6 +63,7 @@ pub mod kalman;
 pub mod linalg;
 pub mod segment;
 pub mod spans;
+pub mod window;
 
 pub use field_fill::{FieldPrediction, Lending, SPLINE_CARRY_FRAMES};
 pub use fillers::{Filler, Marked, PerFiller, Sources};

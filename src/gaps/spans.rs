@@ -75,17 +75,24 @@ pub fn gaps<'a>(tracks: &'a Marked<'a>) -> impl Iterator<Item = Gap> + 'a {
     (0..tracks.points).flat_map(move |i| track_gaps(tracks, i))
 }
 
-/// For each entry `[T, N]`: `None` if observed or of a track never observed, else the
-/// length of its gap, in frames.
-pub fn gap_sizes(tracks: &Marked) -> Vec<Option<usize>> {
+/// For each entry `[T, N]`: the length of its gap in frames, 0 if observed or of a track
+/// never observed ([`gap_len`] reads it). Four bytes an entry: a minute of capture holds
+/// millions.
+pub fn gap_sizes(tracks: &Marked) -> Vec<u32> {
     let n = tracks.points;
-    let mut out = vec![None; tracks.frames * n];
+    let mut out = vec![0; tracks.frames * n];
     for gap in gaps(tracks) {
+        let len = u32::try_from(gap.len()).unwrap_or(u32::MAX);
         for k in gap.frames.clone() {
-            out[k * n + gap.track] = Some(gap.len());
+            out[k * n + gap.track] = len;
         }
     }
     out
+}
+
+/// The length of the gap of entry `e` in `sizes` ([`gap_sizes`]): `None` where it is no gap.
+pub fn gap_len(sizes: &[u32], e: usize) -> Option<usize> {
+    (sizes[e] > 0).then_some(sizes[e] as usize)
 }
 
 /// The span lengths of [`hold_out_spans`] unless asked otherwise: 2 to 10 frames.

@@ -22,6 +22,7 @@
 // Index loops over small matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
+use std::ops::Range;
 use std::sync::Arc;
 
 use rayon::prelude::*;
@@ -35,7 +36,8 @@ use super::{
 use crate::gaps::field_fill::FieldPrediction;
 use crate::gaps::fillers::{Filler, Marked, PerFiller, Sources};
 use crate::gaps::linalg::simplex_least_squares;
-use crate::gaps::spans::{gap_sizes, gaps, validation_spans};
+use crate::gaps::spans::{gap_len, gap_sizes, gaps, validation_spans};
+use crate::gaps::window::draw_window;
 
 /// The classes whose weights [`learn`] solves for: short gaps, long gaps pooled, then each
 /// length class of the long ones.
@@ -203,21 +205,22 @@ pub(super) fn learn(
     seed: u64,
     blind: &[(usize, usize)],
 ) -> Blend {
-    let (t, n, observed) = (tracks.frames, tracks.points, tracks.observed);
-    if t < 3 || observed.iter().all(|&o| o) {
+    let (t, n) = (tracks.frames, tracks.points);
+    if t < 3 || tracks.observed.iter().all(|&o| o) {
         return Blend::only(Filler::FieldFill);
     }
     // Per draw and class, the validation entries' residuals; the draws are independent,
     // so they run on every core (in order: the result does not depend on the split).
     let folds: Vec<Classes<M>> = draws(tracks, seed)
         .into_par_iter()
-        .map(|hidden| {
-            let mut left = observed.to_vec();
+        .map(|(frames, hidden)| {
+            let (tracks, field) = (tracks.window(frames.clone()), field.window(frames));
+            let mut left = tracks.observed.to_vec();
             for &(k, i) in &hidden {
                 left[k * n + i] = false;
             }
             let left_tracks = tracks.with_observed(&left);
-            residuals(&Sources::new(left_tracks, field), &hidden)
+            residuals(&Sources::new(left_tracks, &field), &hidden)
                 .into_iter()
                 .flatten()
                 .fold(empty_classes(), |mut classes, r| {
@@ -308,10 +311,11 @@ fn classic_blend(folds: &[Classes<M>]) -> Option<Blend> {
 /// One validation draw's hidden entries, `(frame, track)`.
 pub(super) type Hidden = Vec<(usize, usize)>;
 
-/// Stage 1's validation draws, each its hidden entries: at least [`VALIDATION_FOLDS`],
-/// then more until every class of gap length with a gap to fill holds
-/// [`VALIDATION_SPANS`] validation spans, at most [`MAX_VALIDATION_DRAWS`].
-pub(super) fn draws(tracks: &Marked, seed: u64) -> Vec<Hidden> {
+/// Stage 1's validation draws, each its window of frames ([`draw_window`]: the whole
+/// recording unless it is long) and its hidden entries in the window's frames: at least
+/// [`VALIDATION_FOLDS`], then more until every class of gap length with a gap to fill
+/// holds [`VALIDATION_SPANS`] validation spans, at most [`MAX_VALIDATION_DRAWS`].
+pub(super) fn draws(tracks: &Marked, seed: u64) -> Vec<(Range<usize>, Hidden)> {
     // The classes of the gaps to fill, and the validation spans drawn in each.
     let mut wanted = [false; 1 + LENGTH_CLASSES];
     for g in gaps(tracks).filter(|g| g.is_interior()) {
@@ -325,7 +329,9 @@ pub(super) fn draws(tracks: &Marked, seed: u64) -> Vec<Hidden> {
             break;
         }
         let draw_seed = seed ^ 0x9e37_79b9_7f4a_7c15u64.wrapping_mul(draw as u64 + 1);
-        let Ok(hidden) = validation_spans(tracks, VALIDATION_FRACTION, draw_seed, span_class)
+        let frames = draw_window(tracks, draw);
+        let window = tracks.window(frames.clone());
+        let Ok(hidden) = validation_spans(&window, VALIDATION_FRACTION, draw_seed, span_class)
         else {
             failed += 1;
             continue;
@@ -333,7 +339,7 @@ pub(super) fn draws(tracks: &Marked, seed: u64) -> Vec<Hidden> {
         for len in span_lengths(&hidden) {
             spans[span_class(len)] += 1;
         }
-        out.push(hidden);
+        out.push((frames, hidden));
     }
     out
 }
@@ -365,13 +371,13 @@ pub(super) fn residuals(
     let sizes = gap_sizes(&sources.marked);
     let entries: Vec<(usize, usize, usize)> = hidden
         .iter()
-        .filter_map(|&(k, i)| sizes[k * n + i].map(|len| (k, i, len)))
+        .filter_map(|&(k, i)| gap_len(&sizes, k * n + i).map(|len| (k, i, len)))
         .collect();
     let mut filled = candidates(sources, &entries).into_iter().zip(&entries);
     hidden
         .iter()
         .map(|&(k, i)| {
-            sizes[k * n + i]?;
+            gap_len(&sizes, k * n + i)?;
             let (p, &(_, _, len)) = filled.next()?;
             let e = 3 * (k * n + i);
             let errors: [[f32; 3]; M] =
