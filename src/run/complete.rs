@@ -9,7 +9,7 @@ use doma_formats::npy::NpyValues;
 use super::{RunConfig, RunDir, field_everywhere};
 use crate::data::c3d::{C3d, c3d_tracks, read_c3d_bytes, write_c3d_patched};
 use crate::data::layout::Layout;
-use crate::data::sequence::read_tracks;
+use crate::data::sequence::{Sequence, read_tracks};
 use crate::gaps::blend::{Blend, blended_fill};
 use crate::gaps::{FieldPrediction, Filler, Marked, Sources};
 use crate::io::write_atomic;
@@ -287,10 +287,23 @@ fn complete_with(
         .collect();
     let predicted = field_everywhere(&field, data, device)?;
     let field = FieldPrediction::new(n, &predicted, data.canonical(), seen);
+    // The run's own copy of the data has served: a long recording's fill holds the input,
+    // its normalised copy and the field's prediction, nothing else as long.
+    let Sequence {
+        trajectories,
+        blind,
+        kept,
+        ..
+    } = sequence;
+    drop(trajectories);
     let tracks = Marked::new(t, n, &normalised, seen);
-    let (values, blend) = match policy.method {
+    let stride = config.stride.max(1);
+    let source_frames: Vec<usize> = frame_range.step_by(stride).collect();
+    let rate = markers.map(|m| m.rate as f64);
+    let (filled, extrapolated) = chosen(&tracks, &source_frames, policy, rate, &config.data)?;
+    let (mut values, blend) = match policy.method {
         None => {
-            let blind = sequence.blind.as_ref().map_or(&[][..], |b| &b.entries[..]);
+            let blind = blind.as_ref().map_or(&[][..], |b| &b.entries[..]);
             blended_fill(&tracks, &field, config.fit.seed, blind)
         }
         Some(filler) => {
@@ -306,30 +319,24 @@ fn complete_with(
             (values, Blend::only(filler))
         }
     };
-    let stride = config.stride.max(1);
-    let source_frames: Vec<usize> = frame_range.step_by(stride).collect();
-    let rate = markers.map(|m| m.rate as f64);
-    let (filled, extrapolated) = chosen(&tracks, &source_frames, policy, rate, &config.data)?;
+    drop(field);
+    drop((predicted, normalised));
     // Observed entries exactly as the input holds them; filled ones back in its units.
-    let tracks: Vec<f32> = input
-        .positions()
-        .iter()
-        .zip(&values)
-        .enumerate()
-        .map(|(e, (&v, &f))| match (seen[e / 3], filled[e / 3]) {
-            (true, _) => v,
-            (false, true) => f * s + c[e % 3],
+    for (e, (v, &o)) in values.iter_mut().zip(input.positions()).enumerate() {
+        *v = match (seen[e / 3], filled[e / 3]) {
+            (true, _) => o,
+            (false, true) => *v * s + c[e % 3],
             (false, false) => f32::NAN,
-        })
-        .collect();
+        };
+    }
     Ok(CompletedTracks {
         frames: t,
         points: n,
-        tracks,
+        tracks: values,
         observed: seen.to_vec(),
         filled,
         extrapolated,
-        kept: sequence.kept.clone(),
+        kept,
         source_frames,
         blend,
     })
