@@ -187,6 +187,9 @@ pub fn blended_fill(
         .collect();
     drop(sizes);
     let mut out = tracks.positions.to_vec();
+    if entries.is_empty() {
+        return (out, blend);
+    }
     let fills = windowed(&Sources::new(*tracks, field), &entries, |s, local| {
         let values = candidates_in(s, local);
         let blended = values.iter().zip(local);

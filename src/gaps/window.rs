@@ -158,7 +158,7 @@ where
     F: Fn(&Sources, &[E]) -> Vec<R> + Sync,
 {
     let tracks = &sources.marked;
-    if tracks.frames <= window_frames(tracks.points) {
+    if tracks.frames <= window_frames(tracks.points) || entries.is_empty() {
         return fill(sources, entries);
     }
     let parts: Vec<(Vec<usize>, Vec<R>)> = plan(tracks, entries)
