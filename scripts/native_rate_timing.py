@@ -5,7 +5,9 @@ memory of each, and the fill of the same gaps beside a 5 s excerpt's.
 The recording is built from a real one (right_knee.c3d, shipped in data/mocap/): its first
 60 markers played forward, backward, forward... (so the motion stays continuous) up to
 12,000 frames, and given a rate of 200 Hz. 3 markers at once are hidden for 0.5 s, 20 times
-in the excerpt (its first 1,000 frames) and 240 times in the whole (the same density).
+in the excerpt (its first 1,000 frames) and 240 times in the whole (the same density). A
+two-minute recording built the same way (24,000 frames, 480 gaps) shows how the peaks grow
+with the frame count.
 
     python scripts/native_rate_timing.py [DOMA_BINARY] [--out DIR]
 
@@ -113,13 +115,14 @@ def main():
     args = p.parse_args()
     tracks, observed = source_tracks()
     tracks, observed = tracks[:, :MARKERS], observed[:, :MARKERS]
-    whole_t = ping_pong(tracks, FRAMES).astype(np.float64)
-    whole_o = ping_pong(observed, FRAMES)
+    whole_t = ping_pong(tracks, 2 * FRAMES).astype(np.float64)
+    whole_o = ping_pong(observed, 2 * FRAMES)
     with tempfile.TemporaryDirectory() as tmp:
         work = pathlib.Path(tmp)
         rows = [
             ("5 s excerpt", case(args.doma, work, "excerpt", whole_t[:1000], whole_o[:1000], 20, args.seed)),
-            ("60 s", case(args.doma, work, "whole", whole_t, whole_o, 240, args.seed)),
+            ("60 s", case(args.doma, work, "whole", whole_t[:FRAMES], whole_o[:FRAMES], 240, args.seed)),
+            ("120 s", case(args.doma, work, "double", whole_t, whole_o, 480, args.seed)),
         ]
     print("| recording | frames × markers | fit (s) | fit peak (MB) | complete (s) | complete peak (MB) | data (MB) | 0.5 s gaps, 3 markers | error (mm) |")
     print("|---|---|---|---|---|---|---|---|---|")
