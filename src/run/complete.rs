@@ -10,6 +10,7 @@ use super::{RunConfig, RunDir, field_everywhere};
 use crate::data::c3d::{C3d, c3d_tracks, read_c3d_bytes, write_c3d_patched};
 use crate::data::layout::Layout;
 use crate::data::sequence::{Sequence, read_tracks};
+use crate::data::tracks::Tracks;
 use crate::gaps::blend::{Blend, blended_fill};
 use crate::gaps::{FieldPrediction, Filler, Marked, Sources};
 use crate::io::write_atomic;
@@ -244,58 +245,63 @@ fn complete_with(
     device: &Device,
 ) -> Result<CompletedTracks> {
     let field = run.load_field(config, device)?;
-    let sequence = run.load_data(config)?;
-    // The input again, clipped and kept as the fit's data was, for its own values.
-    let mut input = match markers {
-        Some(m) => c3d_tracks(m).map_err(|reason| DomaError::Malformed {
-            path: config.data.clone(),
-            reason,
-        })?,
-        None => read_tracks(&config.data, &config.tracks)?.0,
-    };
-    let frame_range = config.frames.map_or(0..input.frames(), |[a, b]| a..b);
-    if config.frames.is_some() || config.stride > 1 {
-        input = input
-            .select_frames(frame_range.clone(), config.stride)
-            .map_err(DomaError::InvalidData)?;
-    }
-    if let Some(kept) = &sequence.kept {
-        input = input.select_points(kept);
-    }
-    let data = &sequence.trajectories;
-    if (input.frames(), input.points()) != (data.frames(), data.points()) {
-        return Err(DomaError::Malformed {
-            path: config.data.clone(),
-            reason: format!(
-                "now holds {} frames of {} tracks; the run fitted {} of {}",
-                input.frames(),
-                input.points(),
-                data.frames(),
-                data.points()
-            ),
-        });
-    }
+    let Sequence {
+        trajectories: data,
+        center: c,
+        scale: s,
+        blind,
+        kept,
+        ..
+    } = run.load_data(config)?;
     let (t, n) = (data.frames(), data.points());
-    let seen = input.observed();
+    // The field at every frame, from the run's own copy of the data, which then goes: a long
+    // recording's fill holds the input's mask, its normalised positions and the field's
+    // prediction, nothing else as long.
+    let predicted = field_everywhere(&field, &data, device)?;
+    let canonical = data.canonical().to_vec();
+    drop(data);
+    // The input again, clipped and kept as the fit's data was, for its own values.
+    let read_input = || -> Result<(Tracks, std::ops::Range<usize>)> {
+        let mut input = match markers {
+            Some(m) => c3d_tracks(m).map_err(|reason| DomaError::Malformed {
+                path: config.data.clone(),
+                reason,
+            })?,
+            None => read_tracks(&config.data, &config.tracks)?.0,
+        };
+        let frame_range = config.frames.map_or(0..input.frames(), |[a, b]| a..b);
+        if config.frames.is_some() || config.stride > 1 {
+            input = input
+                .select_frames(frame_range.clone(), config.stride)
+                .map_err(DomaError::InvalidData)?;
+        }
+        if let Some(kept) = &kept {
+            input = input.select_points(kept);
+        }
+        if (input.frames(), input.points()) != (t, n) {
+            return Err(DomaError::Malformed {
+                path: config.data.clone(),
+                reason: format!(
+                    "now holds {} frames of {} tracks; the run fitted {t} of {n}",
+                    input.frames(),
+                    input.points(),
+                ),
+            });
+        }
+        Ok((input, frame_range))
+    };
+    let (input, frame_range) = read_input()?;
+    let seen = input.observed().to_vec();
     // In the fit's normalised coordinates, where the field predicts.
-    let (c, s) = (sequence.center, sequence.scale);
     let normalised: Vec<f32> = input
         .positions()
         .iter()
         .enumerate()
         .map(|(e, &v)| (v - c[e % 3]) / s)
         .collect();
-    let predicted = field_everywhere(&field, data, device)?;
-    let field = FieldPrediction::new(n, &predicted, data.canonical(), seen);
-    // The run's own copy of the data has served: a long recording's fill holds the input,
-    // its normalised copy and the field's prediction, nothing else as long.
-    let Sequence {
-        trajectories,
-        blind,
-        kept,
-        ..
-    } = sequence;
-    drop(trajectories);
+    drop(input);
+    let seen = &seen[..];
+    let field = FieldPrediction::new(n, &predicted, &canonical, seen);
     let tracks = Marked::new(t, n, &normalised, seen);
     let stride = config.stride.max(1);
     let source_frames: Vec<usize> = frame_range.step_by(stride).collect();
@@ -321,7 +327,9 @@ fn complete_with(
     };
     drop(field);
     drop((predicted, normalised));
-    // Observed entries exactly as the input holds them; filled ones back in its units.
+    // Observed entries exactly as the input holds them (read again rather than kept
+    // through the fill); filled ones back in its units.
+    let (input, _) = read_input()?;
     for (e, (v, &o)) in values.iter_mut().zip(input.positions()).enumerate() {
         *v = match (seen[e / 3], filled[e / 3]) {
             (true, _) => o,
