@@ -208,6 +208,7 @@ pub fn draw_window(tracks: &Marked, draw: usize) -> Range<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gaps::Filler;
 
     #[test]
     fn a_gap_goes_to_the_window_whose_core_holds_its_middle() {
@@ -276,14 +277,7 @@ mod tests {
         // Linear fill reads only a gap's two ends: the same in windows as whole.
         let whole = tracks.linear();
         let windowed_linear = windowed(&sources, &entries, |s, local: &[(usize, usize)]| {
-            let fill = s.marked.linear();
-            local
-                .iter()
-                .map(|&(k, i)| {
-                    let e = 3 * (k * n + i);
-                    [fill[e], fill[e + 1], fill[e + 2]]
-                })
-                .collect()
+            Filler::Linear.fill_at(s, local)
         });
         for (&(k, i), v) in entries.iter().zip(&windowed_linear) {
             let e = 3 * (k * n + i);
