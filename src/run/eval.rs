@@ -1,5 +1,6 @@
 //! `doma eval`: the metrics of a fitted run.
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use burn::tensor::Device;
@@ -111,7 +112,10 @@ pub fn eval_run_as(
             let denorm = denormalize(&other.trajectories, other.center, other.scale)
                 .map_err(in_run_units)?;
             let renorm = normalize_with(&denorm, own.center, own.scale).map_err(in_run_units)?;
-            (renorm, format!("every point of {}", path.display()))
+            (
+                Cow::Owned(renorm),
+                format!("every point of {}", path.display()),
+            )
         }
     };
     let bytes = std::fs::metadata(run.model()).map(|m| m.len()).unwrap_or(0);

@@ -46,6 +46,7 @@ pub use spec::{
 };
 pub use warp::warp_run;
 
+use std::borrow::Cow;
 use std::path::PathBuf;
 
 use burn::tensor::Device;
@@ -256,23 +257,29 @@ impl RunConfig {
     }
 
     /// The training and held-out points of `data` (a seeded split; no held-out points
-    /// at a test fraction of 0).
-    pub fn split(&self, data: &Trajectories) -> Result<(Trajectories, Option<Trajectories>)> {
+    /// at a test fraction of 0, and then `data` itself, not a copy of a long recording).
+    pub fn split<'a>(
+        &self,
+        data: &'a Trajectories,
+    ) -> Result<(Cow<'a, Trajectories>, Option<Trajectories>)> {
         let (train, test) = self.split_indices(data.points())?;
         if test.is_empty() {
-            return Ok((data.clone(), None));
+            return Ok((Cow::Borrowed(data), None));
         }
         Ok((
-            data.select_points(&train)?,
+            Cow::Owned(data.select_points(&train)?),
             Some(data.select_points(&test)?),
         ))
     }
 
     /// What a report measures: the held-out tracks, or with none held out the fitted
     /// tracks at their observed entries (a training error, named as such).
-    pub fn measured(&self, data: &Trajectories) -> Result<(Trajectories, &'static str)> {
+    pub fn measured<'a>(
+        &self,
+        data: &'a Trajectories,
+    ) -> Result<(Cow<'a, Trajectories>, &'static str)> {
         Ok(match self.split(data)? {
-            (_, Some(test)) => (test, "the held-out points of the fitted data"),
+            (_, Some(test)) => (Cow::Owned(test), "the held-out points of the fitted data"),
             (train, None) => (
                 train,
                 "the fitted tracks' own observations (no track held out: a training error)",

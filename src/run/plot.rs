@@ -21,7 +21,8 @@ use crate::{DomaError, Result};
 pub fn plot_run(run: &RunDir, frames: Option<&[usize]>, device: &Device) -> Result<Vec<PathBuf>> {
     let config = run.load_config()?;
     let field = run.load_field(&config, device)?;
-    let (test, _) = config.measured(&run.load_data(&config)?.trajectories)?;
+    let data = run.load_data(&config)?;
+    let (test, _) = config.measured(&data.trajectories)?;
     let t = test.frames();
     let default = [t / 2, t - 1];
     let chosen = frames.unwrap_or(&default);
