@@ -266,10 +266,8 @@ impl RunConfig {
         if test.is_empty() {
             return Ok((Cow::Borrowed(data), None));
         }
-        Ok((
-            Cow::Owned(data.select_points(&train)?),
-            Some(data.select_points(&test)?),
-        ))
+        let test = data.select_points(&test)?;
+        Ok((Cow::Owned(data.select_points(&train)?), Some(test)))
     }
 
     /// What a report measures: the held-out tracks, or with none held out the fitted
