@@ -191,11 +191,7 @@ pub fn blended_fill(
         return (out, blend);
     }
     let fills = windowed(&Sources::new(*tracks, field), &entries, |s, local| {
-        let values = candidates_in(s, local);
-        let blended = values.iter().zip(local);
-        blended
-            .map(|(p, &(_, _, len))| blend.combine(len, p))
-            .collect()
+        combined(&blend, &candidates_in(s, local), local)
     });
     for (&(k, i, _), v) in entries.iter().zip(fills) {
         let e = 3 * (k * n + i);
@@ -212,12 +208,19 @@ fn blend_at(
     entries: &[(usize, usize, usize)],
 ) -> (Vec<[f32; 3]>, Vec<[[f32; 3]; M]>) {
     let values = candidates(sources, entries);
-    let fills = values
-        .iter()
-        .zip(entries)
+    (combined(blend, &values, entries), values)
+}
+
+/// `blend` of the fillers' `values` at `entries`, by each entry's class.
+fn combined(
+    blend: &Blend,
+    values: &[[[f32; 3]; M]],
+    entries: &[(usize, usize, usize)],
+) -> Vec<[f32; 3]> {
+    let with_lengths = values.iter().zip(entries);
+    with_lengths
         .map(|(p, &(_, _, len))| blend.combine(len, p))
-        .collect();
-    (fills, values)
+        .collect()
 }
 
 /// Every filler's value at `entries` `(frame, track, gap length)`, in the order of

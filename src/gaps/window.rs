@@ -12,7 +12,7 @@
 //!   eighth at each end) tile the recording, a gap going to the window whose core holds
 //!   its middle, or to a window of its own if it is too long for one;
 //! - each of a blend's validation draws hides its spans in one window
-//!   ([`draw_window`]), centred on one of the data's own gaps.
+//!   ([`DrawWindows`]), centred on one of the data's own gaps.
 //!
 //! What a fill holds beyond the data (the tracks, the field's prediction, the fill) is then
 //! bounded by the window, whatever the recording's length; a recording that fits in one
@@ -84,9 +84,9 @@ fn window_of(gap: &Range<usize>, frames: usize, width: usize) -> Range<usize> {
     }
 }
 
-/// `entries` `(frame, track, …)`, each unobserved in `tracks`, by the window that fills
-/// it: each window's frames and the indices of its entries, in order.
-fn plan<E: Entry>(tracks: &Marked, entries: &[E]) -> Vec<(Range<usize>, Vec<usize>)> {
+/// `entries` `(frame, track, gap length)`, each unobserved in `tracks`, by the window that
+/// fills it: each window's frames and the indices of its entries, in order.
+fn plan(tracks: &Marked, entries: &[Entry]) -> Vec<(Range<usize>, Vec<usize>)> {
     let (t, n) = (tracks.frames, tracks.points);
     let width = window_frames(n);
     // Each track's gaps, by start, to find an entry's gap.
@@ -95,8 +95,7 @@ fn plan<E: Entry>(tracks: &Marked, entries: &[E]) -> Vec<(Range<usize>, Vec<usiz
         by_track[g.track].push(g.frames);
     }
     let mut windows: BTreeMap<(usize, usize), Vec<usize>> = BTreeMap::new();
-    for (j, entry) in entries.iter().enumerate() {
-        let (k, i) = (entry.frame(), entry.track());
+    for (j, &(k, i, _)) in entries.iter().enumerate() {
         let own = &by_track[i];
         let at = own.partition_point(|g| g.end <= k);
         // An observed entry is no gap: any window serves it.
@@ -111,51 +110,18 @@ fn plan<E: Entry>(tracks: &Marked, entries: &[E]) -> Vec<(Range<usize>, Vec<usiz
     windows.into_iter().map(|((a, b), j)| (a..b, j)).collect()
 }
 
-/// An entry to fill: a frame and a track first, anything after.
-pub trait Entry: Copy + Send + Sync {
-    /// The frame.
-    fn frame(&self) -> usize;
-    /// The track.
-    fn track(&self) -> usize;
-    /// The same entry `by` frames earlier.
-    fn earlier(self, by: usize) -> Self;
-}
+/// An entry to fill, `(frame, track, gap length)`: a gap's length is the same in the
+/// window that holds it.
+pub type Entry = (usize, usize, usize);
 
-impl Entry for (usize, usize) {
-    fn frame(&self) -> usize {
-        self.0
-    }
-    fn track(&self) -> usize {
-        self.1
-    }
-    fn earlier(self, by: usize) -> Self {
-        (self.0 - by, self.1)
-    }
-}
-
-/// `(frame, track, gap length)`: a gap's length is the same in the window that holds it.
-impl Entry for (usize, usize, usize) {
-    fn frame(&self) -> usize {
-        self.0
-    }
-    fn track(&self) -> usize {
-        self.1
-    }
-    fn earlier(self, by: usize) -> Self {
-        (self.0 - by, self.1, self.2)
-    }
-}
-
-/// `fill`'s values at `entries` `(frame, track, …)`, unobserved entries of `sources`, each
-/// computed from the sources of the window that fills it (module docs): `fill` is given a
-/// window's sources and its entries in the window's frames, and returns one value per
-/// entry. One call on the whole recording where it fits in one window. The windows run on
-/// every core.
-pub fn windowed<E, R, F>(sources: &Sources, entries: &[E], fill: F) -> Vec<R>
+/// `fill`'s values at `entries`, unobserved entries of `sources`, each computed from the
+/// sources of the window that fills it (module docs): `fill` is given a window's sources
+/// and its entries in the window's frames, and returns one value per entry. One call on
+/// the whole recording where it fits in one window. The windows run on every core.
+pub fn windowed<R, F>(sources: &Sources, entries: &[Entry], fill: F) -> Vec<R>
 where
-    E: Entry,
     R: Copy + Default + Send,
-    F: Fn(&Sources, &[E]) -> Vec<R> + Sync,
+    F: Fn(&Sources, &[Entry]) -> Vec<R> + Sync,
 {
     let tracks = &sources.marked;
     if tracks.frames <= window_frames(tracks.points) || entries.is_empty() {
@@ -165,9 +131,9 @@ where
         .into_par_iter()
         .map(|(frames, js)| {
             let field = sources.field.window(frames.clone());
-            let local: Vec<E> = js
+            let local: Vec<Entry> = js
                 .iter()
-                .map(|&j| entries[j].earlier(frames.start))
+                .map(|&j| (entries[j].0 - frames.start, entries[j].1, entries[j].2))
                 .collect();
             let values = fill(&Sources::new(tracks.window(frames), &field), &local);
             (js, values)
@@ -182,27 +148,46 @@ where
     out
 }
 
-/// The frames of validation draw `draw`'s window in `tracks`: the whole recording where it
-/// fits in one window, else a window centred on one of its interior gaps (where there is
-/// none, on a time), chosen by the golden-ratio sequence so that the draws spread over the
-/// gaps in time.
-pub fn draw_window(tracks: &Marked, draw: usize) -> Range<usize> {
-    let (t, width) = (tracks.frames, window_frames(tracks.points));
-    if t <= width {
-        return 0..t;
+/// The windows of a blend's validation draws over `tracks` ([`DrawWindows::at`]).
+pub struct DrawWindows {
+    frames: usize,
+    width: usize,
+    /// The middle frame of each interior gap, in order.
+    middles: Vec<usize>,
+}
+
+impl DrawWindows {
+    /// The draws' windows over `tracks`.
+    pub fn new(tracks: &Marked) -> Self {
+        let mut middles: Vec<usize> = gaps(tracks)
+            .filter(|g| g.is_interior())
+            .map(|g| (g.frames.start + g.frames.end) / 2)
+            .collect();
+        middles.sort_unstable();
+        DrawWindows {
+            frames: tracks.frames,
+            width: window_frames(tracks.points),
+            middles,
+        }
     }
-    let spread = ((draw as f64 + 0.5) * 0.618_033_988_749_894_9).fract();
-    let mut middles: Vec<usize> = gaps(tracks)
-        .filter(|g| g.is_interior())
-        .map(|g| (g.frames.start + g.frames.end) / 2)
-        .collect();
-    middles.sort_unstable();
-    let middle = match middles.len() {
-        0 => (spread * t as f64) as usize,
-        m => middles[((spread * m as f64) as usize).min(m - 1)],
-    };
-    let start = middle.saturating_sub(width / 2).min(t - width);
-    start..start + width
+
+    /// The frames of draw `draw`'s window: the whole recording where it fits in one
+    /// window, else a window centred on one of its interior gaps (where there is none, on
+    /// a time), chosen by the golden-ratio sequence so that the draws spread over the gaps
+    /// in time.
+    pub fn at(&self, draw: usize) -> Range<usize> {
+        let (t, width) = (self.frames, self.width);
+        if t <= width {
+            return 0..t;
+        }
+        let spread = ((draw as f64 + 0.5) * 0.618_033_988_749_894_9).fract();
+        let middle = match self.middles.len() {
+            0 => (spread * t as f64) as usize,
+            m => self.middles[((spread * m as f64) as usize).min(m - 1)],
+        };
+        let start = middle.saturating_sub(width / 2).min(t - width);
+        start..start + width
+    }
 }
 
 #[cfg(test)]
@@ -245,15 +230,15 @@ mod tests {
         let tracks = Marked::new(t, n, &positions, &observed);
         let field = FieldPrediction::new(n, &positions, &positions[..3 * n], &observed);
         let sources = Sources::new(tracks, &field);
-        let entries: Vec<(usize, usize)> = (0..t * n)
+        let entries: Vec<Entry> = (0..t * n)
             .filter(|&e| !observed[e])
-            .map(|e| (e / n, e % n))
+            .map(|e| (e / n, e % n, 0))
             .collect();
         let plan = plan(&tracks, &entries);
         assert!(plan.len() > 3, "{} windows", plan.len());
         for (frames, js) in &plan {
             for &j in js {
-                let (k, i) = entries[j];
+                let (k, i, _) = entries[j];
                 // The gap's observed neighbours lie in the window.
                 let before = (0..k).rev().find(|&f| observed[f * n + i]).unwrap_or(0);
                 let after = (k..t).find(|&f| observed[f * n + i]).unwrap_or(t - 1);
@@ -264,22 +249,23 @@ mod tests {
             }
         }
         // Each entry's value computed in its window, by its frame there.
-        let frames = windowed(&sources, &entries, |s, local: &[(usize, usize)]| {
+        let frames = windowed(&sources, &entries, |s, local| {
             local
                 .iter()
-                .map(|&(k, i)| [s.marked.positions[3 * (k * n + i)], k as f32])
+                .map(|&(k, i, _)| [s.marked.positions[3 * (k * n + i)], k as f32])
                 .collect()
         });
-        for (&(k, i), v) in entries.iter().zip(&frames) {
+        for (&(k, i, _), v) in entries.iter().zip(&frames) {
             assert_eq!(v[0], positions[3 * (k * n + i)]);
             assert!(v[1] as usize <= k);
         }
         // Linear fill reads only a gap's two ends: the same in windows as whole.
         let whole = tracks.linear();
-        let windowed_linear = windowed(&sources, &entries, |s, local: &[(usize, usize)]| {
-            Filler::Linear.fill_at(s, local)
+        let windowed_linear = windowed(&sources, &entries, |s, local| {
+            let pairs: Vec<(usize, usize)> = local.iter().map(|&(k, i, _)| (k, i)).collect();
+            Filler::Linear.fill_at(s, &pairs)
         });
-        for (&(k, i), v) in entries.iter().zip(&windowed_linear) {
+        for (&(k, i, _), v) in entries.iter().zip(&windowed_linear) {
             let e = 3 * (k * n + i);
             assert_eq!(v, &[whole[e], whole[e + 1], whole[e + 2]], "({k}, {i})");
         }
@@ -290,11 +276,12 @@ mod tests {
         let (n, width) = (4, window_frames(4));
         let (positions, observed) = walk(4 * width, n, 500, 300);
         let tracks = Marked::new(4 * width, n, &positions, &observed);
-        let starts: Vec<usize> = (0..6).map(|d| draw_window(&tracks, d).start).collect();
+        let windows = DrawWindows::new(&tracks);
+        let starts: Vec<usize> = (0..6).map(|d| windows.at(d).start).collect();
         assert!(starts.iter().all(|&s| s + width <= 4 * width));
         assert!(starts.iter().max() > starts.iter().min());
         // A recording within one window is the whole.
         let short = tracks.window(0..width);
-        assert_eq!(draw_window(&short, 3), 0..width);
+        assert_eq!(DrawWindows::new(&short).at(3), 0..width);
     }
 }

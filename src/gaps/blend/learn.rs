@@ -37,7 +37,7 @@ use crate::gaps::field_fill::FieldPrediction;
 use crate::gaps::fillers::{Filler, Marked, PerFiller, Sources};
 use crate::gaps::linalg::simplex_least_squares;
 use crate::gaps::spans::{gap_len, gap_sizes, gaps, validation_spans};
-use crate::gaps::window::draw_window;
+use crate::gaps::window::DrawWindows;
 
 /// The classes whose weights [`learn`] solves for: short gaps, long gaps pooled, then each
 /// length class of the long ones.
@@ -311,7 +311,7 @@ fn classic_blend(folds: &[Classes<M>]) -> Option<Blend> {
 /// One validation draw's hidden entries, `(frame, track)`.
 pub(super) type Hidden = Vec<(usize, usize)>;
 
-/// Stage 1's validation draws, each its window of frames ([`draw_window`]: the whole
+/// Stage 1's validation draws, each its window of frames ([`DrawWindows`]: the whole
 /// recording unless it is long) and its hidden entries in the window's frames: at least
 /// [`VALIDATION_FOLDS`], then more until every class of gap length with a gap to fill
 /// holds [`VALIDATION_SPANS`] validation spans, at most [`MAX_VALIDATION_DRAWS`].
@@ -322,6 +322,7 @@ pub(super) fn draws(tracks: &Marked, seed: u64) -> Vec<(Range<usize>, Hidden)> {
         wanted[span_class(g.len())] = true;
     }
     let mut spans = [0usize; 1 + LENGTH_CLASSES];
+    let windows = DrawWindows::new(tracks);
     let (mut out, mut failed) = (Vec::new(), 0);
     for draw in 0..MAX_VALIDATION_DRAWS {
         let enough = (0..spans.len()).all(|c| !wanted[c] || spans[c] >= VALIDATION_SPANS);
@@ -329,7 +330,7 @@ pub(super) fn draws(tracks: &Marked, seed: u64) -> Vec<(Range<usize>, Hidden)> {
             break;
         }
         let draw_seed = seed ^ 0x9e37_79b9_7f4a_7c15u64.wrapping_mul(draw as u64 + 1);
-        let frames = draw_window(tracks, draw);
+        let frames = windows.at(draw);
         let window = tracks.window(frames.clone());
         let Ok(hidden) = validation_spans(&window, VALIDATION_FRACTION, draw_seed, span_class)
         else {
