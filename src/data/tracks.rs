@@ -114,6 +114,12 @@ impl Tracks {
         }
     }
 
+    /// The positions `[T, N, 3]`, the tracks consumed (unobserved entries hold whatever the
+    /// input held there).
+    pub fn into_positions(self) -> Vec<f32> {
+        self.positions
+    }
+
     /// `T`.
     pub fn frames(&self) -> usize {
         self.frames

@@ -39,7 +39,7 @@
 // Index loops over 6 × 6 matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
-use super::field_fill::{FieldPrediction, Lending, field_fill};
+use super::field_fill::FieldPrediction;
 use super::fillers::{Filler, Marked, PerFiller, Sources};
 use super::spans::{gap_len, gap_sizes, validation_spans};
 use super::window::windowed;
@@ -175,29 +175,64 @@ pub fn blended_fill(
     blind: &[(usize, usize)],
 ) -> (Vec<f32>, Blend) {
     let n = tracks.points;
-    let blend = learn(tracks, field, seed, blind);
-    if blend.is_field_only() {
-        return (field_fill(tracks, field, Lending::Fixed), blend);
-    }
-    let sizes = gap_sizes(tracks);
-    // The entries to fill: every gap of a track observed somewhere.
-    let entries: Vec<(usize, usize, usize)> = (0..tracks.frames)
-        .flat_map(|k| (0..n).map(move |i| (k, i)))
-        .filter_map(|(k, i)| gap_len(&sizes, k * n + i).map(|len| (k, i, len)))
+    let seen = tracks.seen_tracks();
+    let entries: Vec<(usize, usize)> = (0..tracks.frames)
+        .flat_map(|k| seen.iter().map(move |&i| (k, i)))
+        .filter(|&(k, i)| !tracks.seen(k, i))
         .collect();
-    drop(sizes);
+    let (fills, blend) = blended_fill_at(tracks, field, seed, blind, &entries);
     let mut out = tracks.positions.to_vec();
-    if entries.is_empty() {
-        return (out, blend);
-    }
-    let fills = windowed(&Sources::new(*tracks, field), &entries, |s, local| {
-        combined(&blend, &candidates_in(s, local), local)
-    });
-    for (&(k, i, _), v) in entries.iter().zip(fills) {
+    for (&(k, i), v) in entries.iter().zip(fills) {
         let e = 3 * (k * n + i);
         out[e..e + 3].copy_from_slice(&v);
     }
     (out, blend)
+}
+
+/// [`blended_fill`]'s values at `entries` `(frame, track)` alone, unobserved entries of
+/// tracks observed somewhere: what a long recording's completion holds instead of a second
+/// copy of it.
+pub fn blended_fill_at(
+    tracks: &Marked,
+    field: &FieldPrediction,
+    seed: u64,
+    blind: &[(usize, usize)],
+    entries: &[(usize, usize)],
+) -> (Vec<[f32; 3]>, Blend) {
+    let blend = learn(tracks, field, seed, blind);
+    let fills = if blend.is_field_only() {
+        fill_with(tracks, field, Filler::FieldFill, entries)
+    } else {
+        let entries = with_gap_lengths(tracks, entries);
+        windowed(&Sources::new(*tracks, field), &entries, |s, local| {
+            combined(&blend, &candidates_in(s, local), local)
+        })
+    };
+    (fills, blend)
+}
+
+/// `filler`'s values at `entries` `(frame, track)`, unobserved entries of `tracks`, in
+/// windows of time on a long recording ([`windowed`]).
+pub fn fill_with(
+    tracks: &Marked,
+    field: &FieldPrediction,
+    filler: Filler,
+    entries: &[(usize, usize)],
+) -> Vec<[f32; 3]> {
+    let entries = with_gap_lengths(tracks, entries);
+    windowed(&Sources::new(*tracks, field), &entries, |s, local| {
+        let pairs: Vec<(usize, usize)> = local.iter().map(|&(k, i, _)| (k, i)).collect();
+        filler.fill_at(s, &pairs)
+    })
+}
+
+/// `entries` `(frame, track)` with the length of each one's gap (0 for an observed entry).
+fn with_gap_lengths(tracks: &Marked, entries: &[(usize, usize)]) -> Vec<(usize, usize, usize)> {
+    let (n, sizes) = (tracks.points, gap_sizes(tracks));
+    entries
+        .iter()
+        .map(|&(k, i)| (k, i, gap_len(&sizes, k * n + i).unwrap_or(0)))
+        .collect()
 }
 
 /// The blend of every filler at `entries` `(frame, track, gap length)` by `blend`'s
@@ -265,13 +300,8 @@ pub fn fills_at(
     blind: &[(usize, usize)],
     entries: &[(usize, usize)],
 ) -> FillsAt {
-    let n = tracks.points;
-    let sizes = gap_sizes(tracks);
     let blend = learn(tracks, field, seed, blind);
-    let entries: Vec<(usize, usize, usize)> = entries
-        .iter()
-        .map(|&(k, i)| (k, i, gap_len(&sizes, k * n + i).unwrap_or(0)))
-        .collect();
+    let entries = with_gap_lengths(tracks, entries);
     let (doma, fillers) = blend_at(&Sources::new(*tracks, field), &blend, &entries);
     FillsAt {
         blend,

@@ -11,8 +11,8 @@ use crate::data::c3d::{C3d, c3d_tracks, read_c3d_bytes, write_c3d_patched};
 use crate::data::layout::Layout;
 use crate::data::sequence::{Sequence, read_tracks};
 use crate::data::tracks::Tracks;
-use crate::gaps::blend::{Blend, blended_fill};
-use crate::gaps::{FieldPrediction, Filler, Marked, Sources};
+use crate::gaps::blend::{Blend, blended_fill_at, fill_with};
+use crate::gaps::{FieldPrediction, Filler, Marked};
 use crate::io::write_atomic;
 use crate::{DomaError, Result};
 use doma_formats::c3d::PointEdit;
@@ -300,48 +300,48 @@ fn complete_with(
         .map(|(e, &v)| (v - c[e % 3]) / s)
         .collect();
     drop(input);
-    let seen = &seen[..];
-    let field = FieldPrediction::new(n, &predicted, &canonical, seen);
-    let tracks = Marked::new(t, n, &normalised, seen);
+    let field = FieldPrediction::new(n, &predicted, &canonical, &seen);
+    let tracks = Marked::new(t, n, &normalised, &seen);
     let stride = config.stride.max(1);
     let source_frames: Vec<usize> = frame_range.step_by(stride).collect();
     let rate = markers.map(|m| m.rate as f64);
     let (filled, extrapolated) = chosen(&tracks, &source_frames, policy, rate, &config.data)?;
-    let (mut values, blend) = match policy.method {
+    // The fill of the chosen entries alone: a long recording holds no second copy of itself.
+    let entries: Vec<(usize, usize)> = (0..t * n)
+        .filter(|&e| filled[e])
+        .map(|e| (e / n, e % n))
+        .collect();
+    let (fills, blend) = match policy.method {
         None => {
             let blind = blind.as_ref().map_or(&[][..], |b| &b.entries[..]);
-            blended_fill(&tracks, &field, config.fit.seed, blind)
+            blended_fill_at(&tracks, &field, config.fit.seed, blind, &entries)
         }
-        Some(filler) => {
-            let gaps: Vec<(usize, usize)> = (0..t * n)
-                .filter(|&e| !seen[e])
-                .map(|e| (e / n, e % n))
-                .collect();
-            let fill = filler.fill_at(&Sources::new(tracks, &field), &gaps);
-            let mut values = normalised.clone();
-            for (&(k, i), v) in gaps.iter().zip(fill) {
-                values[3 * (k * n + i)..3 * (k * n + i) + 3].copy_from_slice(&v);
-            }
-            (values, Blend::only(filler))
-        }
+        Some(filler) => (
+            fill_with(&tracks, &field, filler, &entries),
+            Blend::only(filler),
+        ),
     };
     drop(field);
     drop((predicted, normalised));
     // Observed entries exactly as the input holds them (read again rather than kept
     // through the fill); filled ones back in its units.
-    let (input, _) = read_input()?;
-    for (e, (v, &o)) in values.iter_mut().zip(input.positions()).enumerate() {
-        *v = match (seen[e / 3], filled[e / 3]) {
-            (true, _) => o,
-            (false, true) => *v * s + c[e % 3],
-            (false, false) => f32::NAN,
-        };
+    let mut values = read_input()?.0.into_positions();
+    for (e, v) in values.chunks_exact_mut(3).enumerate() {
+        if !seen[e] {
+            v.fill(f32::NAN);
+        }
+    }
+    for (&(k, i), v) in entries.iter().zip(fills) {
+        let e = 3 * (k * n + i);
+        for d in 0..3 {
+            values[e + d] = v[d] * s + c[d];
+        }
     }
     Ok(CompletedTracks {
         frames: t,
         points: n,
         tracks: values,
-        observed: seen.to_vec(),
+        observed: seen,
         filled,
         extrapolated,
         kept,

@@ -2,6 +2,7 @@
 //! its length classes and its blind spans.
 
 use super::*;
+use crate::gaps::field_fill::{Lending, field_fill};
 
 /// `[T, N, 3]`: a grid of `n` tracks, five to a row, translated by an irregular jump
 /// every frame (a camera shake: no spline follows it).
