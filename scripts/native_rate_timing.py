@@ -5,9 +5,10 @@ memory of each, and the fill of the same gaps beside a 5 s excerpt's.
 The recording is built from a real one (right_knee.c3d, shipped in data/mocap/): its first
 60 markers played forward, backward, forward... (so the motion stays continuous) up to
 12,000 frames, and given a rate of 200 Hz. 3 markers at once are hidden for 0.5 s, 20 times
-in the excerpt (its first 1,000 frames) and 240 times in the whole (the same density). A
-two-minute recording built the same way (24,000 frames, 480 gaps) shows how the peaks grow
-with the frame count.
+in the excerpt (its first 1,000 frames) and 240 times in the whole (the same density).
+Recordings of two and four minutes built the same way (24,000 and 48,000 frames, 480 and
+960 gaps) show how the peaks grow with the frame count: the last line gives each peak's
+growth from one minute to four against the tracks' own.
 
     python scripts/native_rate_timing.py [DOMA_BINARY] [--out DIR]
 
@@ -115,20 +116,25 @@ def main():
     args = p.parse_args()
     tracks, observed = source_tracks()
     tracks, observed = tracks[:, :MARKERS], observed[:, :MARKERS]
-    whole_t = ping_pong(tracks, 2 * FRAMES).astype(np.float64)
-    whole_o = ping_pong(observed, 2 * FRAMES)
+    whole_t = ping_pong(tracks, 4 * FRAMES).astype(np.float64)
+    whole_o = ping_pong(observed, 4 * FRAMES)
     with tempfile.TemporaryDirectory() as tmp:
         work = pathlib.Path(tmp)
         rows = [
             ("5 s excerpt", case(args.doma, work, "excerpt", whole_t[:1000], whole_o[:1000], 20, args.seed)),
             ("60 s", case(args.doma, work, "whole", whole_t[:FRAMES], whole_o[:FRAMES], 240, args.seed)),
-            ("120 s", case(args.doma, work, "double", whole_t, whole_o, 480, args.seed)),
+            ("120 s", case(args.doma, work, "double", whole_t[: 2 * FRAMES], whole_o[: 2 * FRAMES], 480, args.seed)),
+            ("240 s", case(args.doma, work, "quad", whole_t, whole_o, 960, args.seed)),
         ]
     print("| recording | frames × markers | fit (s) | fit peak (MB) | complete (s) | complete peak (MB) | data (MB) | 0.5 s gaps, 3 markers | error (mm) |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name, r in rows:
         print(f"| {name} | {r['frames']} × {MARKERS} | {r['fit_s']:.0f} | {r['fit_mb']:.0f} | {r['complete_s']:.0f} | "
               f"{r['complete_mb']:.0f} | {r['data_mb']:.1f} | {r['events']} | {r['error_mm']:.2f} |")
+    one, four = rows[1][1], rows[3][1]
+    data = four["data_mb"] - one["data_mb"]
+    print(f"\nfrom 60 s to 240 s, per MB more tracks: fit peak +{(four['fit_mb'] - one['fit_mb']) / data:.1f} MB, "
+          f"complete peak +{(four['complete_mb'] - one['complete_mb']) / data:.1f} MB")
 
 
 if __name__ == "__main__":

@@ -41,7 +41,7 @@
 
 use super::field_fill::FieldPrediction;
 use super::fillers::{Filler, Marked, PerFiller, Sources};
-use super::spans::{gap_len, gap_sizes, validation_spans};
+use super::spans::{GapIndex, validation_spans};
 use super::window::windowed;
 use learn::learn;
 use serde::{Deserialize, Serialize};
@@ -203,9 +203,9 @@ pub fn blended_fill_at(
     let fills = if blend.is_field_only() {
         fill_with(tracks, field, Filler::FieldFill, entries)
     } else {
-        let entries = with_gap_lengths(tracks, entries);
+        let (entries, used) = (with_gap_lengths(tracks, entries), blend.in_use());
         windowed(&Sources::new(*tracks, field), &entries, |s, local| {
-            combined(&blend, &candidates_in(s, local), local)
+            combined(&blend, &candidates_in(s, local, used), local)
         })
     };
     (fills, blend)
@@ -228,10 +228,10 @@ pub fn fill_with(
 
 /// `entries` `(frame, track)` with the length of each one's gap (0 for an observed entry).
 fn with_gap_lengths(tracks: &Marked, entries: &[(usize, usize)]) -> Vec<(usize, usize, usize)> {
-    let (n, sizes) = (tracks.points, gap_sizes(tracks));
+    let index = GapIndex::new(tracks);
     entries
         .iter()
-        .map(|&(k, i)| (k, i, gap_len(&sizes, k * n + i).unwrap_or(0)))
+        .map(|&(k, i)| (k, i, index.len_at(k, i).unwrap_or(0)))
         .collect()
 }
 
@@ -242,7 +242,7 @@ fn blend_at(
     blend: &Blend,
     entries: &[(usize, usize, usize)],
 ) -> (Vec<[f32; 3]>, Vec<[[f32; 3]; M]>) {
-    let values = candidates(sources, entries);
+    let values = candidates(sources, entries, EVERY_FILLER);
     (combined(blend, &values, entries), values)
 }
 
@@ -259,18 +259,46 @@ fn combined(
 }
 
 /// Every filler's value at `entries` `(frame, track, gap length)`, in the order of
-/// [`Filler::ALL`]: in windows of time on a long recording ([`windowed`]).
-fn candidates(sources: &Sources, entries: &[(usize, usize, usize)]) -> Vec<[[f32; 3]; M]> {
-    windowed(sources, entries, candidates_in)
+/// [`Filler::ALL`], computed for the fillers whose bits are set in `fillers` (the others'
+/// are NaN): in windows of time on a long recording ([`windowed`]).
+fn candidates(
+    sources: &Sources,
+    entries: &[(usize, usize, usize)],
+    fillers: u32,
+) -> Vec<[[f32; 3]; M]> {
+    windowed(sources, entries, |s, local| {
+        candidates_in(s, local, fillers)
+    })
 }
 
 /// [`candidates`] from `sources` as they are.
-fn candidates_in(sources: &Sources, entries: &[(usize, usize, usize)]) -> Vec<[[f32; 3]; M]> {
+fn candidates_in(
+    sources: &Sources,
+    entries: &[(usize, usize, usize)],
+    fillers: u32,
+) -> Vec<[[f32; 3]; M]> {
     let pairs: Vec<(usize, usize)> = entries.iter().map(|&(k, i, _)| (k, i)).collect();
-    let columns = Filler::ALL.map(|f| f.fill_at(sources, &pairs));
+    let columns = Filler::ALL.map(|f| {
+        if fillers & f.bit() != 0 {
+            f.fill_at(sources, &pairs)
+        } else {
+            vec![[f32::NAN; 3]; pairs.len()]
+        }
+    });
     (0..entries.len())
         .map(|row| std::array::from_fn(|m| columns[m][row]))
         .collect()
+}
+
+/// The bits of every filler ([`Filler::bit`]).
+const EVERY_FILLER: u32 = (1 << M) - 1;
+
+/// The bits of the classic fillers, those that fill from the observations alone.
+fn classic_fillers() -> u32 {
+    Filler::ALL
+        .iter()
+        .filter(|f| !f.is_field())
+        .fold(0, |bits, f| bits | f.bit())
 }
 
 /// doma's fill and every filler's value at `entries` `(frame, track)`, gaps of the tracks:
@@ -323,6 +351,20 @@ impl Blend {
             by_length: Vec::new(),
             field_validated: 0,
         }
+    }
+
+    /// The bits ([`Filler::bit`]) of the fillers with a weight in some class: the others'
+    /// values are never read.
+    fn in_use(&self) -> u32 {
+        let classes = [self.short, self.long]
+            .into_iter()
+            .chain(self.by_length.iter().map(|c| c.weights));
+        classes.fold(0, |bits, w| {
+            Filler::ALL
+                .iter()
+                .filter(|&&f| w[f] > 0.0)
+                .fold(bits, |bits, f| bits | f.bit())
+        })
     }
 
     /// The weights for a gap of `len` frames.

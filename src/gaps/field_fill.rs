@@ -7,8 +7,8 @@
 //! before ([`FieldPrediction`]).
 
 use super::fillers::Marked;
+pub use super::prediction::FieldPrediction;
 use super::spans::gaps;
-use crate::knn::PointTree;
 
 /// The longest gap (in frames) whose residual [`carry_residuals`] carries by a spline;
 /// longer gaps carry it linearly. Chosen among 9, 16 and no limit on five marker recordings
@@ -42,55 +42,6 @@ pub enum Lending {
     /// are occluded together (the far side of a surface), the fixed lenders are unseen
     /// exactly where the track is, and their carried residual is no better than its own.
     FrameByFrame,
-}
-
-/// The fitted field's prediction of a set of tracks, with what its fill needs besides: each
-/// track's nearest tracks by canonical position.
-pub struct FieldPrediction<'a> {
-    /// The field at every frame and track, `[T, N, 3]`.
-    pub predicted: &'a [f32],
-    /// For each track, the [`LENDER_CANDIDATES`] other tracks nearest to it in the
-    /// canonical frame, among those observed somewhere, closest first.
-    pub neighbours: Vec<Vec<usize>>,
-}
-
-impl<'a> FieldPrediction<'a> {
-    /// `predicted` (`[T, N, 3]`) and the neighbours by `canonical` (`[N, 3]`, the positions
-    /// the field was evaluated from) among the tracks observed somewhere in `observed`
-    /// (`[T, N]`). A track whose canonical position is not finite has no neighbour and lends
-    /// none.
-    pub fn new(points: usize, predicted: &'a [f32], canonical: &[f32], observed: &[bool]) -> Self {
-        let n = points;
-        debug_assert_eq!(canonical.len(), 3 * n);
-        let frames = observed.len().checked_div(n).unwrap_or(0);
-        let at = |i: usize| [canonical[3 * i], canonical[3 * i + 1], canonical[3 * i + 2]];
-        let finite = |i: usize| at(i).iter().all(|v| v.is_finite());
-        let lenders: Vec<usize> = (0..n)
-            .filter(|&i| finite(i) && (0..frames).any(|k| observed[k * n + i]))
-            .collect();
-        let cloud: Vec<[f32; 3]> = lenders.iter().map(|&i| at(i)).collect();
-        let neighbours = match PointTree::new(&cloud) {
-            Ok(tree) if !cloud.is_empty() => (0..n)
-                .map(|i| {
-                    if !finite(i) {
-                        return Vec::new();
-                    }
-                    let want = (LENDER_CANDIDATES + 1).min(cloud.len());
-                    tree.nearest_k(&at(i), want)
-                        .into_iter()
-                        .map(|r| lenders[r])
-                        .filter(|&j| j != i)
-                        .take(LENDER_CANDIDATES)
-                        .collect()
-                })
-                .collect(),
-            _ => vec![Vec::new(); n],
-        };
-        FieldPrediction {
-            predicted,
-            neighbours,
-        }
-    }
 }
 
 /// The residual carry: `predicted` (`[T, N, 3]`, the field at every track and frame) plus,
@@ -141,7 +92,7 @@ pub fn carry_residuals(tracks: &Marked, predicted: &[f32]) -> Vec<f32> {
 /// neighbours' residual at the gap's own frames corrects what the track's residual, known
 /// only at the gap's borders, cannot (docs/design.md §7).
 pub fn field_fill(tracks: &Marked, field: &FieldPrediction, lending: Lending) -> Vec<f32> {
-    let carried = carry_residuals(tracks, field.predicted);
+    let carried = carry_residuals(tracks, field.predicted());
     field_fill_from_carry(tracks, field, &carried, lending)
 }
 
@@ -154,7 +105,7 @@ pub fn field_fill_from_carry(
     lending: Lending,
 ) -> Vec<f32> {
     let (t, n, observed) = (tracks.frames, tracks.points, tracks.observed);
-    let predicted = field.predicted;
+    let predicted = field.predicted();
     let seen: Vec<bool> = (0..n)
         .map(|i| (0..t).any(|k| observed[k * n + i]))
         .collect();
@@ -373,10 +324,7 @@ mod tests {
         assert!(field.neighbours[3].is_empty());
         assert_eq!(field.neighbours[4], vec![2, 0]);
         // With no neighbour the fill is the residual carried alone.
-        let alone = FieldPrediction {
-            predicted: &predicted,
-            neighbours: vec![Vec::new(); n],
-        };
+        let alone = FieldPrediction::new(n, &predicted, &[f32::NAN; 3].repeat(n), &observed);
         let positions: Vec<f32> = (0..3 * t * n).map(|v| v as f32).collect();
         let mut gappy = observed.clone();
         gappy[n] = false;

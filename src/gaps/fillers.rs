@@ -182,6 +182,11 @@ impl Filler {
         })
     }
 
+    /// Its bit in a set of fillers (`1 << index`).
+    pub fn bit(self) -> u32 {
+        1 << self.index()
+    }
+
     /// Whether it is one of the field's fills (the others are the classic fillers).
     pub fn is_field(self) -> bool {
         matches!(self, Filler::FieldFill | Filler::FieldFillFramewise)
@@ -261,7 +266,7 @@ impl<'a> Sources<'a> {
     pub fn field_fill(&self, lending: Lending) -> Vec<f32> {
         let carried = self
             .carried
-            .get_or_init(|| carry_residuals(&self.marked, self.field.predicted));
+            .get_or_init(|| carry_residuals(&self.marked, self.field.predicted()));
         field_fill_from_carry(&self.marked, self.field, carried, lending)
     }
 }

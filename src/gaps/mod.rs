@@ -40,7 +40,8 @@
 //! | `gloersen.rs` | Gløersen & Federolf's PCA fill (R2): a method of [`Marked`] |
 //! | `donors.rs` | pattern and rigid-body fill: methods of [`Marked`] |
 //! | `segment.rs` | the segment fill: rigid-body fill from the donors that carry the track best around its gap |
-//! | `field_fill.rs` | [`FieldPrediction`], the lenders ([`Lending`]), the residual carry |
+//! | `field_fill.rs` | the field's fill: the lenders ([`Lending`]), the residual carry |
+//! | `prediction.rs` | [`FieldPrediction`]: the field's prediction, given or computed window by window |
 //! | `blend.rs` | [`blend::Weights`] (one per filler), learning them per class of gap length and applying a blend (tests in `blend/tests.rs`) |
 //! | `spans.rs` | gaps and their classes and lengths, hidden and validation spans |
 //! | `linalg.rs` | the small solvers: the spline's system, simplex least squares |
@@ -61,9 +62,11 @@ pub mod fillers;
 pub mod gloersen;
 pub mod kalman;
 pub mod linalg;
+pub mod prediction;
 pub mod segment;
 pub mod spans;
 pub mod window;
 
-pub use field_fill::{FieldPrediction, Lending, SPLINE_CARRY_FRAMES};
+pub use field_fill::{Lending, SPLINE_CARRY_FRAMES};
 pub use fillers::{Filler, Marked, PerFiller, Sources};
+pub use prediction::FieldPrediction;

@@ -75,24 +75,34 @@ pub fn gaps<'a>(tracks: &'a Marked<'a>) -> impl Iterator<Item = Gap> + 'a {
     (0..tracks.points).flat_map(move |i| track_gaps(tracks, i))
 }
 
-/// For each entry `[T, N]`: the length of its gap in frames, 0 if observed or of a track
-/// never observed ([`gap_len`] reads it). Four bytes an entry: a minute of capture holds
-/// millions.
-pub fn gap_sizes(tracks: &Marked) -> Vec<u32> {
-    let n = tracks.points;
-    let mut out = vec![0; tracks.frames * n];
-    for gap in gaps(tracks) {
-        let len = u32::try_from(gap.len()).unwrap_or(u32::MAX);
-        for k in gap.frames.clone() {
-            out[k * n + gap.track] = len;
-        }
-    }
-    out
+/// Each track's gaps in frame order, to find the gap of an entry: a few words a gap, where
+/// a mask of the recording's entries would grow with its frames.
+pub struct GapIndex {
+    by_track: Vec<Vec<Range<usize>>>,
 }
 
-/// The length of the gap of entry `e` in `sizes` ([`gap_sizes`]): `None` where it is no gap.
-pub fn gap_len(sizes: &[u32], e: usize) -> Option<usize> {
-    (sizes[e] > 0).then_some(sizes[e] as usize)
+impl GapIndex {
+    /// The gaps of `tracks` ([`gaps`]).
+    pub fn new(tracks: &Marked) -> Self {
+        let mut by_track = vec![Vec::new(); tracks.points];
+        for g in gaps(tracks) {
+            by_track[g.track].push(g.frames);
+        }
+        GapIndex { by_track }
+    }
+
+    /// The frames of the gap of track `i` that holds frame `k`; `None` where `k` is
+    /// observed, or the track never is.
+    pub fn gap_at(&self, k: usize, i: usize) -> Option<Range<usize>> {
+        let own = &self.by_track[i];
+        let at = own.partition_point(|g| g.end <= k);
+        own.get(at).filter(|g| g.contains(&k)).cloned()
+    }
+
+    /// The length in frames of the gap that holds entry `(k, i)` ([`GapIndex::gap_at`]).
+    pub fn len_at(&self, k: usize, i: usize) -> Option<usize> {
+        self.gap_at(k, i).map(|g| g.len())
+    }
 }
 
 /// The span lengths of [`hold_out_spans`] unless asked otherwise: 2 to 10 frames.

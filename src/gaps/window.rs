@@ -25,9 +25,8 @@ use std::ops::Range;
 
 use rayon::prelude::*;
 
-use super::field_fill::FieldPrediction;
 use super::fillers::{Marked, Sources};
-use super::spans::gaps;
+use super::spans::{GapIndex, gaps};
 
 /// The entries (frames × tracks) of a window: 8,738 frames of 60 markers (44 s at
 /// 200 Hz), so that a lab's trial is filled whole, as the published fillers fill it. The
@@ -57,17 +56,6 @@ impl<'a> Marked<'a> {
     }
 }
 
-impl<'a> FieldPrediction<'a> {
-    /// The same prediction at `frames` alone, with the same neighbours.
-    pub fn window(&self, frames: Range<usize>) -> FieldPrediction<'a> {
-        let n = self.neighbours.len();
-        FieldPrediction {
-            predicted: &self.predicted[3 * frames.start * n..3 * frames.end * n],
-            neighbours: self.neighbours.clone(),
-        }
-    }
-}
-
 /// The window whose core holds the middle of a gap over `gap` frames of `frames`, or the
 /// gap with a margin on both sides where that window does not hold it with half a margin.
 fn window_of(gap: &Range<usize>, frames: usize, width: usize) -> Range<usize> {
@@ -89,21 +77,11 @@ fn window_of(gap: &Range<usize>, frames: usize, width: usize) -> Range<usize> {
 fn plan(tracks: &Marked, entries: &[Entry]) -> Vec<(Range<usize>, Vec<usize>)> {
     let (t, n) = (tracks.frames, tracks.points);
     let width = window_frames(n);
-    // Each track's gaps, by start, to find an entry's gap.
-    let mut by_track: Vec<Vec<Range<usize>>> = vec![Vec::new(); n];
-    for g in gaps(tracks) {
-        by_track[g.track].push(g.frames);
-    }
+    let index = GapIndex::new(tracks);
     let mut windows: BTreeMap<(usize, usize), Vec<usize>> = BTreeMap::new();
     for (j, &(k, i, _)) in entries.iter().enumerate() {
-        let own = &by_track[i];
-        let at = own.partition_point(|g| g.end <= k);
         // An observed entry is no gap: any window serves it.
-        let gap = own
-            .get(at)
-            .filter(|g| g.contains(&k))
-            .cloned()
-            .unwrap_or(k..k + 1);
+        let gap = index.gap_at(k, i).unwrap_or(k..k + 1);
         let w = window_of(&gap, t, width);
         windows.entry((w.start, w.end)).or_default().push(j);
     }
@@ -228,7 +206,8 @@ mod tests {
         let (t, n) = (3 * window_frames(4), 4);
         let (positions, observed) = walk(t, n, 500, 300);
         let tracks = Marked::new(t, n, &positions, &observed);
-        let field = FieldPrediction::new(n, &positions, &positions[..3 * n], &observed);
+        let field =
+            crate::gaps::FieldPrediction::new(n, &positions, &positions[..3 * n], &observed);
         let sources = Sources::new(tracks, &field);
         let entries: Vec<Entry> = (0..t * n)
             .filter(|&e| !observed[e])

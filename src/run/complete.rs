@@ -1,17 +1,21 @@
 //! `doma complete`: every track of a fitted run at every frame, gaps filled by the field,
 //! as a `.npz` or, from a C3D input, a `.c3d`.
 
+use std::ops::Range;
 use std::path::Path;
+use std::sync::Mutex;
 
 use burn::tensor::Device;
 use doma_formats::npy::NpyValues;
 
-use super::{RunConfig, RunDir, field_everywhere};
+use super::{RunConfig, RunDir, field_at_frames};
 use crate::data::c3d::{C3d, c3d_tracks, read_c3d_bytes, write_c3d_patched};
 use crate::data::layout::Layout;
+use crate::data::mesh::as_points;
 use crate::data::sequence::{Sequence, read_tracks};
 use crate::data::tracks::Tracks;
 use crate::gaps::blend::{Blend, blended_fill_at, fill_with};
+use crate::gaps::window::window_frames;
 use crate::gaps::{FieldPrediction, Filler, Marked};
 use crate::io::write_atomic;
 use crate::{DomaError, Result};
@@ -254,14 +258,27 @@ fn complete_with(
         ..
     } = run.load_data(config)?;
     let (t, n) = (data.frames(), data.points());
-    // The field at every frame, from the run's own copy of the data, which then goes: a long
-    // recording's fill holds the input's mask, its normalised positions and the field's
-    // prediction, nothing else as long.
-    let predicted = field_everywhere(&field, &data, device)?;
+    // The field's prediction: of the whole recording where the fill takes it whole, else
+    // of each window of time as its fill starts (`gaps::window`), from the windows'
+    // threads; an evaluation that fails fills its window with NaN and fails the fill after.
     let canonical = data.canonical().to_vec();
     drop(data);
+    let points = as_points(&canonical);
+    let failed: Mutex<Option<DomaError>> = Mutex::new(None);
+    let predict = |frames: Range<usize>| {
+        let len = 3 * frames.len() * n;
+        field_at_frames(&field, &points, frames, t, device).unwrap_or_else(|e| {
+            if let Ok(mut first) = failed.lock() {
+                first.get_or_insert(e);
+            }
+            vec![f32::NAN; len]
+        })
+    };
+    let whole = (t <= window_frames(n))
+        .then(|| field_at_frames(&field, &points, 0..t, t, device))
+        .transpose()?;
     // The input again, clipped and kept as the fit's data was, for its own values.
-    let read_input = || -> Result<(Tracks, std::ops::Range<usize>)> {
+    let read_input = || -> Result<(Tracks, Range<usize>)> {
         let mut input = match markers {
             Some(m) => c3d_tracks(m).map_err(|reason| DomaError::Malformed {
                 path: config.data.clone(),
@@ -300,17 +317,18 @@ fn complete_with(
         .map(|(e, &v)| (v - c[e % 3]) / s)
         .collect();
     drop(input);
-    let field = FieldPrediction::new(n, &predicted, &canonical, &seen);
+    let field = match &whole {
+        Some(predicted) => FieldPrediction::new(n, predicted, &canonical, &seen),
+        None => FieldPrediction::on_demand(n, &predict, &canonical, &seen),
+    };
     let tracks = Marked::new(t, n, &normalised, &seen);
     let stride = config.stride.max(1);
     let source_frames: Vec<usize> = frame_range.step_by(stride).collect();
     let rate = markers.map(|m| m.rate as f64);
     let (filled, extrapolated) = chosen(&tracks, &source_frames, policy, rate, &config.data)?;
     // The fill of the chosen entries alone: a long recording holds no second copy of itself.
-    let entries: Vec<(usize, usize)> = (0..t * n)
-        .filter(|&e| filled[e])
-        .map(|e| (e / n, e % n))
-        .collect();
+    let mut entries = Vec::with_capacity(filled.iter().filter(|&&f| f).count());
+    entries.extend((0..t * n).filter(|&e| filled[e]).map(|e| (e / n, e % n)));
     let (fills, blend) = match policy.method {
         None => {
             let blind = blind.as_ref().map_or(&[][..], |b| &b.entries[..]);
@@ -322,7 +340,10 @@ fn complete_with(
         ),
     };
     drop(field);
-    drop((predicted, normalised));
+    drop((whole, normalised));
+    if let Some(e) = failed.into_inner().ok().flatten() {
+        return Err(e);
+    }
     // Observed entries exactly as the input holds them (read again rather than kept
     // through the fill); filled ones back in its units.
     let mut values = read_input()?.0.into_positions();

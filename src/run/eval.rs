@@ -48,13 +48,22 @@ pub fn field_everywhere(
     data: &Trajectories,
     device: &Device,
 ) -> Result<Vec<f32>> {
-    let (t, n) = (data.frames(), data.points());
-    let canonical = as_points(data.canonical());
-    let mut predicted = vec![0f32; 3 * t * n];
-    crate::warp::warp_frames(field, &canonical, 0..t, t, device, |k, y| {
-        for (i, p) in y.iter().enumerate() {
-            predicted[3 * (k * n + i)..3 * (k * n + i) + 3].copy_from_slice(p);
-        }
+    let t = data.frames();
+    field_at_frames(field, &as_points(data.canonical()), 0..t, t, device)
+}
+
+/// The field's prediction `[F, N, 3]` of the tracks at `canonical` (`[N]`) at `frames` of
+/// a `total`-frame sequence: a window of [`field_everywhere`], the same to the bit.
+pub fn field_at_frames(
+    field: &dyn MotionField,
+    canonical: &[[f32; 3]],
+    frames: std::ops::Range<usize>,
+    total: usize,
+    device: &Device,
+) -> Result<Vec<f32>> {
+    let mut predicted = Vec::with_capacity(3 * frames.len() * canonical.len());
+    crate::warp::warp_frames(field, canonical, frames, total, device, |_, y| {
+        predicted.extend(y.iter().flatten());
         Ok(())
     })?;
     Ok(predicted)

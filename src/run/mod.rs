@@ -34,7 +34,7 @@ pub use complete::{
     CompletedTracks, Completion, FillPolicy, MaxGap, complete_run, complete_run_with,
     complete_tracks,
 };
-pub use eval::{eval_run, eval_run_as, evaluate, field_everywhere};
+pub use eval::{eval_run, eval_run_as, evaluate, field_at_frames, field_everywhere};
 pub use fit::{FitOutcome, fit_run, fit_run_locked};
 pub use gap_report::{GapErrors, GapReport, gap_report};
 pub use info::{RunInfo, info};

@@ -10,6 +10,7 @@ use super::learn::{
 use super::{Blend, VALIDATION_FOLDS, Weights};
 use crate::gaps::field_fill::FieldPrediction;
 use crate::gaps::fillers::{Filler, Marked, PerFiller, Sources};
+use crate::gaps::window::WINDOW_ENTRIES;
 
 /// The blind folds with entries of a class that stage 2 needs to weigh the field's fills
 /// there (fewer give no measure of the gain's spread).
@@ -36,7 +37,9 @@ pub(super) fn blind_residuals(
         Filler::FieldFill.index(),
         Filler::FieldFillFramewise.index(),
     );
-    let mut residuals = residuals(&sources, &all).into_iter();
+    // Stage 1's fillers with a weight, and the field's two fills.
+    let fillers = blend.in_use() | Filler::FieldFill.bit() | Filler::FieldFillFramewise.bit();
+    let mut residuals = residuals(&sources, &all, fillers).into_iter();
     folds
         .iter()
         .map(|fold| {
@@ -131,9 +134,16 @@ fn clearly_positive(gains: &[f64]) -> bool {
     mean > 0.0 && mean > 2.0 * (variance / n).sqrt()
 }
 
+/// The blind entries that stage 2 weighs at most, about: an eighth of a window of time
+/// ([`WINDOW_ENTRIES`]), more than a recording in one window holds (a tenth of its
+/// observations, [`blind_spans`](super::blind_spans)). A long recording's blind spans grow
+/// with it; its stage 2 weighs an even share of them, as its fill's memory must not grow.
+pub(super) const BLIND_ENTRIES: usize = WINDOW_ENTRIES / 8;
+
 /// The observed entries of `blind`, split into [`VALIDATION_FOLDS`] folds span by span
-/// (none where `blind` holds no observed entry), and the `[T, N]` mask of what is left
-/// observed with all of them hidden.
+/// (none where `blind` holds no observed entry; past [`BLIND_ENTRIES`] of them, every
+/// so many spans alone), and the `[T, N]` mask of what is left observed with all of them
+/// hidden.
 pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> (Vec<Hidden>, Vec<bool>) {
     let (n, observed) = (tracks.points, tracks.observed);
     let mut blind: Vec<(usize, usize)> = blind
@@ -148,13 +158,18 @@ pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> (Vec<Hid
     // Span by span (a track's consecutive frames), so that a fold never judges a span
     // whose other half another fold learned from.
     blind.sort_unstable_by_key(|&(k, i)| (i, k));
+    let starts = |r: usize| r == 0 || blind[r - 1] != (blind[r].0.wrapping_sub(1), blind[r].1);
+    // Past [`BLIND_ENTRIES`], every `every`-th span alone, the others still hidden.
+    let every = blind.len().div_ceil(BLIND_ENTRIES).max(1);
     let mut folds = vec![Vec::new(); VALIDATION_FOLDS];
     let mut span = 0;
-    for (r, &(k, i)) in blind.iter().enumerate() {
-        if r > 0 && blind[r - 1] != (k.wrapping_sub(1), i) {
+    for r in 0..blind.len() {
+        if r > 0 && starts(r) {
             span += 1;
         }
-        folds[span % VALIDATION_FOLDS].push((k, i));
+        if span % every == 0 {
+            folds[span / every % VALIDATION_FOLDS].push(blind[r]);
+        }
     }
     folds.retain(|f| !f.is_empty());
     (folds, left)

@@ -30,13 +30,13 @@ use rayon::prelude::*;
 use super::blind::{blind_residuals, judge_field};
 use super::{
     Blend, LENGTH_CLASSES, LengthBlend, M, MAX_VALIDATION_DRAWS, VALIDATION_FOLDS,
-    VALIDATION_FRACTION, VALIDATION_SPANS, Weights, candidates, class_longest, length_class,
-    span_class,
+    VALIDATION_FRACTION, VALIDATION_SPANS, Weights, candidates, class_longest, classic_fillers,
+    length_class, span_class,
 };
 use crate::gaps::field_fill::FieldPrediction;
 use crate::gaps::fillers::{Filler, Marked, PerFiller, Sources};
 use crate::gaps::linalg::simplex_least_squares;
-use crate::gaps::spans::{gap_len, gap_sizes, gaps, validation_spans};
+use crate::gaps::spans::{GapIndex, gaps, validation_spans};
 use crate::gaps::window::DrawWindows;
 
 /// The classes whose weights [`learn`] solves for: short gaps, long gaps pooled, then each
@@ -220,21 +220,29 @@ pub(super) fn learn(
                 left[k * n + i] = false;
             }
             let left_tracks = tracks.with_observed(&left);
-            residuals(&Sources::new(left_tracks, &field), &hidden)
-                .into_iter()
-                .flatten()
-                .fold(empty_classes(), |mut classes, r| {
-                    for class in classes_of(r.len) {
-                        classes[class].push(Arc::clone(&r));
-                    }
-                    classes
-                })
+            // Stage 1 weighs the classic fillers alone: the field's fills are not computed.
+            residuals(
+                &Sources::new(left_tracks, &field),
+                &hidden,
+                classic_fillers(),
+            )
+            .into_iter()
+            .flatten()
+            .fold(empty_classes(), |mut classes, r| {
+                for class in classes_of(r.len) {
+                    classes[class].push(Arc::clone(&r));
+                }
+                classes
+            })
         })
         .collect();
     let Some(mut blend) = classic_blend(&folds) else {
         // Nothing to validate on: the field's fill, as it is fitted.
         return Blend::only(Filler::FieldFill);
     };
+    // Stage 1's residuals (up to a window's tenth per draw) are spent: not held through
+    // stage 2's fills.
+    drop(folds);
     let blind_folds = blind_residuals(tracks, field, blind, &blend);
     if !blind_folds.is_empty() {
         judge_field(&mut blend, &blind_folds);
@@ -249,11 +257,7 @@ pub(super) fn empty_classes<const K: usize>() -> Classes<K> {
 /// Stage 1: the blend of the classic fillers on `folds`, per class; `None` where no draw
 /// holds a validation entry.
 fn classic_blend(folds: &[Classes<M>]) -> Option<Blend> {
-    let classic = Filler::ALL
-        .iter()
-        .enumerate()
-        .filter(|(_, f)| !f.is_field())
-        .fold(0u32, |bits, (m, _)| bits | 1 << m);
+    let classic = classic_fillers();
     let counts: [usize; CLASSES] = std::array::from_fn(|c| folds.iter().map(|f| f[c].len()).sum());
     // The draws in which each class has a validation entry.
     let drawn: [usize; CLASSES] =
@@ -367,22 +371,37 @@ fn span_lengths(hidden: &[(usize, usize)]) -> Vec<usize> {
 pub(super) fn residuals(
     sources: &Sources,
     hidden: &[(usize, usize)],
+    fillers: u32,
 ) -> Vec<Option<Arc<Residual<M>>>> {
     let (positions, n) = (sources.marked.positions, sources.marked.points);
-    let sizes = gap_sizes(&sources.marked);
+    let index = GapIndex::new(&sources.marked);
+    let lengths: Vec<Option<usize>> = hidden.iter().map(|&(k, i)| index.len_at(k, i)).collect();
     let entries: Vec<(usize, usize, usize)> = hidden
         .iter()
-        .filter_map(|&(k, i)| gap_len(&sizes, k * n + i).map(|len| (k, i, len)))
+        .zip(&lengths)
+        .filter_map(|(&(k, i), len)| len.map(|len| (k, i, len)))
         .collect();
-    let mut filled = candidates(sources, &entries).into_iter().zip(&entries);
+    let mut filled = candidates(sources, &entries, fillers)
+        .into_iter()
+        .zip(&entries);
     hidden
         .iter()
-        .map(|&(k, i)| {
-            gap_len(&sizes, k * n + i)?;
+        .zip(lengths)
+        .map(|(&(k, i), len)| {
+            len?;
             let (p, &(_, _, len)) = filled.next()?;
             let e = 3 * (k * n + i);
-            let errors: [[f32; 3]; M] =
-                std::array::from_fn(|m| std::array::from_fn(|c| p[m][c] - positions[e + c]));
+            // A filler not computed errs by 0: it takes no weight where it was not asked.
+            let errors: [[f32; 3]; M] = std::array::from_fn(|m| {
+                let asked = fillers & Filler::ALL[m].bit() != 0;
+                std::array::from_fn(|c| {
+                    if asked {
+                        p[m][c] - positions[e + c]
+                    } else {
+                        0.0
+                    }
+                })
+            });
             (!errors.iter().flatten().any(|v| !v.is_finite()))
                 .then(|| Arc::new(Residual { errors, len }))
         })
@@ -445,7 +464,11 @@ mod tests {
         (left[3 * n], left[4 * n]) = (false, false);
         let field = FieldPrediction::new(n, &positions, &positions[..3 * n], &left);
         let sources = Sources::new(Marked::new(t, n, &positions, &left), &field);
-        let got = residuals(&sources, &[(0, 1), (3, 0), (4, 0)]);
+        let got = residuals(
+            &sources,
+            &[(0, 1), (3, 0), (4, 0)],
+            super::super::EVERY_FILLER,
+        );
         assert_eq!(got.len(), 3);
         assert!(got[0].is_none());
         assert!(

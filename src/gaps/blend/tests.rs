@@ -69,10 +69,7 @@ fn a_jittering_translation_with_a_wrong_field_is_filled_by_the_neighbours() {
         }
     }
     let predicted = vec![0f32; 3 * t * n];
-    let field = FieldPrediction {
-        predicted: &predicted,
-        neighbours: vec![Vec::new(); n],
-    };
+    let field = FieldPrediction::new(n, &predicted, &[f32::NAN; 3].repeat(n), &observed);
     let (filled, blend) = blended_fill(&Marked::new(t, n, &truth, &observed), &field, 7, &[]);
     assert!(blend.validated[0] > 0, "{blend:?}");
     // The neighbours' motion, pattern, rigid-body and segment fill are all exact for a
@@ -134,10 +131,7 @@ fn blind_spans_judge_a_field_that_only_memorised_what_it_saw() {
         .enumerate()
         .map(|(e, &y)| if fitted[e / 3] { y } else { y + 3.0 })
         .collect();
-    let field = FieldPrediction {
-        predicted: &predicted,
-        neighbours: vec![Vec::new(); n],
-    };
+    let field = FieldPrediction::new(n, &predicted, &[f32::NAN; 3].repeat(n), &observed);
     let tracks = Marked::new(t, n, &truth, &observed);
     let worst = |filled: &[f32]| {
         (0..3 * t * n)
@@ -152,10 +146,7 @@ fn blind_spans_judge_a_field_that_only_memorised_what_it_saw() {
         .enumerate()
         .map(|(e, &y)| if observed[e / 3] { y } else { y + 3.0 })
         .collect();
-    let memorised = FieldPrediction {
-        predicted: &memorised,
-        neighbours: vec![Vec::new(); n],
-    };
+    let memorised = FieldPrediction::new(n, &memorised, &[f32::NAN; 3].repeat(n), &observed);
     // Judged on the validation spans it was fitted to, it would look exact and take the
     // weight: without blind spans its fills take none.
     let (seen, unjudged) = blended_fill(&tracks, &memorised, 7, &[]);
@@ -260,10 +251,7 @@ fn each_length_class_learns_its_own_weights() {
         .enumerate()
         .map(|(e, &y)| y + 0.05 * ((e as f32 * 12.9898).sin() * 43_758.547).fract())
         .collect();
-    let field = FieldPrediction {
-        predicted: &predicted,
-        neighbours: vec![Vec::new(); n],
-    };
+    let field = FieldPrediction::new(n, &predicted, &[f32::NAN; 3].repeat(n), &observed);
     let tracks = Marked::new(t, n, &truth, &observed);
     // The field judged where it was not fitted, as it is inside a gap.
     let (filled, blend) = blended_fill(&tracks, &field, 5, &blind_spans(&tracks, 5));

@@ -36,7 +36,7 @@ fn gaps_are_the_unobserved_runs_between_the_nearest_observed_frames() {
 }
 
 #[test]
-fn gap_sizes_follow_the_gaps() {
+fn the_gap_index_finds_each_entry_s_gap() {
     // One track of 40 frames: seen at 0, 4, 30, 39 (gaps of 3, 25 and 8), and one never
     // seen.
     let (t, n) = (40, 2);
@@ -45,13 +45,15 @@ fn gap_sizes_follow_the_gaps() {
         observed[k * n] = true;
     }
     let positions = vec![0f32; 3 * t * n];
-    let tracks = Marked::new(t, n, &positions, &observed);
-    let sizes = gap_sizes(&tracks);
-    assert_eq!(gap_len(&sizes, 2 * n), Some(3));
-    assert_eq!(gap_len(&sizes, 10 * n), Some(25));
-    assert_eq!(gap_len(&sizes, 35 * n), Some(8));
-    assert_eq!(gap_len(&sizes, 30 * n), None);
-    assert!(sizes.iter().skip(1).step_by(2).all(|&s| s == 0));
+    let index = GapIndex::new(&Marked::new(t, n, &positions, &observed));
+    assert_eq!(index.gap_at(2, 0), Some(1..4));
+    assert_eq!(index.len_at(10, 0), Some(25));
+    assert_eq!(index.len_at(5, 0), Some(25));
+    assert_eq!(index.len_at(29, 0), Some(25));
+    assert_eq!(index.len_at(35, 0), Some(8));
+    assert_eq!(index.len_at(30, 0), None);
+    assert_eq!(index.len_at(0, 0), None);
+    assert!((0..t).all(|k| index.len_at(k, 1).is_none()));
 }
 
 #[test]
