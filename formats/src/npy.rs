@@ -377,6 +377,39 @@ impl NpyValues<'_> {
         }
     }
 
+    /// The bytes of the data in a `.npy`.
+    pub fn byte_len(&self) -> usize {
+        self.len()
+            * match self {
+                NpyValues::F32(_) => 4,
+                NpyValues::F16(_) => 2,
+                NpyValues::Bool(_) => 1,
+                NpyValues::I64(_) => 8,
+            }
+    }
+
+    /// The data as a `.npy` holds it (little-endian), handed to `f` a few kilobytes at a
+    /// time: a large array is never copied whole.
+    pub fn for_each_chunk(&self, mut f: impl FnMut(&[u8])) {
+        const VALUES: usize = 4096;
+        let mut buf = Vec::with_capacity(8 * VALUES);
+        macro_rules! chunks {
+            ($v:expr, $bytes:expr) => {
+                for chunk in $v.chunks(VALUES) {
+                    buf.clear();
+                    chunk.iter().for_each(|x| buf.extend_from_slice(&$bytes(x)));
+                    f(&buf);
+                }
+            };
+        }
+        match self {
+            NpyValues::F32(v) => chunks!(v, |x: &f32| x.to_le_bytes()),
+            NpyValues::F16(v) => chunks!(v, |x: &f32| f32_to_f16(*x).to_le_bytes()),
+            NpyValues::Bool(v) => chunks!(v, |x: &bool| [u8::from(*x)]),
+            NpyValues::I64(v) => chunks!(v, |x: &i64| x.to_le_bytes()),
+        }
+    }
+
     fn descr(&self) -> &'static str {
         match self {
             NpyValues::F32(_) => "<f4",
@@ -438,6 +471,15 @@ pub fn encode_npy(shape: &[usize], data: &[f32]) -> Vec<u8> {
 /// # Panics
 /// If the number of values is not the product of `shape` (a programming error).
 pub fn encode_npy_values(shape: &[usize], values: NpyValues) -> Vec<u8> {
+    let mut out = npy_header(shape, values);
+    out.reserve(values.byte_len());
+    values.for_each_chunk(|bytes| out.extend_from_slice(bytes));
+    out
+}
+
+/// The header of [`encode_npy_values`]' `.npy` (magic, version, the padded dictionary):
+/// the bytes before the data.
+pub fn npy_header(shape: &[usize], values: NpyValues) -> Vec<u8> {
     assert_eq!(
         shape.iter().product::<usize>(),
         values.len(),
@@ -457,23 +499,11 @@ pub fn encode_npy_values(shape: &[usize], values: NpyValues) -> Vec<u8> {
         header.push(' ');
     }
     header.push('\n');
-    let mut out = Vec::with_capacity(10 + header.len() + 8 * values.len());
+    let mut out = Vec::with_capacity(10 + header.len());
     out.extend_from_slice(NPY_MAGIC);
     out.extend_from_slice(&[1, 0]);
     out.extend_from_slice(&(header.len() as u16).to_le_bytes());
     out.extend_from_slice(header.as_bytes());
-    match values {
-        NpyValues::F32(v) => v
-            .iter()
-            .for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
-        NpyValues::F16(v) => v
-            .iter()
-            .for_each(|&x| out.extend_from_slice(&f32_to_f16(x).to_le_bytes())),
-        NpyValues::Bool(v) => out.extend(v.iter().map(|&b| u8::from(b))),
-        NpyValues::I64(v) => v
-            .iter()
-            .for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
-    }
     out
 }
 

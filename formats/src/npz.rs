@@ -5,9 +5,11 @@
 //! through a bounded window straight into the array the member's header declares. Every
 //! defect is an error saying what is wrong; nothing panics.
 
-use crate::crc32;
+use std::io::{self, Write};
+
+use crate::Crc32;
 use crate::npy::{
-    MAX_HEADER_BYTES, NpyArray, NpyHeader, NpyValues, Values, encode_npy_values, parse_npy_header,
+    MAX_HEADER_BYTES, NpyArray, NpyHeader, NpyValues, Values, npy_header, parse_npy_header,
 };
 
 /// The little-endian integers of a zip record at `at`; an `at` near `usize::MAX` (a lying
@@ -269,7 +271,7 @@ pub fn read_npz_member(bytes: &[u8], member: &NpzMember) -> Result<NpyArray, Str
     let header = npz_member_header(bytes, member)?;
     let err = |m: String| format!("member {}: {m}", member.name);
     let data = &bytes[member.data.clone()];
-    let mut crc = crate::Crc32::default();
+    let mut crc = Crc32::default();
     let mut values = Values::new(&header);
     let mut seen = 0usize;
     let mut take = |piece: &[u8]| {
@@ -319,30 +321,68 @@ pub fn encode_npz(members: &[(&str, &[usize], &[f32])]) -> Vec<u8> {
 }
 
 /// The bytes of a `.npz` archive (stored, like `np.savez`) of arrays of any
-/// [`NpyValues`] kind, `(name, shape, values)`; each member is named `name.npy`.
+/// [`NpyValues`] kind, `(name, shape, values)`; each member is named `name.npy`. Panics
+/// on a member of 4 GiB or more ([`write_npz_values`] refuses it).
 pub fn encode_npz_values(members: &[(&str, &[usize], NpyValues)]) -> Vec<u8> {
     let mut out = Vec::new();
+    if let Err(e) = write_npz_values(&mut out, members) {
+        panic!("encode_npz_values: {e}");
+    }
+    out
+}
+
+/// [`encode_npz_values`]' archive written to `w` as it is made: each member's data goes
+/// from its slice to `w` a few kilobytes at a time (read twice: once for its CRC, which
+/// the member's header carries before it), so that a large array is never copied whole.
+/// Refuses a member or an archive of 4 GiB or more (a `.npz` past that needs ZIP64).
+pub fn write_npz_values(
+    w: &mut impl Write,
+    members: &[(&str, &[usize], NpyValues)],
+) -> io::Result<()> {
+    let too_large = |what: &str| {
+        io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!(
+                "{what} of 4 GiB or more: a .npz past that needs ZIP64, which this writer does not write"
+            ),
+        )
+    };
+    let mut written = 0u64;
     let mut directory = Vec::new();
     for (name, shape, values) in members {
-        let payload = encode_npy_values(shape, *values);
+        let header = npy_header(shape, *values);
+        let size = u32::try_from(header.len() + values.byte_len())
+            .map_err(|_| too_large(&format!("member {name}")))?;
+        let mut crc = Crc32::default();
+        crc.update(&header);
+        values.for_each_chunk(|bytes| crc.update(bytes));
+        let crc = crc.finish();
         let file = format!("{name}.npy");
-        let crc = crc32(&payload);
-        let offset = out.len() as u32;
+        let offset = u32::try_from(written).map_err(|_| too_large("an archive"))?;
         let common = |buf: &mut Vec<u8>| {
             buf.extend_from_slice(&20u16.to_le_bytes()); // version needed
             buf.extend_from_slice(&0u16.to_le_bytes()); // flags
             buf.extend_from_slice(&0u16.to_le_bytes()); // stored
             buf.extend_from_slice(&0u32.to_le_bytes()); // time, date
             buf.extend_from_slice(&crc.to_le_bytes());
-            buf.extend_from_slice(&(payload.len() as u32).to_le_bytes());
-            buf.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+            buf.extend_from_slice(&size.to_le_bytes());
+            buf.extend_from_slice(&size.to_le_bytes());
             buf.extend_from_slice(&(file.len() as u16).to_le_bytes());
             buf.extend_from_slice(&0u16.to_le_bytes()); // extra
         };
-        out.extend_from_slice(&0x0403_4b50u32.to_le_bytes());
-        common(&mut out);
-        out.extend_from_slice(file.as_bytes());
-        out.extend_from_slice(&payload);
+        let mut local = 0x0403_4b50u32.to_le_bytes().to_vec();
+        common(&mut local);
+        local.extend_from_slice(file.as_bytes());
+        local.extend_from_slice(&header);
+        w.write_all(&local)?;
+        let mut result = Ok(());
+        values.for_each_chunk(|bytes| {
+            if result.is_ok() {
+                result = w.write_all(bytes);
+            }
+        });
+        result?;
+        written += (local.len() + values.byte_len()) as u64;
 
         directory.extend_from_slice(&0x0201_4b50u32.to_le_bytes());
         directory.extend_from_slice(&20u16.to_le_bytes()); // made by
@@ -352,16 +392,17 @@ pub fn encode_npz_values(members: &[(&str, &[usize], NpyValues)]) -> Vec<u8> {
         directory.extend_from_slice(&offset.to_le_bytes());
         directory.extend_from_slice(file.as_bytes());
     }
-    let dir_offset = out.len() as u32;
-    out.extend_from_slice(&directory);
-    out.extend_from_slice(&0x0605_4b50u32.to_le_bytes());
-    out.extend_from_slice(&[0u8; 4]); // disk numbers
-    out.extend_from_slice(&(members.len() as u16).to_le_bytes());
-    out.extend_from_slice(&(members.len() as u16).to_le_bytes());
-    out.extend_from_slice(&(directory.len() as u32).to_le_bytes());
-    out.extend_from_slice(&dir_offset.to_le_bytes());
-    out.extend_from_slice(&0u16.to_le_bytes());
-    out
+    let dir_offset = u32::try_from(written).map_err(|_| too_large("an archive"))?;
+    let mut end = directory;
+    let dir_len = end.len() as u32;
+    end.extend_from_slice(&0x0605_4b50u32.to_le_bytes());
+    end.extend_from_slice(&[0u8; 4]); // disk numbers
+    end.extend_from_slice(&(members.len() as u16).to_le_bytes());
+    end.extend_from_slice(&(members.len() as u16).to_le_bytes());
+    end.extend_from_slice(&dir_len.to_le_bytes());
+    end.extend_from_slice(&dir_offset.to_le_bytes());
+    end.extend_from_slice(&0u16.to_le_bytes());
+    w.write_all(&end)
 }
 
 #[cfg(test)]
@@ -379,6 +420,47 @@ mod tests {
         let e = npz_members(&bytes).unwrap_err();
         assert!(e.contains("\"tracks\""), "{e}");
         assert!(parse_npz(&bytes).is_err());
+    }
+
+    #[test]
+    fn a_streamed_archive_reads_back_member_by_member() {
+        // More values than one chunk of the writer, in every kind it writes.
+        let big: Vec<f32> = (0..10_001).map(|v| (v as f32 * 0.37).sin()).collect();
+        let mask: Vec<bool> = (0..10_001).map(|v| v % 3 == 0).collect();
+        let ids: Vec<i64> = (0..5).map(|v| 1000 - 7 * v).collect();
+        let halves = [0.5f32, -2.0, 65504.0];
+        let members = [
+            ("tracks", &[10_001][..], NpyValues::F32(&big)),
+            ("observed", &[10_001][..], NpyValues::Bool(&mask)),
+            ("kept", &[5][..], NpyValues::I64(&ids)),
+            ("half", &[3][..], NpyValues::F16(&halves)),
+        ];
+        let mut streamed = Vec::new();
+        write_npz_values(&mut streamed, &members).unwrap();
+        assert_eq!(streamed, encode_npz_values(&members));
+        let read = parse_npz(&streamed).unwrap();
+        let names: Vec<&str> = read.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["tracks", "observed", "kept", "half"]);
+        assert_eq!(read[0].1.data, big);
+        let as_f32: Vec<f32> = mask.iter().map(|&b| f32::from(u8::from(b))).collect();
+        assert_eq!(read[1].1.data, as_f32);
+        assert_eq!(
+            read[2].1.data,
+            ids.iter().map(|&i| i as f32).collect::<Vec<_>>()
+        );
+        assert_eq!(read[3].1.data, halves);
+        // A writer that fails stops the archive with its error.
+        struct Full;
+        impl Write for Full {
+            fn write(&mut self, _: &[u8]) -> io::Result<usize> {
+                Err(io::Error::other("disk full"))
+            }
+            fn flush(&mut self) -> io::Result<()> {
+                Ok(())
+            }
+        }
+        let e = write_npz_values(&mut Full, &members).unwrap_err();
+        assert_eq!(e.to_string(), "disk full");
     }
 
     #[test]

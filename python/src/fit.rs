@@ -101,7 +101,7 @@ pub fn fit(
             if let Some(mask) = &mask {
                 members.push(("observed", &s2[..], NpyValues::Bool(mask)));
             }
-            doma::io::write_atomic(&data, &doma_formats::npz::encode_npz_values(&members))?;
+            doma::data::npy::write_npz_values(&data, &members)?;
             spec.data = Some(data);
             spec.layout = Some(if mask.is_some() {
                 Layout::Masked

@@ -19,14 +19,14 @@
 use std::path::Path;
 
 pub use doma_formats::npy::{
-    NPY_MAGIC, NpyArray, NpyHeader, encode_npy, parse_npy, parse_npy_header,
+    NPY_MAGIC, NpyArray, NpyHeader, NpyValues, encode_npy, parse_npy, parse_npy_header,
 };
 pub use doma_formats::npz::{
     NpzMember, encode_npz, npz_member_header, npz_members, parse_npz, read_npz_member,
 };
 
 use super::Trajectories;
-use crate::io::write_atomic;
+use crate::io::{write_atomic, write_atomic_with};
 use crate::{DomaError, Result};
 
 /// An array as trajectories: `[T, N, 3]` gives `T` frames, `[N, 3]` one frame. Refuses
@@ -118,5 +118,15 @@ pub fn read_npz_trajectories(path: impl AsRef<Path>, key: Option<&str>) -> Resul
 
 /// Writes a `.npz` archive of `f32` arrays atomically ([`encode_npz`]).
 pub fn write_npz(path: impl AsRef<Path>, members: &[(&str, &[usize], &[f32])]) -> Result<()> {
-    write_atomic(path.as_ref(), &encode_npz(members))
+    let typed: Vec<(&str, &[usize], NpyValues)> = members
+        .iter()
+        .map(|&(name, shape, data)| (name, shape, NpyValues::F32(data)))
+        .collect();
+    write_npz_values(path.as_ref(), &typed)
+}
+
+/// Writes a `.npz` archive of arrays of any [`NpyValues`] kind atomically, streamed to the
+/// file ([`doma_formats::npz::write_npz_values`]): no array is copied whole on the way.
+pub fn write_npz_values(path: &Path, members: &[(&str, &[usize], NpyValues)]) -> Result<()> {
+    write_atomic_with(path, |w| doma_formats::npz::write_npz_values(w, members))
 }

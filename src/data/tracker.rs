@@ -14,7 +14,7 @@ use rand_chacha::ChaCha8Rng;
 use super::Trajectories;
 use super::layout::Layout;
 use super::mesh::{as_points, vertex_normals};
-use crate::io::write_atomic;
+use super::npy::write_npz_values;
 use crate::{DomaError, Result};
 
 /// How the tracker is simulated.
@@ -94,12 +94,13 @@ impl TrackerView {
         let (s3, s2) = ([t, n, 3], [t, n]);
         // A pinhole camera of 512 × 512 pixels with a 60° field of view.
         let (f, c) = (443.4f32, 256.0f32);
-        let bytes = match layout {
+        let write = |members: &[(&str, &[usize], NpyValues)]| write_npz_values(path, members);
+        match layout {
             Layout::PointOdyssey => {
                 let extrinsics: Vec<f32> = (0..t).flat_map(|_| self.extrinsics).collect();
                 let k = [f, 0.0, c, 0.0, f, c, 0.0, 0.0, 1.0];
                 let intrinsics: Vec<f32> = (0..t).flat_map(|_| k).collect();
-                doma_formats::npz::encode_npz_values(&[
+                write(&[
                     ("trajs_3d", &s3, NpyValues::F16(self.truth.positions())),
                     ("visibs", &s2, NpyValues::Bool(&self.visible)),
                     ("valids", &s2, NpyValues::Bool(&self.valid)),
@@ -118,24 +119,21 @@ impl TrackerView {
                         [f * p[0] / p[2] + c, f * p[1] / p[2] + c, k as f32]
                     })
                     .collect();
-                doma_formats::npz::encode_npz_values(&[
+                write(&[
                     ("tracks_XYZ", &s3, NpyValues::F32(&xyz)),
                     ("visibility", &s2, NpyValues::Bool(&observed)),
                     ("queries_xyt", &[n, 3], NpyValues::F32(&queries)),
                     ("fx_fy_cx_cy", &[4], NpyValues::F32(&[f, f, c, c])),
                 ])
             }
-            Layout::Masked => doma_formats::npz::encode_npz_values(&[
+            Layout::Masked => write(&[
                 ("tracks", &s3, NpyValues::F32(self.truth.positions())),
                 ("observed", &s2, NpyValues::Bool(&self.observed())),
             ]),
-            Layout::Plain => {
-                return Err(DomaError::Usage(
-                    "a simulated tracker writes a tracker's layout, not plain trajectories".into(),
-                ));
-            }
-        };
-        write_atomic(path, &bytes)
+            Layout::Plain => Err(DomaError::Usage(
+                "a simulated tracker writes a tracker's layout, not plain trajectories".into(),
+            )),
+        }
     }
 }
 

@@ -17,7 +17,6 @@ use crate::data::tracks::Tracks;
 use crate::gaps::blend::{Blend, blended_fill_at, fill_with};
 use crate::gaps::window::window_frames;
 use crate::gaps::{FieldPrediction, Filler, Marked};
-use crate::io::write_atomic;
 use crate::{DomaError, Result};
 use doma_formats::c3d::PointEdit;
 
@@ -438,5 +437,5 @@ fn write_npz(out: &Path, done: &CompletedTracks, layout: Option<Layout>) -> Resu
     if let Some(kept) = &kept {
         members.push(("kept", &shape1, NpyValues::I64(kept)));
     }
-    write_atomic(out, &doma_formats::npz::encode_npz_values(&members))
+    crate::data::npy::write_npz_values(out, &members)
 }
