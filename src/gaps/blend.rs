@@ -1,4 +1,4 @@
-//! doma's fill: the field's fills ([`field_fill`], with fixed lenders and with lenders
+//! doma's fill: the field's fills ([`field_fill`](super::field_fill::field_fill), with fixed lenders and with lenders
 //! chosen frame by frame) blended with the classic fillers ([`Filler`]), each weighted by
 //! how well it fills gaps in this very data.
 //!
