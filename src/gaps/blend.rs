@@ -1,6 +1,6 @@
-//! doma's fill: the field's fills ([`field_fill`](super::field_fill::field_fill), with fixed lenders and with lenders
-//! chosen frame by frame) blended with the classic fillers ([`Filler`]), each weighted by
-//! how well it fills gaps in this very data.
+//! doma's fill: the field's fills ([`field_fill`](super::field_fill::field_fill), with
+//! fixed lenders and with lenders chosen frame by frame) blended with the classic fillers
+//! ([`Filler`]), each weighted by how well it fills gaps in this very data.
 //!
 //! No filler wins everywhere. On sparse markers the field's fill beats every baseline in
 //! most cases, but a cubic spline wins short gaps of a fast, densely sampled motion; on
