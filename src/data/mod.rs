@@ -357,7 +357,7 @@ impl Trajectories {
     /// about that range). Returns the new sequence, the centre and the scale `s`
     /// (`x' = (x − c) / s`). A point whose normalised coordinate is not finite (a later
     /// frame ~10³⁸ box sizes away) is refused rather than fitted as zeros or infinities.
-    pub fn normalized(&self) -> Result<(Self, [f32; 3], f32)> {
+    pub fn normalized(mut self) -> Result<(Self, [f32; 3], f32)> {
         let mut lo = [f32::INFINITY; 3];
         let mut hi = [f32::NEG_INFINITY; 3];
         for p in self.canonical().chunks_exact(3) {
@@ -373,34 +373,24 @@ impl Trajectories {
             .map(|c| 0.5 * hi[c] - 0.5 * lo[c])
             .fold(0f32, f32::max);
         let scale = if half > 0.0 { half } else { 1.0 };
-        let positions: Vec<f32> = self
-            .positions
-            .chunks_exact(3)
-            .flat_map(|p| (0..3).map(move |c| (p[c] - center[c]) / scale))
-            .collect();
-        if let Some(i) = positions.iter().position(|v| !v.is_finite()) {
-            let (f, p) = (i / (3 * self.points), (i / 3) % self.points);
-            return Err(DomaError::InvalidData(format!(
-                "point {p} of frame {f} is {} frame-0 box sizes away: the coordinates span \
-                 more than f32 can normalise",
-                self.positions[i]
-            )));
+        // In place: a long recording is not held twice.
+        for (i, v) in self.positions.iter_mut().enumerate() {
+            let moved = (*v - center[i % 3]) / scale;
+            if !moved.is_finite() {
+                let (f, p) = (i / (3 * self.points), (i / 3) % self.points);
+                return Err(DomaError::InvalidData(format!(
+                    "point {p} of frame {f} is {v} frame-0 box sizes away: the coordinates span \
+                     more than f32 can normalise"
+                )));
+            }
+            *v = moved;
         }
-        let normalize = |v: &[f32]| -> Vec<f32> {
-            v.chunks_exact(3)
-                .flat_map(|p| (0..3).map(move |c| (p[c] - center[c]) / scale))
-                .collect()
-        };
-        let out = Trajectories {
-            frames: self.frames,
-            points: self.points,
-            positions,
-            observed: self.observed.clone(),
-            canonical: self.canonical.as_deref().map(normalize),
-            reference: self.reference,
-            weights: self.weights.clone(),
-        };
-        Ok((out, center, scale))
+        if let Some(canonical) = &mut self.canonical {
+            for (i, v) in canonical.iter_mut().enumerate() {
+                *v = (*v - center[i % 3]) / scale;
+            }
+        }
+        Ok((self, center, scale))
     }
 
     /// Splits the points into the first `n_train` and the rest (the authors' split of
