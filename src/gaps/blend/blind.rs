@@ -158,17 +158,16 @@ pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> (Vec<Hid
     // Span by span (a track's consecutive frames), so that a fold never judges a span
     // whose other half another fold learned from.
     blind.sort_unstable_by_key(|&(k, i)| (i, k));
-    let starts = |r: usize| r == 0 || blind[r - 1] != (blind[r].0.wrapping_sub(1), blind[r].1);
     // Past [`BLIND_ENTRIES`], every `every`-th span alone, the others still hidden.
     let every = blind.len().div_ceil(BLIND_ENTRIES).max(1);
     let mut folds = vec![Vec::new(); VALIDATION_FOLDS];
     let mut span = 0;
-    for r in 0..blind.len() {
-        if r > 0 && starts(r) {
+    for (r, &(k, i)) in blind.iter().enumerate() {
+        if r > 0 && blind[r - 1] != (k.wrapping_sub(1), i) {
             span += 1;
         }
         if span % every == 0 {
-            folds[span / every % VALIDATION_FOLDS].push(blind[r]);
+            folds[span / every % VALIDATION_FOLDS].push((k, i));
         }
     }
     folds.retain(|f| !f.is_empty());
@@ -178,6 +177,36 @@ pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> (Vec<Hid
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn past_the_cap_stage_2_weighs_every_other_span_whole_and_hides_them_all() {
+        // 8 tracks of 20,000 frames, blind in spans of 2 frames every 4: 80,000 blind
+        // entries, past the cap of 65,536, so every other span is weighed.
+        let (t, n) = (20_000, 8);
+        let observed = vec![true; t * n];
+        let positions = vec![0f32; 3 * t * n];
+        let tracks = Marked::new(t, n, &positions, &observed);
+        let blind: Vec<(usize, usize)> = (0..n)
+            .flat_map(|i| (0..t).filter(|k| k % 4 < 2).map(move |k| (k, i)))
+            .collect();
+        assert!(blind.len() > BLIND_ENTRIES);
+        let (folds, left) = blind_draws(&tracks, &blind);
+        assert_eq!(left.iter().filter(|&&o| !o).count(), blind.len());
+        let mut weighed: Vec<(usize, usize)> = folds.concat();
+        assert_eq!(weighed.len(), blind.len() / 2);
+        weighed.sort_unstable_by_key(|&(k, i)| (i, k));
+        // Whole spans of 2, every other one of each track: frames 0–1, 8–9, 16–17, ...
+        assert!(
+            weighed.iter().all(|&(k, _)| k % 8 < 2),
+            "{:?}",
+            &weighed[..4]
+        );
+        // No span split between folds.
+        for fold in &folds {
+            let own: std::collections::HashSet<&(usize, usize)> = fold.iter().collect();
+            assert!(fold.iter().all(|&(k, i)| own.contains(&(k ^ 1, i))));
+        }
+    }
 
     #[test]
     fn a_gain_is_clear_past_two_standard_errors() {
