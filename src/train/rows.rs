@@ -42,7 +42,9 @@ pub(super) struct PreparedRows {
 /// The row selection of a fit: each frame's observed rows, the subset size, and the
 /// current iteration's drawn subsets.
 pub(super) struct TrainingRows {
-    frames: Vec<FrameRows>,
+    /// Made at the first step that reads them: the fused step gathers its rows on the host,
+    /// and a tensor per frame costs hundreds of bytes beside a frame's few rows.
+    frames: Option<Vec<FrameRows>>,
     /// Training points per step when fewer than all.
     subset: Option<usize>,
     prepared: Option<PreparedRows>,
@@ -50,9 +52,20 @@ pub(super) struct TrainingRows {
 }
 
 impl TrainingRows {
-    /// The rows of `data`'s frames, with `subset` points per step (`None`: all), on `ad`.
+    /// The row selection of `data`'s frames, with `subset` points per step (`None`: all),
+    /// on `ad`.
     pub fn new(data: &Trajectories, subset: Option<usize>, ad: &Device) -> Self {
-        let frames = (0..data.frames())
+        TrainingRows {
+            frames: None,
+            subset: subset.filter(|&k| k < data.points()),
+            prepared: None,
+            ad: ad.clone(),
+        }
+    }
+
+    /// What each frame of `data` observes, as rows on `ad`.
+    fn frame_rows(data: &Trajectories, ad: &Device) -> Vec<FrameRows> {
+        (0..data.frames())
             .map(|k| {
                 let Some(seen) = data.observed_in_frame(k) else {
                     return FrameRows::All;
@@ -69,13 +82,7 @@ impl TrainingRows {
                     len => FrameRows::Some(Box::new(upload(rows, len, ad))),
                 }
             })
-            .collect();
-        TrainingRows {
-            frames,
-            subset: subset.filter(|&k| k < data.points()),
-            prepared: None,
-            ad: ad.clone(),
-        }
+            .collect()
     }
 
     /// Training points per step when fewer than all.
@@ -93,9 +100,11 @@ impl TrainingRows {
         take: usize,
         rng: &mut ChaCha8Rng,
     ) -> Vec<i64> {
-        match (&self.frames[k], data.observed_in_frame(k)) {
-            (FrameRows::All, _) | (_, None) => step_rows(data.points(), take, rng),
-            (_, Some(seen)) => {
+        match data.observed_in_frame(k) {
+            // A frame that observes every point draws as one without a mask: the rows of
+            // its observed points are then `0..n`, and the draw the same.
+            None => step_rows(data.points(), take, rng),
+            Some(seen) => {
                 let rows: Vec<usize> = (0..seen.len()).filter(|&i| seen[i]).collect();
                 step_rows(rows.len(), take.min(rows.len()), rng)
                     .into_iter()
@@ -125,7 +134,11 @@ impl TrainingRows {
     /// step outside `Trainer::iteration`, as benchmarks take).
     pub fn step(&mut self, data: &Trajectories, k: usize, rng: &mut ChaCha8Rng) -> StepRows {
         let Some(take) = self.subset else {
-            return match &self.frames[k] {
+            let ad = &self.ad;
+            let frames = self
+                .frames
+                .get_or_insert_with(|| Self::frame_rows(data, ad));
+            return match &frames[k] {
                 FrameRows::All => StepRows::All,
                 FrameRows::Some(rows) => StepRows::Rows(rows.clone()),
                 FrameRows::Nothing => StepRows::Nothing,

@@ -6,6 +6,7 @@
 //! reference frame ([`super::learned`]).
 
 use std::borrow::Cow;
+use std::cell::OnceCell;
 
 use burn::tensor::{Device, Gradients, Tensor, TensorData};
 use rand_chacha::ChaCha8Rng;
@@ -38,11 +39,12 @@ pub struct TrajectoryObjective<'a> {
     loss: LossConfig,
     method: Box<dyn JacobianMethod>,
     ad: Device,
-    /// Every fitted track's canonical position `[N, 3]`, and its position in each frame.
+    /// Every fitted track's canonical position `[N, 3]`.
     x0: Tensor<2>,
-    targets: Vec<Tensor<2>>,
-    /// Each frame's confidence weights `[N, 1]`, when the data has them.
-    frame_weights: Option<Vec<Tensor<2>>>,
+    /// Each frame's positions and weights as tensors, made at the first composed step: the
+    /// fused step reads the frames on the host, and a tensor per frame costs hundreds of
+    /// bytes beside a frame of a few dozen markers.
+    frames: OnceCell<FrameTensors>,
     rows: TrainingRows,
     /// `L_H`'s own sample points, when they are not the training points.
     samples: Option<SmoothnessSamples>,
@@ -100,21 +102,11 @@ impl<'a> TrajectoryObjective<'a> {
             };
             SmoothnessSamples::new(x0, sampling, &ad)
         });
-        let frame_weights = data.weights_in_frame(0).map(|_| {
-            (0..data.frames())
-                .map(|k| {
-                    let w = data.weights_in_frame(k).expect("weights in every frame");
-                    Tensor::<2>::from_data(TensorData::new(w.to_vec(), [w.len(), 1]), &ad)
-                })
-                .collect()
-        });
         Ok(TrajectoryObjective {
             rows: TrainingRows::new(&data, config.points_per_step, &ad),
             learned: LearnedPositions::new(&data, &ad),
             x0: data.canonical_tensor(&ad),
-            targets: (0..data.frames())
-                .map(|k| data.frame_tensor(k, &ad))
-                .collect(),
+            frames: OnceCell::new(),
             warp_needs_jacobian: config.loss.elasticity_weight > 0.0 || (w_h > 0.0 && !separate_h),
             method: config.jacobian.method(),
             loss: config.loss.clone(),
@@ -123,10 +115,15 @@ impl<'a> TrajectoryObjective<'a> {
             fit_rows,
             validation,
             ad,
-            frame_weights,
             samples,
             host: None,
         })
+    }
+
+    /// Whether the composed step's per-frame tensors were made.
+    #[cfg(test)]
+    pub(super) fn holds_frame_tensors(&self) -> bool {
+        self.frames.get().is_some()
     }
 
     /// The data term on frame `k` at time `t` over `rows` (none when the frame observes no
@@ -144,12 +141,16 @@ impl<'a> TrajectoryObjective<'a> {
             None => self.x0.clone(),
             Some(l) => l.positions(self.x0.clone()),
         };
-        let weights = self.frame_weights.as_ref().map(|w| w[k].clone());
+        let frames = self
+            .frames
+            .get_or_init(|| FrameTensors::new(&self.data, &self.ad));
+        let target = frames.targets[k].clone();
+        let weights = frames.weights.as_ref().map(|w| w[k].clone());
         let (x0, target, weights) = match rows {
-            StepRows::All => (x0, self.targets[k].clone(), weights),
+            StepRows::All => (x0, target, weights),
             StepRows::Rows(rows) => (
                 x0.select(0, (*rows).clone()),
-                self.targets[k].clone().select(0, (*rows).clone()),
+                target.select(0, (*rows).clone()),
                 weights.map(|w| w.select(0, *rows)),
             ),
             StepRows::Nothing => return None,
@@ -369,6 +370,33 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
         match &self.validation {
             Some((tracks, device)) => crate::metrics::evaluate_epe(field, tracks, device).map(Some),
             None => Ok(None),
+        }
+    }
+}
+
+/// The frames of the composed step's data term, on the autodiff device.
+struct FrameTensors {
+    /// Each frame's positions `[N, 3]`.
+    targets: Vec<Tensor<2>>,
+    /// Each frame's confidence weights `[N, 1]`, when the data has them.
+    weights: Option<Vec<Tensor<2>>>,
+}
+
+impl FrameTensors {
+    fn new(data: &Trajectories, ad: &Device) -> Self {
+        FrameTensors {
+            targets: (0..data.frames())
+                .map(|k| data.frame_tensor(k, ad))
+                .collect(),
+            weights: (0..data.frames())
+                .map(|k| {
+                    let w = data.weights_in_frame(k)?;
+                    Some(Tensor::<2>::from_data(
+                        TensorData::new(w.to_vec(), [w.len(), 1]),
+                        ad,
+                    ))
+                })
+                .collect(),
         }
     }
 }
