@@ -15,7 +15,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::npy::{npz_member_header, npz_members, read_npz_member, read_npz_trajectories};
+use super::npy::{NpzFile, npz_member_header, npz_members, read_npz_member, read_npz_trajectories};
 use super::tracks::Tracks;
 use crate::{DomaError, Result};
 use doma_formats::npy::ValueKind;
@@ -165,10 +165,11 @@ impl TrackFile {
 /// Reads the tracks of a `.npz` file in its layout ([`Layout::detect`], or `file.layout`).
 /// Errors name the file and the key: a missing key, a mask whose shape is not the tracks'
 /// `[T, N]`, an observed coordinate that is not finite (an f16 overflow reads as
-/// infinity), a frame or flag that the layout does not have.
+/// infinity), a frame or flag that the layout does not have. The file is read member by
+/// member, a piece at a time ([`NpzFile`]), never whole.
 pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
-    let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
-    let members = npz_members(&bytes).map_err(|reason| malformed(path, reason))?;
+    let source = NpzFile::open(path).map_err(|e| DomaError::io(path, e))?;
+    let members = npz_members(&source).map_err(|reason| malformed(path, reason))?;
     let names: Vec<&str> = members.iter().map(|m| m.name.as_str()).collect();
     let layout = file
         .layout
@@ -177,9 +178,9 @@ pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
     if layout == Layout::Plain {
         return Ok(Tracks::complete(read_npz_trajectories(path, None)?));
     }
-    let archive = Archive::open(path, &bytes, &members, layout, file)?;
+    let archive = Archive::open(path, &source, &members, layout, file)?;
     let observed = archive.observed(file.count_hidden)?;
-    let mut positions = read_npz_member(&bytes, archive.member(archive.tracks_key)?)
+    let mut positions = read_npz_member(&source, archive.member(archive.tracks_key)?)
         .map_err(|reason| malformed(path, reason))?
         .data;
     if layout == Layout::PointOdyssey && file.frame == Some(CoordFrame::Camera) {
@@ -251,7 +252,8 @@ fn check_flags(path: &Path, layout: Layout, file: &TrackFile) -> Result<()> {
 /// the headers before any values are inflated.
 struct Archive<'a> {
     path: &'a Path,
-    bytes: &'a [u8],
+    /// The file, read member by member: its bytes are never held whole.
+    source: &'a NpzFile,
     members: &'a [NpzMember],
     layout: Layout,
     tracks_key: &'static str,
@@ -265,14 +267,14 @@ struct Archive<'a> {
 impl<'a> Archive<'a> {
     fn open(
         path: &'a Path,
-        bytes: &'a [u8],
+        source: &'a NpzFile,
         members: &'a [NpzMember],
         layout: Layout,
         file: &TrackFile,
     ) -> Result<Self> {
         let mut archive = Archive {
             path,
-            bytes,
+            source,
             members,
             layout,
             tracks_key: layout.keys()[0],
@@ -311,7 +313,7 @@ impl<'a> Archive<'a> {
     }
 
     fn header(&self, key: &str) -> Result<doma_formats::npy::NpyHeader> {
-        npz_member_header(self.bytes, self.member(key)?).map_err(|r| self.malformed(r))
+        npz_member_header(self.source, self.member(key)?).map_err(|r| self.malformed(r))
     }
 
     /// A `[T, N]` array beside the tracks: a mask or the confidence weights.
@@ -324,7 +326,7 @@ impl<'a> Archive<'a> {
                 h.shape, self.tracks_key
             )));
         }
-        Ok(read_npz_member(self.bytes, self.member(key)?)
+        Ok(read_npz_member(self.source, self.member(key)?)
             .map_err(|r| self.malformed(r))?
             .data)
     }
@@ -364,7 +366,7 @@ impl<'a> Archive<'a> {
                 h.shape
             )));
         }
-        let e = read_npz_member(self.bytes, self.member("extrinsics")?)
+        let e = read_npz_member(self.source, self.member("extrinsics")?)
             .map_err(|r| self.malformed(r))?
             .data;
         // A frame's matrix matters where one of its points is observed; a non-finite entry

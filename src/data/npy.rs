@@ -22,7 +22,8 @@ pub use doma_formats::npy::{
     NPY_MAGIC, NpyArray, NpyHeader, NpyValues, encode_npy, parse_npy, parse_npy_header,
 };
 pub use doma_formats::npz::{
-    NpzMember, encode_npz, npz_member_header, npz_members, parse_npz, read_npz_member,
+    NpzFile, NpzMember, NpzSource, encode_npz, npz_member_header, npz_members, parse_npz,
+    read_npz_member,
 };
 
 use super::Trajectories;
@@ -84,18 +85,19 @@ pub fn write_npy_trajectories(path: impl AsRef<Path>, data: &Trajectories) -> Re
 /// Reads a `.npz` archive's members, `(name, array)`.
 pub fn read_npz(path: impl AsRef<Path>) -> Result<Vec<(String, NpyArray)>> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
-    parse_npz(&bytes).map_err(malformed(path))
+    let source = NpzFile::open(path).map_err(|e| DomaError::io(path, e))?;
+    parse_npz(&source).map_err(malformed(path))
 }
 
 /// Reads trajectories from member `key` of a `.npz` archive; with `key = None` the archive
 /// must hold exactly one member. The member's count, name and `.npy` header (shape
 /// `[T, N, 3]` or `[N, 3]`) are checked before any of its values are inflated, and those
-/// are inflated into no more than the header declares ([`read_npz_member`]).
+/// are inflated into no more than the header declares ([`read_npz_member`]), read from the
+/// file a piece at a time ([`NpzFile`]): the archive's bytes are never held whole.
 pub fn read_npz_trajectories(path: impl AsRef<Path>, key: Option<&str>) -> Result<Trajectories> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
-    let members = npz_members(&bytes).map_err(malformed(path))?;
+    let source = NpzFile::open(path).map_err(|e| DomaError::io(path, e))?;
+    let members = npz_members(&source).map_err(malformed(path))?;
     let names: Vec<&str> = members.iter().map(|m| m.name.as_str()).collect();
     let member = match key {
         Some(k) => members.iter().find(|m| m.name == k).ok_or_else(|| {
@@ -109,10 +111,10 @@ pub fn read_npz_trajectories(path: impl AsRef<Path>, key: Option<&str>) -> Resul
             )));
         }
     };
-    let header = npz_member_header(&bytes, member).map_err(malformed(path))?;
+    let header = npz_member_header(&source, member).map_err(malformed(path))?;
     trajectory_shape(&header.shape)
         .map_err(|m| malformed(path)(format!("member {}: {m}", member.name)))?;
-    let array = read_npz_member(&bytes, member).map_err(malformed(path))?;
+    let array = read_npz_member(&source, member).map_err(malformed(path))?;
     to_trajectories(array).map_err(malformed(path))
 }
 

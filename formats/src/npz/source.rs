@@ -1,0 +1,186 @@
+//! Where a `.npz` archive's bytes are read from: memory, or its file a piece at a time, so
+//! that reading a large archive never holds its bytes beside the arrays they decode to.
+
+use std::borrow::Cow;
+use std::fs::File;
+use std::io::{self, Read, Seek, SeekFrom};
+use std::path::Path;
+use std::sync::Mutex;
+
+/// A `.npz` archive's bytes, read by range ([`super::npz_members`],
+/// [`super::read_npz_member`]).
+pub trait NpzSource {
+    /// The archive's length in bytes.
+    fn size(&self) -> usize;
+
+    /// The `len` bytes from `at`: an error when the archive ends before them.
+    fn bytes_at(&self, at: usize, len: usize) -> Result<Cow<'_, [u8]>, String>;
+
+    /// The most bytes a member's data is asked for at once: all of them from memory.
+    fn piece(&self) -> usize {
+        usize::MAX
+    }
+}
+
+impl NpzSource for [u8] {
+    fn size(&self) -> usize {
+        self.len()
+    }
+
+    fn bytes_at(&self, at: usize, len: usize) -> Result<Cow<'_, [u8]>, String> {
+        at.checked_add(len)
+            .and_then(|end| self.get(at..end))
+            .map(Cow::Borrowed)
+            .ok_or_else(|| "truncated zip record".to_string())
+    }
+}
+
+/// As its slice, so that `&Vec<u8>` reads as `&[u8]` does.
+impl NpzSource for Vec<u8> {
+    fn size(&self) -> usize {
+        self.len()
+    }
+
+    fn bytes_at(&self, at: usize, len: usize) -> Result<Cow<'_, [u8]>, String> {
+        self.as_slice().bytes_at(at, len)
+    }
+}
+
+/// The bytes a file source reads at once from a member's data: large enough that the reads
+/// cost nothing beside decoding, small beside an array of a long recording.
+pub const FILE_PIECE: usize = 1 << 20;
+
+/// An archive read from its file as it is parsed: the directory and headers in small reads,
+/// a member's data in pieces of [`FILE_PIECE`] bytes. The file is expected not to change
+/// while it is read; if it does, the reads fail or the members' CRC-32s do not match.
+pub struct NpzFile {
+    file: Mutex<File>,
+    size: usize,
+    piece: usize,
+}
+
+impl NpzFile {
+    /// Opens the archive at `path`.
+    pub fn open(path: &Path) -> io::Result<Self> {
+        let file = File::open(path)?;
+        let size = usize::try_from(file.metadata()?.len())
+            .map_err(|_| io::Error::other("the file is larger than this machine can address"))?;
+        Ok(NpzFile {
+            file: Mutex::new(file),
+            size,
+            piece: FILE_PIECE,
+        })
+    }
+
+    /// The same archive, its members' data read `bytes` at a time (at least one).
+    pub fn with_piece(mut self, bytes: usize) -> Self {
+        self.piece = bytes.max(1);
+        self
+    }
+}
+
+impl NpzSource for NpzFile {
+    fn size(&self) -> usize {
+        self.size
+    }
+
+    fn bytes_at(&self, at: usize, len: usize) -> Result<Cow<'_, [u8]>, String> {
+        let end = at
+            .checked_add(len)
+            .filter(|&end| end <= self.size)
+            .ok_or_else(|| "truncated zip record".to_string())?;
+        let mut file = self
+            .file
+            .lock()
+            .map_err(|_| "a reader of the archive panicked".to_string())?;
+        let mut bytes = vec![0; len];
+        file.seek(SeekFrom::Start(at as u64))
+            .and_then(|_| file.read_exact(&mut bytes))
+            .map_err(|e| format!("reading bytes {at}..{end}: {e}"))?;
+        Ok(Cow::Owned(bytes))
+    }
+
+    fn piece(&self) -> usize {
+        self.piece
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::npy::NpyValues;
+    use crate::npz::{encode_npz_values, parse_npz};
+
+    /// An archive in memory served in owned pieces of `piece` bytes, as a file is.
+    struct Pieces<'a>(&'a [u8], usize);
+
+    impl NpzSource for Pieces<'_> {
+        fn size(&self) -> usize {
+            self.0.len()
+        }
+        fn bytes_at(&self, at: usize, len: usize) -> Result<Cow<'_, [u8]>, String> {
+            self.0.bytes_at(at, len).map(|b| Cow::Owned(b.into_owned()))
+        }
+        fn piece(&self) -> usize {
+            self.1
+        }
+    }
+
+    fn deflated() -> &'static [u8] {
+        include_bytes!("../../../tests/fixtures/deflated_zip64.npz")
+    }
+
+    fn stored() -> Vec<u8> {
+        let values: Vec<f32> = (0..301).map(|v| (v as f32 * 0.37).sin()).collect();
+        let mask: Vec<bool> = (0..301).map(|v| v % 3 == 0).collect();
+        encode_npz_values(&[
+            ("tracks", &[301][..], NpyValues::F32(&values)),
+            ("observed", &[301][..], NpyValues::Bool(&mask)),
+        ])
+    }
+
+    /// Read in pieces, every archive reads as it does whole: the same arrays, or the same
+    /// error, for a stored and a deflated zip64 archive and every corruption of them by a
+    /// flipped byte or a cut.
+    #[test]
+    fn an_archive_read_in_pieces_reads_as_it_does_whole() {
+        let stored = stored();
+        for archive in [deflated(), &stored[..]] {
+            let mut variants = vec![archive.to_vec()];
+            for at in 0..archive.len() {
+                let mut flipped = archive.to_vec();
+                flipped[at] ^= 0x5A;
+                variants.push(flipped);
+                variants.push(archive[..at].to_vec());
+            }
+            for bytes in &variants {
+                let whole = parse_npz(&bytes[..]);
+                for piece in [1, 5, 64] {
+                    assert_eq!(parse_npz(&Pieces(bytes, piece)), whole, "piece {piece}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_file_reads_as_its_bytes_and_a_cut_one_is_refused_alike() {
+        let dir = std::env::temp_dir().join(format!("doma-npz-source-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let stored = stored();
+        for (name, bytes) in [
+            ("deflated.npz", deflated()),
+            ("stored.npz", &stored[..]),
+            ("cut.npz", &stored[..stored.len() - 30]),
+        ] {
+            let path = dir.join(name);
+            std::fs::write(&path, bytes).unwrap();
+            let whole = parse_npz(bytes);
+            for piece in [3, FILE_PIECE] {
+                let file = NpzFile::open(&path).unwrap().with_piece(piece);
+                assert_eq!(parse_npz(&file), whole, "{name}, piece {piece}");
+            }
+        }
+        assert!(parse_npz(&stored[..stored.len() - 30]).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
