@@ -117,10 +117,11 @@ pub fn visibility_mask(
     threshold: f64,
 ) -> std::result::Result<Vec<bool>, String> {
     let at = |e: usize| format!("{key}[{}, {}]", e / points.max(1), e % points.max(1));
-    values
-        .iter()
-        .enumerate()
-        .map(|(e, &v)| match kind {
+    // Sized up front: collected through `Result`, the mask would grow by doubling and keep
+    // up to twice its length for the whole fit.
+    let mut mask = Vec::with_capacity(values.len());
+    for (e, &v) in values.iter().enumerate() {
+        mask.push(match kind {
             ValueKind::Bool => Ok(v != 0.0),
             ValueKind::Integer if v == 0.0 || v == 1.0 => Ok(v == 1.0),
             ValueKind::Integer => Err(format!(
@@ -132,8 +133,9 @@ pub fn visibility_mask(
                 "{} is {v}: a float visibility is a probability in [0, 1] (observed from {threshold})",
                 at(e)
             )),
-        })
-        .collect()
+        }?);
+    }
+    Ok(mask)
 }
 
 impl TrackFile {
