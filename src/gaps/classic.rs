@@ -154,11 +154,11 @@ impl Marked<'_> {
         }
         let spread = x.iter().fold(0f64, |m, v| m.max(v.abs())).max(1e-30);
         for _ in 0..LOW_RANK_ITERATIONS {
-            let r = low_rank_projection(&x, t, d, LOW_RANK_ENERGY);
+            let r = low_rank_projection(&x, t, d, LOW_RANK_ENERGY, &missing);
             let mut change = 0f64;
-            for &e in &missing {
-                change = change.max((r[e] - x[e]).abs());
-                x[e] = r[e];
+            for (&e, &v) in missing.iter().zip(&r) {
+                change = change.max((v - x[e]).abs());
+                x[e] = v;
             }
             if change < 1e-6 * spread {
                 break;
@@ -185,36 +185,61 @@ pub const LOW_RANK_ENERGY: f64 = 0.99;
 pub const LOW_RANK_ITERATIONS: usize = 100;
 
 /// `x` (`[t, d]`, row-major) projected onto its column means plus the principal components
-/// that hold `energy` of its variance.
-fn low_rank_projection(x: &[f64], t: usize, d: usize, energy: f64) -> Vec<f64> {
+/// that hold `energy` of its variance, at the entries `at` (row-major indices, increasing).
+/// A tall matrix is projected one row at a time, where `at` asks, and never copied.
+fn low_rank_projection(x: &[f64], t: usize, d: usize, energy: f64, at: &[usize]) -> Vec<f64> {
     let mut mean = vec![0f64; d];
     for row in x.chunks(d) {
         for (m, v) in mean.iter_mut().zip(row) {
             *m += v / t as f64;
         }
     }
-    let c: Vec<f64> = x
-        .chunks(d)
-        .flat_map(|row| row.iter().zip(&mean).map(|(v, m)| v - m))
-        .collect();
+    let centred = |row: &[f64]| -> Vec<f64> { row.iter().zip(&mean).map(|(v, m)| v - m).collect() };
     // The components from the smaller Gram matrix: frames × frames or columns × columns.
-    let by_frames = t <= d;
-    let g_size = if by_frames { t } else { d };
-    let g = if by_frames {
-        let mut g = vec![0f64; g_size * g_size];
-        for a in 0..g_size {
-            for b in a..g_size {
-                let v: f64 = (0..d).map(|j| c[a * d + j] * c[b * d + j]).sum();
-                g[a * g_size + b] = v;
-                g[b * g_size + a] = v;
+    if t <= d {
+        return projection_by_frames(
+            &x.chunks(d).flat_map(centred).collect::<Vec<_>>(),
+            t,
+            d,
+            energy,
+            &mean,
+            at,
+        );
+    }
+    let g = column_gram(x.chunks(d).map(centred), d);
+    let (vectors, kept) = principal(g, d, energy);
+    let kept: Vec<Vec<f64>> = kept
+        .iter()
+        .map(|&o| (0..d).map(|a| vectors[a * d + o]).collect())
+        .collect();
+    // C v vᵀ at the entries asked, row by row: each row's coordinates p = C[k] · v once.
+    let mut out = Vec::with_capacity(at.len());
+    let mut i = 0;
+    while i < at.len() {
+        let k = at[i] / d;
+        let row = centred(&x[k * d..(k + 1) * d]);
+        let p: Vec<f64> = kept
+            .iter()
+            .map(|v| (0..d).map(|j| row[j] * v[j]).sum())
+            .collect();
+        while i < at.len() && at[i] / d == k {
+            let j = at[i] % d;
+            let mut o = 0f64;
+            for (pv, v) in p.iter().zip(&kept) {
+                o += pv * v[j];
             }
+            out.push(o + mean[j]);
+            i += 1;
         }
-        g
-    } else {
-        column_gram(c.chunks(d), d)
-    };
-    let (values, vectors) = symmetric_eigen_householder(g, g_size);
-    let mut order: Vec<usize> = (0..g_size).collect();
+    }
+    out
+}
+
+/// The eigenvectors (columns of `[n, n]`) of the Gram matrix `g` and, largest first, the
+/// indices of those that hold `energy` of its trace.
+fn principal(g: Vec<f64>, n: usize, energy: f64) -> (Vec<f64>, Vec<usize>) {
+    let (values, vectors) = symmetric_eigen_householder(g, n);
+    let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
     let total: f64 = values.iter().map(|v| v.max(0.0)).sum();
     let mut kept = Vec::new();
@@ -226,38 +251,44 @@ fn low_rank_projection(x: &[f64], t: usize, d: usize, energy: f64) -> Vec<f64> {
         held += values[o].max(0.0);
         kept.push(o);
     }
+    (vectors, kept)
+}
+
+/// [`low_rank_projection`] of a wide matrix, centred (`c`, `[t, d]` with `t <= d`), from its
+/// frames' Gram matrix: u uᵀ C, the row combination of the frames.
+fn projection_by_frames(
+    c: &[f64],
+    t: usize,
+    d: usize,
+    energy: f64,
+    mean: &[f64],
+    at: &[usize],
+) -> Vec<f64> {
+    let mut g = vec![0f64; t * t];
+    for a in 0..t {
+        for b in a..t {
+            let v: f64 = (0..d).map(|j| c[a * d + j] * c[b * d + j]).sum();
+            g[a * t + b] = v;
+            g[b * t + a] = v;
+        }
+    }
+    let (vectors, kept) = principal(g, t, energy);
     let mut out = vec![0f64; t * d];
     for &o in &kept {
-        let v: Vec<f64> = (0..g_size).map(|a| vectors[a * g_size + o]).collect();
-        if by_frames {
-            // u uᵀ C: the row combination of the frames.
-            let mut row = vec![0f64; d];
-            for (k, &vk) in v.iter().enumerate() {
-                for j in 0..d {
-                    row[j] += vk * c[k * d + j];
-                }
+        let v: Vec<f64> = (0..t).map(|a| vectors[a * t + o]).collect();
+        let mut row = vec![0f64; d];
+        for (k, &vk) in v.iter().enumerate() {
+            for j in 0..d {
+                row[j] += vk * c[k * d + j];
             }
-            for (k, &vk) in v.iter().enumerate() {
-                for j in 0..d {
-                    out[k * d + j] += vk * row[j];
-                }
-            }
-        } else {
-            // C v vᵀ.
-            for k in 0..t {
-                let p: f64 = (0..d).map(|j| c[k * d + j] * v[j]).sum();
-                for j in 0..d {
-                    out[k * d + j] += p * v[j];
-                }
+        }
+        for (k, &vk) in v.iter().enumerate() {
+            for j in 0..d {
+                out[k * d + j] += vk * row[j];
             }
         }
     }
-    for row in out.chunks_mut(d) {
-        for (o, m) in row.iter_mut().zip(&mean) {
-            *o += m;
-        }
-    }
-    out
+    at.iter().map(|&e| out[e] + mean[e % d]).collect()
 }
 #[cfg(test)]
 mod tests {
@@ -358,6 +389,35 @@ mod tests {
             (p[0] + 4.0).abs() < 1e-5 && p[1] == 0.0 && p[2] == 0.0,
             "{p:?}"
         );
+    }
+
+    /// A tall matrix's projection, row by row from its columns' Gram matrix, is the one
+    /// from its frames' Gram matrix (the other derivation, which a wide matrix takes), and
+    /// the entries asked alone are those of every entry asked.
+    #[test]
+    fn a_tall_matrix_projects_as_from_its_frames_gram_at_the_entries_asked() {
+        let (t, d) = (14, 5);
+        let x: Vec<f64> = (0..t * d)
+            .map(|i| ((i * 7919 % 101) as f64 / 101.0 - 0.5) + 0.1 * (i % d) as f64)
+            .collect();
+        let every: Vec<usize> = (0..t * d).collect();
+        let tall = low_rank_projection(&x, t, d, 0.9, &every);
+        let mut mean = vec![0f64; d];
+        for row in x.chunks(d) {
+            for (m, v) in mean.iter_mut().zip(row) {
+                *m += v / t as f64;
+            }
+        }
+        let centred: Vec<f64> = (0..t * d).map(|e| x[e] - mean[e % d]).collect();
+        let by_frames = projection_by_frames(&centred, t, d, 0.9, &mean, &every);
+        for (a, b) in tall.iter().zip(&by_frames) {
+            assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+        }
+        // Not the data itself: 0.9 of the variance leaves some of it out.
+        assert!(tall.iter().zip(&x).any(|(p, v)| (p - v).abs() > 1e-3));
+        let some = [3, 4, 17, 40, 69];
+        let picked = low_rank_projection(&x, t, d, 0.9, &some);
+        assert_eq!(picked, some.map(|e| tall[e]));
     }
 
     #[test]

@@ -10,9 +10,10 @@ use std::ops::Range;
 /// `Xᵀ X` (`[d, d]`, row-major) of the rows of `x` (each `d` long), summed row by row so
 /// that a matrix far larger than a cache is read in order; each entry sums over the rows
 /// in their order.
-pub fn column_gram<'a>(rows: impl IntoIterator<Item = &'a [f64]>, d: usize) -> Vec<f64> {
+pub fn column_gram<R: AsRef<[f64]>>(rows: impl IntoIterator<Item = R>, d: usize) -> Vec<f64> {
     let mut g = vec![0f64; d * d];
     for row in rows {
+        let row = row.as_ref();
         for a in 0..d {
             let ra = row[a];
             for (entry, &rb) in g[a * d + a..(a + 1) * d].iter_mut().zip(&row[a..]) {
