@@ -52,21 +52,37 @@ pub const FILE_PIECE: usize = 1 << 20;
 
 /// An archive read from its file as it is parsed: the directory and headers in small reads,
 /// a member's data in pieces of [`FILE_PIECE`] bytes. The file is expected not to change
-/// while it is read; if it does, the reads fail or the members' CRC-32s do not match.
+/// while it is read; if it does, the reads fail or the members' CRC-32s do not match. What
+/// cannot be read at an offset (a pipe) is read whole at once.
 pub struct NpzFile {
-    file: Mutex<File>,
+    backing: Backing,
     size: usize,
     piece: usize,
+}
+
+enum Backing {
+    File(Mutex<File>),
+    Memory(Vec<u8>),
 }
 
 impl NpzFile {
     /// Opens the archive at `path`.
     pub fn open(path: &Path) -> io::Result<Self> {
-        let file = File::open(path)?;
-        let size = usize::try_from(file.metadata()?.len())
+        let mut file = File::open(path)?;
+        let metadata = file.metadata()?;
+        if !metadata.is_file() {
+            let mut bytes = Vec::new();
+            file.read_to_end(&mut bytes)?;
+            return Ok(NpzFile {
+                size: bytes.len(),
+                backing: Backing::Memory(bytes),
+                piece: usize::MAX,
+            });
+        }
+        let size = usize::try_from(metadata.len())
             .map_err(|_| io::Error::other("the file is larger than this machine can address"))?;
         Ok(NpzFile {
-            file: Mutex::new(file),
+            backing: Backing::File(Mutex::new(file)),
             size,
             piece: FILE_PIECE,
         })
@@ -85,12 +101,15 @@ impl NpzSource for NpzFile {
     }
 
     fn bytes_at(&self, at: usize, len: usize) -> Result<Cow<'_, [u8]>, String> {
+        let file = match &self.backing {
+            Backing::File(file) => file,
+            Backing::Memory(bytes) => return bytes.as_slice().bytes_at(at, len),
+        };
         let end = at
             .checked_add(len)
             .filter(|&end| end <= self.size)
             .ok_or_else(|| "truncated zip record".to_string())?;
-        let mut file = self
-            .file
+        let mut file = file
             .lock()
             .map_err(|_| "a reader of the archive panicked".to_string())?;
         let mut bytes = vec![0; len];
@@ -181,6 +200,30 @@ mod tests {
             }
         }
         assert!(parse_npz(&stored[..stored.len() - 30]).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A pipe cannot be read at an offset: it is read whole, and reads as its bytes.
+    #[cfg(unix)]
+    #[test]
+    fn a_pipe_is_read_whole() {
+        let dir = std::env::temp_dir().join(format!("doma-npz-pipe-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("piped.npz");
+        let made = std::process::Command::new("mkfifo").arg(&path).status();
+        if !made.is_ok_and(|s| s.success()) {
+            std::fs::remove_dir_all(&dir).unwrap();
+            return; // no mkfifo here: nothing to test
+        }
+        let bytes = stored();
+        let writer = {
+            let (path, bytes) = (path.clone(), bytes.clone());
+            std::thread::spawn(move || std::fs::write(path, bytes).unwrap())
+        };
+        let file = NpzFile::open(&path).unwrap();
+        writer.join().unwrap();
+        assert_eq!(parse_npz(&file), parse_npz(&bytes));
+        assert!(parse_npz(&file).is_ok());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
