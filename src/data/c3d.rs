@@ -26,28 +26,18 @@ pub fn read_c3d(path: impl AsRef<Path>) -> Result<C3d> {
     })
 }
 
-/// Reads a C3D file's bytes and its points.
-pub fn read_c3d_bytes(path: impl AsRef<Path>) -> Result<(Vec<u8>, C3d)> {
-    let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|e| DomaError::io(path, e))?;
-    let points = doma_formats::c3d::parse(&bytes).map_err(|reason| DomaError::Malformed {
-        path: path.to_path_buf(),
-        reason,
-    })?;
-    Ok((bytes, points))
-}
-
-/// Writes `original` (the bytes of the C3D file `source`) to `path` with only `edits`
-/// changed ([`doma_formats::c3d::patch`]: every group, parameter, analog sample and event
-/// kept), atomically.
+/// Writes the C3D file `source` to `path` with only `edits` changed
+/// ([`doma_formats::c3d::patch_in_place`]: every group, parameter, analog sample and event
+/// kept), atomically. `source` is read here, so that a caller holds none of its bytes
+/// before.
 pub fn write_c3d_patched(
     path: impl AsRef<Path>,
     source: &Path,
-    original: &[u8],
     edits: &[doma_formats::c3d::PointEdit],
 ) -> Result<()> {
     let path = path.as_ref();
-    let bytes = doma_formats::c3d::patch(original, edits).map_err(|reason| {
+    let mut bytes = std::fs::read(source).map_err(|e| DomaError::io(source, e))?;
+    doma_formats::c3d::patch_in_place(&mut bytes, edits).map_err(|reason| {
         DomaError::InvalidData(format!(
             "cannot write {} from {}: {reason}",
             path.display(),

@@ -9,7 +9,7 @@ use burn::tensor::Device;
 use doma_formats::npy::NpyValues;
 
 use super::{RunConfig, RunDir, field_at_frames};
-use crate::data::c3d::{C3d, c3d_tracks, read_c3d_bytes, write_c3d_patched};
+use crate::data::c3d::{c3d_tracks, read_c3d, write_c3d_patched};
 use crate::data::layout::Layout;
 use crate::data::mesh::as_points;
 use crate::data::sequence::{Sequence, read_tracks};
@@ -128,30 +128,16 @@ pub fn complete_run_with(
     }
     let config = run.load_config()?;
     crate::io::check_output(out, Some(&run.dir), &[&config.data])?;
-    let markers = if to_c3d {
-        if !is_c3d(&config.data) {
-            return Err(DomaError::Usage(format!(
-                "a .c3d output is the C3D input with its gaps filled, and this run fitted {}: \
-                 write a .npz",
-                config.data.display()
-            )));
-        }
-        Some(read_c3d_bytes(&config.data)?)
-    } else if is_c3d(&config.data) {
-        // Read for its rate (a --max-gap in seconds) and its own values.
-        Some(read_c3d_bytes(&config.data)?)
-    } else {
-        None
-    };
-    let done = complete_with(
-        run,
-        &config,
-        markers.as_ref().map(|(_, m)| m),
-        policy,
-        device,
-    )?;
+    if to_c3d && !is_c3d(&config.data) {
+        return Err(DomaError::Usage(format!(
+            "a .c3d output is the C3D input with its gaps filled, and this run fitted {}: \
+             write a .npz",
+            config.data.display()
+        )));
+    }
+    let done = complete_with(run, &config, policy, device)?;
     let (t, n) = (done.frames, done.points);
-    if let (true, Some((original, _))) = (to_c3d, &markers) {
+    if to_c3d {
         // The input file itself, with only the filled entries written: every group,
         // parameter, analog sample and event kept, and the frames outside the fitted clip
         // (or between its strided frames) as they were.
@@ -170,7 +156,7 @@ pub fn complete_run_with(
                 cameras: 0,
             })
             .collect();
-        write_c3d_patched(out, &config.data, original, &edits)?;
+        write_c3d_patched(out, &config.data, &edits)?;
     } else {
         write_npz(out, &done, layout)?;
     }
@@ -222,16 +208,7 @@ pub fn complete_tracks(
     device: &Device,
 ) -> Result<CompletedTracks> {
     let config = run.load_config()?;
-    let markers = is_c3d(&config.data)
-        .then(|| read_c3d_bytes(&config.data))
-        .transpose()?;
-    complete_with(
-        run,
-        &config,
-        markers.as_ref().map(|(_, m)| m),
-        policy,
-        device,
-    )
+    complete_with(run, &config, policy, device)
 }
 
 fn is_c3d(path: &Path) -> bool {
@@ -239,11 +216,10 @@ fn is_c3d(path: &Path) -> bool {
         .is_some_and(|e| e.eq_ignore_ascii_case("c3d"))
 }
 
-/// [`complete_tracks`] of the run's `config`, its input read from `markers` when given.
+/// [`complete_tracks`] of the run's `config`.
 fn complete_with(
     run: &RunDir,
     config: &RunConfig,
-    markers: Option<&C3d>,
     policy: FillPolicy,
     device: &Device,
 ) -> Result<CompletedTracks> {
@@ -276,14 +252,19 @@ fn complete_with(
     let whole = (t <= window_frames(n))
         .then(|| field_at_frames(&field, &points, 0..t, t, device))
         .transpose()?;
-    // The input again, clipped and kept as the fit's data was, for its own values.
-    let read_input = || -> Result<(Tracks, Range<usize>)> {
-        let mut input = match markers {
-            Some(m) => c3d_tracks(m).map_err(|reason| DomaError::Malformed {
+    // The input again, clipped and kept as the fit's data was, for its own values (and a
+    // C3D's rate, for a --max-gap in seconds); read when needed rather than kept through
+    // the fill.
+    let read_input = || -> Result<(Tracks, Range<usize>, Option<f32>)> {
+        let (mut input, rate) = if is_c3d(&config.data) {
+            let markers = read_c3d(&config.data)?;
+            let tracks = c3d_tracks(&markers).map_err(|reason| DomaError::Malformed {
                 path: config.data.clone(),
                 reason,
-            })?,
-            None => read_tracks(&config.data, &config.tracks)?.0,
+            })?;
+            (tracks, Some(markers.rate))
+        } else {
+            (read_tracks(&config.data, &config.tracks)?.0, None)
         };
         let frame_range = config.frames.map_or(0..input.frames(), |[a, b]| a..b);
         if config.frames.is_some() || config.stride > 1 {
@@ -304,9 +285,9 @@ fn complete_with(
                 ),
             });
         }
-        Ok((input, frame_range))
+        Ok((input, frame_range, rate))
     };
-    let (input, frame_range) = read_input()?;
+    let (input, frame_range, rate) = read_input()?;
     let seen = input.observed().to_vec();
     // In the fit's normalised coordinates, where the field predicts.
     let normalised: Vec<f32> = input
@@ -323,7 +304,7 @@ fn complete_with(
     let tracks = Marked::new(t, n, &normalised, &seen);
     let stride = config.stride.max(1);
     let source_frames: Vec<usize> = frame_range.step_by(stride).collect();
-    let rate = markers.map(|m| m.rate as f64);
+    let rate = rate.map(f64::from);
     let (filled, extrapolated) = chosen(&tracks, &source_frames, policy, rate, &config.data)?;
     // The fill of the chosen entries alone: a long recording holds no second copy of itself.
     let mut entries = Vec::with_capacity(filled.iter().filter(|&&f| f).count());

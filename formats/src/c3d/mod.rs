@@ -25,7 +25,7 @@ mod patch;
 mod read;
 mod write;
 
-pub use patch::{PointEdit, patch};
+pub use patch::{PointEdit, patch, patch_in_place};
 pub use read::parse;
 pub use write::encode;
 

@@ -2,6 +2,7 @@
 //! changed, in its own byte order and number format, so that every group and parameter
 //! (in its order), every analog sample and every event is kept.
 
+use super::Processor;
 use super::read::{Layout, parameters};
 
 /// One point to write over a file's.
@@ -21,65 +22,89 @@ pub struct PointEdit {
 }
 
 /// `bytes` (a C3D file that [`super::parse`] reads) with each of `edits` written over its
-/// point's `x y z w` words, in the file's processor format (Intel, DEC or MIPS) and number
-/// format (floats, or `i16` multiples of the scale); every other byte as it was. The
+/// point's `x y z w` words ([`patch_in_place`]), in a copy.
+pub fn patch(bytes: &[u8], edits: &[PointEdit]) -> Result<Vec<u8>, String> {
+    let mut out = bytes.to_vec();
+    patch_in_place(&mut out, edits)?;
+    Ok(out)
+}
+
+/// Writes each of `edits` over its point's `x y z w` words in `bytes` (a C3D file that
+/// [`super::parse`] reads), in the file's processor format (Intel, DEC or MIPS) and number
+/// format (floats, or `i16` multiples of the scale); every other byte stays as it was. The
 /// residual word is encoded as the reader decodes it: `−1` for not measured, else the
 /// residual in units of `|scale|` (rounded, at most 255) with the camera mask above it.
 /// Refuses an edit outside the file's frames or points, a position that is not finite,
-/// and a position that an integer file cannot hold (past ±32767 × the scale).
-pub fn patch(bytes: &[u8], edits: &[PointEdit]) -> Result<Vec<u8>, String> {
-    let (processor, params) = parameters(bytes)?;
-    let layout = Layout::of(bytes, processor, &params)?;
+/// and a position that an integer file cannot hold (past ±32767 × the scale); every edit
+/// is checked before any is written, so a refusal leaves `bytes` as they were.
+pub fn patch_in_place(bytes: &mut [u8], edits: &[PointEdit]) -> Result<(), String> {
+    let (processor, layout) = {
+        let (processor, params) = parameters(bytes)?;
+        (processor, Layout::of(bytes, processor, &params)?)
+    };
+    for edit in edits {
+        words(edit, processor, &layout)?;
+    }
+    for edit in edits {
+        let (at, words, len) = words(edit, processor, &layout)?;
+        bytes[at..at + len].copy_from_slice(&words[..len]);
+    }
+    Ok(())
+}
+
+/// Where `edit`'s point is in the file, and its `x y z w` words: `len` bytes of `words`.
+fn words(
+    edit: &PointEdit,
+    processor: Processor,
+    layout: &Layout,
+) -> Result<(usize, [u8; 16], usize), String> {
     let float = layout.scale < 0.0;
     let size = if float { 4 } else { 2 };
     let magnitude = layout.scale.abs();
-    let mut out = bytes.to_vec();
-    for edit in edits {
-        if edit.frame >= layout.frames || edit.point >= layout.points {
-            return Err(format!(
-                "point {} of frame {} is outside the file's {} points and {} frames",
-                edit.point, edit.frame, layout.points, layout.frames
-            ));
-        }
-        if let Some(v) = edit.position.iter().find(|v| !v.is_finite()) {
-            return Err(format!(
-                "point {} of frame {}: the coordinate {v} is not finite",
-                edit.point, edit.frame
-            ));
-        }
-        let w: i32 = if edit.residual.is_nan() || edit.residual < 0.0 {
-            -1
-        } else {
-            let byte = (edit.residual / magnitude).round().clamp(0.0, 255.0) as i32;
-            ((edit.cameras as i32 & 0x7f) << 8) | byte
-        };
-        let at = layout.start + edit.frame * layout.record + edit.point * 4 * size;
-        let words = &mut out[at..at + 4 * size];
-        if float {
-            let values = [
-                edit.position[0],
-                edit.position[1],
-                edit.position[2],
-                w as f32,
-            ];
-            for (c, v) in values.into_iter().enumerate() {
-                words[4 * c..4 * c + 4].copy_from_slice(&processor.put_f32(v));
-            }
-        } else {
-            for c in 0..3 {
-                let q = (edit.position[c] / magnitude).round();
-                if !(-32767.0..=32767.0).contains(&q) {
-                    return Err(format!(
-                        "point {} of frame {}: {} is past what an integer C3D of scale {} holds",
-                        edit.point, edit.frame, edit.position[c], layout.scale
-                    ));
-                }
-                words[2 * c..2 * c + 2].copy_from_slice(&processor.put_u16(q as i16 as u16));
-            }
-            words[6..8].copy_from_slice(&processor.put_u16(w as i16 as u16));
-        }
+    if edit.frame >= layout.frames || edit.point >= layout.points {
+        return Err(format!(
+            "point {} of frame {} is outside the file's {} points and {} frames",
+            edit.point, edit.frame, layout.points, layout.frames
+        ));
     }
-    Ok(out)
+    if let Some(v) = edit.position.iter().find(|v| !v.is_finite()) {
+        return Err(format!(
+            "point {} of frame {}: the coordinate {v} is not finite",
+            edit.point, edit.frame
+        ));
+    }
+    let w: i32 = if edit.residual.is_nan() || edit.residual < 0.0 {
+        -1
+    } else {
+        let byte = (edit.residual / magnitude).round().clamp(0.0, 255.0) as i32;
+        ((edit.cameras as i32 & 0x7f) << 8) | byte
+    };
+    let at = layout.start + edit.frame * layout.record + edit.point * 4 * size;
+    let mut words = [0u8; 16];
+    if float {
+        let values = [
+            edit.position[0],
+            edit.position[1],
+            edit.position[2],
+            w as f32,
+        ];
+        for (c, v) in values.into_iter().enumerate() {
+            words[4 * c..4 * c + 4].copy_from_slice(&processor.put_f32(v));
+        }
+    } else {
+        for c in 0..3 {
+            let q = (edit.position[c] / magnitude).round();
+            if !(-32767.0..=32767.0).contains(&q) {
+                return Err(format!(
+                    "point {} of frame {}: {} is past what an integer C3D of scale {} holds",
+                    edit.point, edit.frame, edit.position[c], layout.scale
+                ));
+            }
+            words[2 * c..2 * c + 2].copy_from_slice(&processor.put_u16(q as i16 as u16));
+        }
+        words[6..8].copy_from_slice(&processor.put_u16(w as i16 as u16));
+    }
+    Ok((at, words, 4 * size))
 }
 
 #[cfg(test)]
@@ -181,5 +206,14 @@ mod tests {
         };
         assert!(patch(&bytes, &[nan]).unwrap_err().contains("not finite"));
         assert_eq!(patch(&bytes, &[]).unwrap(), bytes);
+        // A refused edit after a good one: nothing is written.
+        let good = PointEdit {
+            position: [1.0, 2.0, 3.0],
+            ..outside
+        };
+        let good = PointEdit { frame: 0, ..good };
+        let mut in_place = bytes.clone();
+        assert!(patch_in_place(&mut in_place, &[good, nan]).is_err());
+        assert_eq!(in_place, bytes);
     }
 }
