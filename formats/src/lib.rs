@@ -1,7 +1,8 @@
 //! The file formats of doma as pure functions over bytes and text: `.traj` ([`traj`]),
 //! DeformingThings4D `.anime` ([`anime`]), NumPy `.npy` ([`npy`]) and `.npz` ([`npz`]),
 //! OBJ meshes ([`obj`]), any OBJ with its materials for display ([`textured`]), and C3D
-//! motion-capture files ([`c3d`]).
+//! motion-capture files ([`c3d`]). The `.npz` and C3D readers take their bytes from memory
+//! or from the file a piece at a time ([`source`]).
 //!
 //! This crate has no Burn dependency, so that the readers can be fuzzed (`fuzz/` in the
 //! doma repository) without building a deep-learning framework under coverage
@@ -15,6 +16,7 @@ pub mod c3d;
 pub mod npy;
 pub mod npz;
 pub mod obj;
+pub mod source;
 pub mod textured;
 pub mod traj;
 

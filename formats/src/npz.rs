@@ -3,18 +3,17 @@
 //! reader walks the central directory, refuses a member whose declared size deflate cannot
 //! produce from its bytes, checks every member's CRC-32, and inflates with `miniz_oxide`
 //! through a bounded window straight into the array the member's header declares. It reads
-//! the archive from memory or from its file a piece at a time ([`NpzSource`]). Every
+//! the archive from memory or from its file a piece at a time ([`Source`]). Every
 //! defect is an error saying what is wrong; nothing panics.
 
 use std::ops::Range;
 
 use crate::Crc32;
 use crate::npy::{MAX_HEADER_BYTES, NpyArray, NpyHeader, Values, parse_npy_header};
+use crate::source::Source;
 
-mod source;
 mod write;
 
-pub use source::{FILE_PIECE, NpzFile, NpzSource};
 pub use write::{encode_npz, encode_npz_values, write_npz_values};
 
 /// The little-endian integers of a zip record at `at`; an `at` near `usize::MAX` (a lying
@@ -41,16 +40,16 @@ fn le_u64(b: &[u8], at: usize) -> Result<u64, String> {
         .ok_or_else(|| "truncated zip record".to_string())
 }
 
-/// The same integers read from a source ([`NpzSource::bytes_at`]).
-fn u16_at<S: NpzSource + ?Sized>(src: &S, at: usize) -> Result<u64, String> {
+/// The same integers read from a source ([`Source::bytes_at`]).
+fn u16_at<S: Source + ?Sized>(src: &S, at: usize) -> Result<u64, String> {
     le_u16(&src.bytes_at(at, 2)?, 0)
 }
 
-fn u32_at<S: NpzSource + ?Sized>(src: &S, at: usize) -> Result<u64, String> {
+fn u32_at<S: Source + ?Sized>(src: &S, at: usize) -> Result<u64, String> {
     le_u32(&src.bytes_at(at, 4)?, 0)
 }
 
-fn u64_at<S: NpzSource + ?Sized>(src: &S, at: usize) -> Result<u64, String> {
+fn u64_at<S: Source + ?Sized>(src: &S, at: usize) -> Result<u64, String> {
     le_u64(&src.bytes_at(at, 8)?, 0)
 }
 
@@ -76,7 +75,7 @@ pub const DEFLATE_MAX_RATIO: usize = 1032;
 /// against the file (a stored member must be in the file; a deflated one cannot hold more
 /// than [`DEFLATE_MAX_RATIO`] times its bytes). Inflates nothing and allocates nothing in
 /// proportion to a declared size.
-pub fn npz_members<S: NpzSource + ?Sized>(src: &S) -> Result<Vec<NpzMember>, String> {
+pub fn npz_members<S: Source + ?Sized>(src: &S) -> Result<Vec<NpzMember>, String> {
     const EOCD: [u8; 4] = [0x50, 0x4b, 0x05, 0x06];
     let len = src.size();
     if len < 22 {
@@ -136,10 +135,7 @@ fn offset(v: u64) -> Result<usize, String> {
 }
 
 /// The directory entry at `at`, and where the next one starts.
-fn directory_entry<S: NpzSource + ?Sized>(
-    src: &S,
-    at: usize,
-) -> Result<(NpzMember, usize), String> {
+fn directory_entry<S: Source + ?Sized>(src: &S, at: usize) -> Result<(NpzMember, usize), String> {
     if u32_at(src, at)? != 0x0201_4b50 {
         return Err(format!("the zip directory is corrupt at byte {at}"));
     }
@@ -216,10 +212,10 @@ fn directory_entry<S: NpzSource + ?Sized>(
 }
 
 /// Inflates the bytes `data` of `src` piece by piece into `sink`, through a 64 KiB window,
-/// reading them [`NpzSource::piece`] bytes at a time: never more than `limit` bytes (the
+/// reading them [`Source::piece`] bytes at a time: never more than `limit` bytes (the
 /// stream is cut off, with an error, as soon as it would exceed them). `sink` returns
 /// whether it wants more. Returns the bytes produced.
-fn inflate_into<S: NpzSource + ?Sized>(
+fn inflate_into<S: Source + ?Sized>(
     src: &S,
     data: Range<usize>,
     limit: usize,
@@ -273,7 +269,7 @@ fn inflate_into<S: NpzSource + ?Sized>(
 
 /// The `.npy` header of `member`, from its first bytes alone (for a deflated member, at
 /// most [`MAX_HEADER_BYTES`] are inflated): what its array is, before reading it.
-pub fn npz_member_header<S: NpzSource + ?Sized>(
+pub fn npz_member_header<S: Source + ?Sized>(
     src: &S,
     member: &NpzMember,
 ) -> Result<NpyHeader, String> {
@@ -312,7 +308,7 @@ pub fn npz_member_header<S: NpzSource + ?Sized>(
 /// values, inflated in pieces and converted straight to `f32`, its CRC-32 checked on the
 /// way. The memory it takes is the `f32` array the header declares, which the directory
 /// and deflate's ratio bound (a small multiple of the file's size), plus a 64 KiB window.
-pub fn read_npz_member<S: NpzSource + ?Sized>(
+pub fn read_npz_member<S: Source + ?Sized>(
     src: &S,
     member: &NpzMember,
 ) -> Result<NpyArray, String> {
@@ -356,7 +352,7 @@ pub fn read_npz_member<S: NpzSource + ?Sized>(
 
 /// Parses the bytes of a `.npz` archive into its members, `(name without ".npy", array)`,
 /// in archive order ([`npz_members`], then [`read_npz_member`] for each).
-pub fn parse_npz<S: NpzSource + ?Sized>(src: &S) -> Result<Vec<(String, NpyArray)>, String> {
+pub fn parse_npz<S: Source + ?Sized>(src: &S) -> Result<Vec<(String, NpyArray)>, String> {
     npz_members(src)?
         .iter()
         .map(|m| Ok((m.name.clone(), read_npz_member(src, m)?)))

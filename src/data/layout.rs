@@ -15,7 +15,9 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::npy::{NpzFile, npz_member_header, npz_members, read_npz_member, read_npz_trajectories};
+use super::npy::{
+    FileSource, npz_member_header, npz_members, read_npz_member, read_npz_trajectories,
+};
 use super::tracks::Tracks;
 use crate::{DomaError, Result};
 use doma_formats::npy::ValueKind;
@@ -168,9 +170,9 @@ impl TrackFile {
 /// Errors name the file and the key: a missing key, a mask whose shape is not the tracks'
 /// `[T, N]`, an observed coordinate that is not finite (an f16 overflow reads as
 /// infinity), a frame or flag that the layout does not have. The file is read member by
-/// member, a piece at a time ([`NpzFile`]), never whole.
+/// member, a piece at a time ([`FileSource`]), never whole.
 pub fn read_npz_tracks(path: &Path, file: &TrackFile) -> Result<Tracks> {
-    let source = NpzFile::open(path).map_err(|e| DomaError::io(path, e))?;
+    let source = FileSource::open(path).map_err(|e| DomaError::io(path, e))?;
     let members = npz_members(&source).map_err(|reason| malformed(path, reason))?;
     let names: Vec<&str> = members.iter().map(|m| m.name.as_str()).collect();
     let layout = file
@@ -255,7 +257,7 @@ fn check_flags(path: &Path, layout: Layout, file: &TrackFile) -> Result<()> {
 struct Archive<'a> {
     path: &'a Path,
     /// The file, read member by member: its bytes are never held whole.
-    source: &'a NpzFile,
+    source: &'a FileSource,
     members: &'a [NpzMember],
     layout: Layout,
     tracks_key: &'static str,
@@ -269,7 +271,7 @@ struct Archive<'a> {
 impl<'a> Archive<'a> {
     fn open(
         path: &'a Path,
-        source: &'a NpzFile,
+        source: &'a FileSource,
         members: &'a [NpzMember],
         layout: Layout,
         file: &TrackFile,

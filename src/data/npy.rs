@@ -22,9 +22,9 @@ pub use doma_formats::npy::{
     NPY_MAGIC, NpyArray, NpyHeader, NpyValues, encode_npy, parse_npy, parse_npy_header,
 };
 pub use doma_formats::npz::{
-    NpzFile, NpzMember, NpzSource, encode_npz, npz_member_header, npz_members, parse_npz,
-    read_npz_member,
+    NpzMember, encode_npz, npz_member_header, npz_members, parse_npz, read_npz_member,
 };
+pub use doma_formats::source::{FileSource, Source};
 
 use super::Trajectories;
 use crate::io::{write_atomic, write_atomic_with};
@@ -85,7 +85,7 @@ pub fn write_npy_trajectories(path: impl AsRef<Path>, data: &Trajectories) -> Re
 /// Reads a `.npz` archive's members, `(name, array)`.
 pub fn read_npz(path: impl AsRef<Path>) -> Result<Vec<(String, NpyArray)>> {
     let path = path.as_ref();
-    let source = NpzFile::open(path).map_err(|e| DomaError::io(path, e))?;
+    let source = FileSource::open(path).map_err(|e| DomaError::io(path, e))?;
     parse_npz(&source).map_err(malformed(path))
 }
 
@@ -93,10 +93,10 @@ pub fn read_npz(path: impl AsRef<Path>) -> Result<Vec<(String, NpyArray)>> {
 /// must hold exactly one member. The member's count, name and `.npy` header (shape
 /// `[T, N, 3]` or `[N, 3]`) are checked before any of its values are inflated, and those
 /// are inflated into no more than the header declares ([`read_npz_member`]), read from the
-/// file a piece at a time ([`NpzFile`]): the archive's bytes are never held whole.
+/// file a piece at a time ([`FileSource`]): the archive's bytes are never held whole.
 pub fn read_npz_trajectories(path: impl AsRef<Path>, key: Option<&str>) -> Result<Trajectories> {
     let path = path.as_ref();
-    let source = NpzFile::open(path).map_err(|e| DomaError::io(path, e))?;
+    let source = FileSource::open(path).map_err(|e| DomaError::io(path, e))?;
     let members = npz_members(&source).map_err(malformed(path))?;
     let names: Vec<&str> = members.iter().map(|m| m.name.as_str()).collect();
     let member = match key {

@@ -1,5 +1,6 @@
-//! Where a `.npz` archive's bytes are read from: memory, or its file a piece at a time, so
-//! that reading a large archive never holds its bytes beside the arrays they decode to.
+//! Where a file's bytes are read from: memory, or the file a piece at a time, so that
+//! reading a large `.npz` archive or C3D file never holds its bytes beside the arrays they
+//! decode to.
 
 use std::borrow::Cow;
 use std::fs::File;
@@ -7,22 +8,22 @@ use std::io::{self, Read, Seek, SeekFrom};
 use std::path::Path;
 use std::sync::Mutex;
 
-/// A `.npz` archive's bytes, read by range ([`super::npz_members`],
-/// [`super::read_npz_member`]).
-pub trait NpzSource {
-    /// The archive's length in bytes.
+/// A file's bytes, read by range ([`crate::npz::npz_members`], [`crate::c3d::parse_from`]).
+pub trait Source {
+    /// The file's length in bytes.
     fn size(&self) -> usize;
 
-    /// The `len` bytes from `at`: an error when the archive ends before them.
+    /// The `len` bytes from `at`: an error when the file ends before them.
     fn bytes_at(&self, at: usize, len: usize) -> Result<Cow<'_, [u8]>, String>;
 
-    /// The most bytes a member's data is asked for at once: all of them from memory.
+    /// The most bytes a reader asks for at once when it reads a long stretch (an archive
+    /// member's data, a C3D file's frames): all of them from memory.
     fn piece(&self) -> usize {
         usize::MAX
     }
 }
 
-impl NpzSource for [u8] {
+impl Source for [u8] {
     fn size(&self) -> usize {
         self.len()
     }
@@ -31,12 +32,17 @@ impl NpzSource for [u8] {
         at.checked_add(len)
             .and_then(|end| self.get(at..end))
             .map(Cow::Borrowed)
-            .ok_or_else(|| "truncated zip record".to_string())
+            .ok_or_else(|| past_the_end(at, len, self.len()))
     }
 }
 
+/// The error of a read past the end of a file of `size` bytes.
+fn past_the_end(at: usize, len: usize, size: usize) -> String {
+    format!("truncated: {len} bytes at byte {at}, past the end of its {size}")
+}
+
 /// As its slice, so that `&Vec<u8>` reads as `&[u8]` does.
-impl NpzSource for Vec<u8> {
+impl Source for Vec<u8> {
     fn size(&self) -> usize {
         self.len()
     }
@@ -46,15 +52,16 @@ impl NpzSource for Vec<u8> {
     }
 }
 
-/// The bytes a file source reads at once from a member's data: large enough that the reads
+/// The bytes a file source reads at once from a long stretch: large enough that the reads
 /// cost nothing beside decoding, small beside an array of a long recording.
 pub const FILE_PIECE: usize = 1 << 20;
 
-/// An archive read from its file as it is parsed: the directory and headers in small reads,
-/// a member's data in pieces of [`FILE_PIECE`] bytes. The file is expected not to change
+/// A file read as it is parsed: the directory, headers and parameters in small reads, long
+/// stretches (an archive member's data, a C3D file's frames) in pieces of [`FILE_PIECE`]
+/// bytes. The file is expected not to change
 /// while it is read; if it does, the reads fail or the members' CRC-32s do not match. What
 /// cannot be read at an offset (a pipe) is read whole at once.
-pub struct NpzFile {
+pub struct FileSource {
     backing: Backing,
     size: usize,
     piece: usize,
@@ -65,15 +72,15 @@ enum Backing {
     Memory(Vec<u8>),
 }
 
-impl NpzFile {
-    /// Opens the archive at `path`.
+impl FileSource {
+    /// Opens the file at `path`.
     pub fn open(path: &Path) -> io::Result<Self> {
         let mut file = File::open(path)?;
         let metadata = file.metadata()?;
         if !metadata.is_file() {
             let mut bytes = Vec::new();
             file.read_to_end(&mut bytes)?;
-            return Ok(NpzFile {
+            return Ok(FileSource {
                 size: bytes.len(),
                 backing: Backing::Memory(bytes),
                 piece: usize::MAX,
@@ -81,21 +88,21 @@ impl NpzFile {
         }
         let size = usize::try_from(metadata.len())
             .map_err(|_| io::Error::other("the file is larger than this machine can address"))?;
-        Ok(NpzFile {
+        Ok(FileSource {
             backing: Backing::File(Mutex::new(file)),
             size,
             piece: FILE_PIECE,
         })
     }
 
-    /// The same archive, its members' data read `bytes` at a time (at least one).
+    /// The same file, its long stretches read `bytes` at a time (at least one).
     pub fn with_piece(mut self, bytes: usize) -> Self {
         self.piece = bytes.max(1);
         self
     }
 }
 
-impl NpzSource for NpzFile {
+impl Source for FileSource {
     fn size(&self) -> usize {
         self.size
     }
@@ -108,7 +115,7 @@ impl NpzSource for NpzFile {
         let end = at
             .checked_add(len)
             .filter(|&end| end <= self.size)
-            .ok_or_else(|| "truncated zip record".to_string())?;
+            .ok_or_else(|| past_the_end(at, len, self.size))?;
         let mut file = file
             .lock()
             .map_err(|_| "a reader of the archive panicked".to_string())?;
@@ -124,29 +131,31 @@ impl NpzSource for NpzFile {
     }
 }
 
+/// Bytes in memory served in owned pieces of at most `.1` bytes, as a file is (for tests).
+#[cfg(test)]
+pub(crate) struct Pieces<'a>(pub &'a [u8], pub usize);
+
+#[cfg(test)]
+impl Source for Pieces<'_> {
+    fn size(&self) -> usize {
+        self.0.len()
+    }
+    fn bytes_at(&self, at: usize, len: usize) -> Result<Cow<'_, [u8]>, String> {
+        self.0.bytes_at(at, len).map(|b| Cow::Owned(b.into_owned()))
+    }
+    fn piece(&self) -> usize {
+        self.1
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::npy::NpyValues;
     use crate::npz::{encode_npz_values, parse_npz};
 
-    /// An archive in memory served in owned pieces of `piece` bytes, as a file is.
-    struct Pieces<'a>(&'a [u8], usize);
-
-    impl NpzSource for Pieces<'_> {
-        fn size(&self) -> usize {
-            self.0.len()
-        }
-        fn bytes_at(&self, at: usize, len: usize) -> Result<Cow<'_, [u8]>, String> {
-            self.0.bytes_at(at, len).map(|b| Cow::Owned(b.into_owned()))
-        }
-        fn piece(&self) -> usize {
-            self.1
-        }
-    }
-
     fn deflated() -> &'static [u8] {
-        include_bytes!("../../../tests/fixtures/deflated_zip64.npz")
+        include_bytes!("../../tests/fixtures/deflated_zip64.npz")
     }
 
     fn stored() -> Vec<u8> {
@@ -195,7 +204,7 @@ mod tests {
             std::fs::write(&path, bytes).unwrap();
             let whole = parse_npz(bytes);
             for piece in [3, FILE_PIECE] {
-                let file = NpzFile::open(&path).unwrap().with_piece(piece);
+                let file = FileSource::open(&path).unwrap().with_piece(piece);
                 assert_eq!(parse_npz(&file), whole, "{name}, piece {piece}");
             }
         }
@@ -220,7 +229,7 @@ mod tests {
             let (path, bytes) = (path.clone(), bytes.clone());
             std::thread::spawn(move || std::fs::write(path, bytes).unwrap())
         };
-        let file = NpzFile::open(&path).unwrap();
+        let file = FileSource::open(&path).unwrap();
         writer.join().unwrap();
         assert_eq!(parse_npz(&file), parse_npz(&bytes));
         assert!(parse_npz(&file).is_ok());
