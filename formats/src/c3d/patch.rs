@@ -3,7 +3,8 @@
 //! (in its order), every analog sample and every event is kept.
 
 use super::Processor;
-use super::read::{Layout, parameters};
+use super::read::{Layout, head, parameters};
+use crate::source::Source;
 
 /// One point to write over a file's.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,26 +39,53 @@ pub fn patch(bytes: &[u8], edits: &[PointEdit]) -> Result<Vec<u8>, String> {
 /// and a position that an integer file cannot hold (past ±32767 × the scale); every edit
 /// is checked before any is written, so a refusal leaves `bytes` as they were.
 pub fn patch_in_place(bytes: &mut [u8], edits: &[PointEdit]) -> Result<(), String> {
-    let (processor, layout) = {
-        let (processor, params) = parameters(bytes)?;
-        (processor, Layout::of(bytes, processor, &params)?)
-    };
-    for edit in edits {
-        words(edit, processor, &layout)?;
-    }
-    for edit in edits {
-        let (at, words, len) = words(edit, processor, &layout)?;
-        bytes[at..at + len].copy_from_slice(&words[..len]);
+    for w in patch_words(&*bytes, edits)? {
+        bytes[w.at..w.at + w.len].copy_from_slice(w.bytes());
     }
     Ok(())
 }
 
-/// Where `edit`'s point is in the file, and its `x y z w` words: `len` bytes of `words`.
-fn words(
+/// One point's `x y z w` words as a patch writes them, at byte `at` of the file.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointWords {
+    /// The byte of the file where the words start.
+    pub at: usize,
+    words: [u8; 16],
+    len: usize,
+}
+
+impl PointWords {
+    /// The words' bytes (8 in an integer file, 16 in a float one).
+    pub fn bytes(&self) -> &[u8] {
+        &self.words[..self.len]
+    }
+}
+
+/// What [`patch_in_place`] writes into the C3D file `src`, checked (the same refusals), in
+/// the order of the bytes they go to (two edits of one point in the order given): for a
+/// caller that copies the file a piece at a time and writes each piece's words over it.
+/// Reads the file's header and parameters alone.
+pub fn patch_words<S: Source + ?Sized>(
+    src: &S,
+    edits: &[PointEdit],
+) -> Result<Vec<PointWords>, String> {
+    let head = head(src)?;
+    let (processor, params) = parameters(&head)?;
+    let layout = Layout::of(&head, src.size(), processor, &params)?;
+    let mut words = edits
+        .iter()
+        .map(|e| point_words(e, processor, &layout))
+        .collect::<Result<Vec<_>, _>>()?;
+    words.sort_by_key(|w| w.at);
+    Ok(words)
+}
+
+/// Where `edit`'s point is in the file, and its `x y z w` words.
+fn point_words(
     edit: &PointEdit,
     processor: Processor,
     layout: &Layout,
-) -> Result<(usize, [u8; 16], usize), String> {
+) -> Result<PointWords, String> {
     let float = layout.scale < 0.0;
     let size = if float { 4 } else { 2 };
     let magnitude = layout.scale.abs();
@@ -104,7 +132,11 @@ fn words(
         }
         words[6..8].copy_from_slice(&processor.put_u16(w as i16 as u16));
     }
-    Ok((at, words, 4 * size))
+    Ok(PointWords {
+        at,
+        words,
+        len: 4 * size,
+    })
 }
 
 #[cfg(test)]

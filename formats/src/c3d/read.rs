@@ -1,6 +1,7 @@
 //! Reading a C3D file: the header, the parameter section and the points.
 
 use super::{C3d, Processor};
+use crate::source::Source;
 
 /// One parameter of the parameter section.
 struct Param<'a> {
@@ -162,9 +163,17 @@ fn parse_params(section: &[u8], processor: Processor) -> Result<Params<'_>, Stri
 /// analog samples are skipped). The error says what is wrong (the caller adds the file
 /// name).
 pub fn parse(bytes: &[u8]) -> Result<C3d, String> {
-    let (processor, params) = parameters(bytes)?;
-    let layout = Layout::of(bytes, processor, &params)?;
-    let (positions, residuals, cameras) = read_points(bytes, processor, &layout);
+    parse_from(bytes)
+}
+
+/// [`parse`] of a C3D file read from `src`: its header and parameter section first, then
+/// its frames [`Source::piece`] bytes at a time, so that a file read from disk
+/// ([`crate::source::FileSource`]) is never held whole (its analog samples are read past).
+pub fn parse_from<S: Source + ?Sized>(src: &S) -> Result<C3d, String> {
+    let head = head(src)?;
+    let (processor, params) = parameters(&head)?;
+    let layout = Layout::of(&head, src.size(), processor, &params)?;
+    let (positions, residuals, cameras) = read_points(src, processor, &layout)?;
     let units = params
         .strings("POINT", "UNITS")
         .and_then(|u| u.into_iter().next())
@@ -182,6 +191,25 @@ pub fn parse(bytes: &[u8]) -> Result<C3d, String> {
         residuals,
         cameras,
     })
+}
+
+/// The first bytes of the file `src`, through the end of its parameter section: all that
+/// [`parameters`] and [`Layout::of`] read (the whole file when its header cannot say where
+/// that section ends).
+pub(super) fn head<S: Source + ?Sized>(src: &S) -> Result<std::borrow::Cow<'_, [u8]>, String> {
+    let len = src.size();
+    let whole = || src.bytes_at(0, len);
+    if len < 512 {
+        return whole();
+    }
+    let header = src.bytes_at(0, 512)?;
+    let pstart = (header[0] as usize).saturating_sub(1) * 512;
+    if header[0] == 0 || pstart + 4 > len {
+        return whole();
+    }
+    let blocks = src.bytes_at(pstart + 2, 1)?[0];
+    let pend = len.min(pstart + (blocks as usize).max(1) * 512);
+    src.bytes_at(0, pend.max(512))
 }
 
 /// The header's checks, the processor, and the parameter section.
@@ -238,7 +266,14 @@ pub(super) struct Layout {
 }
 
 impl Layout {
-    pub(super) fn of(bytes: &[u8], processor: Processor, params: &Params) -> Result<Self, String> {
+    /// The layout of a file of `len` bytes whose first bytes are `bytes` (at least its
+    /// header, [`head`]).
+    pub(super) fn of(
+        bytes: &[u8],
+        len: usize,
+        processor: Processor,
+        params: &Params,
+    ) -> Result<Self, String> {
         let word = |w: usize| processor.u16(&bytes[2 * (w - 1)..2 * w]);
         let points = params.u16("POINT", "USED").unwrap_or_else(|| word(2)) as usize;
         if points == 0 {
@@ -285,11 +320,10 @@ impl Layout {
             .checked_mul(record)
             .and_then(|d| d.checked_add(start))
             .ok_or_else(|| format!("{frames} frames of {points} points overflow"))?;
-        if bytes.len() < needed {
+        if len < needed {
             return Err(format!(
                 "truncated: {frames} frames of {points} points (and {analog} analog words) \
-                 need {needed} bytes, the file has {}",
-                bytes.len()
+                 need {needed} bytes, the file has {len}"
             ));
         }
         Ok(Layout {
@@ -304,12 +338,16 @@ impl Layout {
     }
 }
 
-/// The positions `[T, N, 3]`, residuals `[T, N]` and camera masks `[T, N]` of every frame.
-fn read_points(
-    bytes: &[u8],
+/// A file's positions `[T, N, 3]`, residuals `[T, N]` and camera masks `[T, N]`.
+type Points = (Vec<f32>, Vec<f32>, Vec<u8>);
+
+/// The positions `[T, N, 3]`, residuals `[T, N]` and camera masks `[T, N]` of every frame,
+/// read from `src` as many whole frames at a time as [`Source::piece`] allows.
+fn read_points<S: Source + ?Sized>(
+    src: &S,
     processor: Processor,
     layout: &Layout,
-) -> (Vec<f32>, Vec<f32>, Vec<u8>) {
+) -> Result<Points, String> {
     let (frames, points, start, record) =
         (layout.frames, layout.points, layout.start, layout.record);
     let float = layout.scale < 0.0;
@@ -318,33 +356,40 @@ fn read_points(
     let mut positions = Vec::with_capacity(frames * points * 3);
     let mut residuals = Vec::with_capacity(frames * points);
     let mut cameras = Vec::with_capacity(frames * points);
-    for k in 0..frames {
-        let row = &bytes[start + k * record..start + k * record + 4 * points * size];
-        for p in row.chunks_exact(4 * size) {
-            let w = if float {
-                for c in 0..3 {
-                    positions.push(processor.f32(&p[4 * c..4 * c + 4]));
+    let per_read = (src.piece() / record.max(1)).clamp(1, frames.max(1));
+    for first in (0..frames).step_by(per_read) {
+        let count = per_read.min(frames - first);
+        // Through the last frame's points: its analog samples are not needed.
+        let len = (count - 1) * record + 4 * points * size;
+        let chunk = src.bytes_at(start + first * record, len)?;
+        for k in 0..count {
+            let row = &chunk[k * record..k * record + 4 * points * size];
+            for p in row.chunks_exact(4 * size) {
+                let w = if float {
+                    for c in 0..3 {
+                        positions.push(processor.f32(&p[4 * c..4 * c + 4]));
+                    }
+                    let w = processor.f32(&p[12..16]);
+                    // The word is an integer stored as a float; NaN counts as not measured.
+                    if w.is_nan() { -1 } else { w as i32 }
+                } else {
+                    for c in 0..3 {
+                        let v = processor.u16(&p[2 * c..2 * c + 2]) as i16;
+                        positions.push(v as f32 * magnitude);
+                    }
+                    processor.u16(&p[6..8]) as i16 as i32
+                };
+                if w < 0 {
+                    residuals.push(-1.0);
+                    cameras.push(0);
+                } else {
+                    residuals.push((w & 0xff) as f32 * magnitude);
+                    cameras.push(((w & 0x7f00) >> 8) as u8);
                 }
-                let w = processor.f32(&p[12..16]);
-                // The word is an integer stored as a float; NaN counts as not measured.
-                if w.is_nan() { -1 } else { w as i32 }
-            } else {
-                for c in 0..3 {
-                    let v = processor.u16(&p[2 * c..2 * c + 2]) as i16;
-                    positions.push(v as f32 * magnitude);
-                }
-                processor.u16(&p[6..8]) as i16 as i32
-            };
-            if w < 0 {
-                residuals.push(-1.0);
-                cameras.push(0);
-            } else {
-                residuals.push((w & 0xff) as f32 * magnitude);
-                cameras.push(((w & 0x7f00) >> 8) as u8);
             }
         }
     }
-    (positions, residuals, cameras)
+    Ok((positions, residuals, cameras))
 }
 
 /// The `points` labels: `POINT:LABELS`, then `LABELS2`, ... until there are enough, `""`
