@@ -10,10 +10,14 @@ Recordings of two and four minutes built the same way (24,000 and 48,000 frames,
 960 gaps) show how the peaks grow with the frame count: the last line gives each peak's
 growth from one minute to four against the tracks' own.
 
-    python scripts/native_rate_timing.py [DOMA_BINARY] [--out DIR]
+With --c3d each recording is a C3D file instead (floats, with 38 analog channels sampled
+10 times a frame, a force plate's 2,000 Hz), fitted from the .c3d and completed to a .c3d,
+as a lab's trial is.
+
+    python scripts/native_rate_timing.py [DOMA_BINARY] [--c3d]
 
 Needs numpy and the doma binary (default $CARGO_TARGET_DIR/release/doma); /usr/bin/time
-for the peak memory.
+for the peak memory; the `c3d` package for --c3d.
 """
 
 import argparse
@@ -31,6 +35,8 @@ RATE = 200.0
 FRAMES = 12_000
 MARKERS = 60
 GAP_S = 0.5
+ANALOG_CHANNELS = 38
+ANALOG_PER_FRAME = 10
 
 
 def source_tracks():
@@ -91,20 +97,54 @@ def timed(cmd):
     return seconds, peak
 
 
-def case(doma, work, name, tracks, observed, events, seed):
+def write_c3d(path, tracks, mask):
+    """`tracks` where `mask` holds as a float C3D at RATE, an unobserved point written as
+    not measured, with ANALOG_CHANNELS smooth analog channels."""
+    import c3d
+
+    t, n, _ = tracks.shape
+    w = c3d.Writer(point_rate=RATE, analog_rate=RATE * ANALOG_PER_FRAME, point_scale=-1.0)
+    w.set_point_labels([f"M{i:02d}" for i in range(n)])
+    w.set_analog_labels([f"A{i:02d}" for i in range(ANALOG_CHANNELS)])
+    phase = np.arange(ANALOG_CHANNELS)[:, None] * 0.1
+    frames = []
+    for k in range(t):
+        points = np.zeros((n, 5), np.float32)
+        points[:, :3] = np.where(mask[k][:, None], tracks[k], 0.0)
+        points[:, 3] = np.where(mask[k], 1.0, -1.0)
+        s = (k * ANALOG_PER_FRAME + np.arange(ANALOG_PER_FRAME))[None, :] / (RATE * ANALOG_PER_FRAME)
+        frames.append((points, (100 * np.sin(2 * np.pi * 3 * s + phase)).astype(np.float32)))
+    w.add_frames(frames)
+    with open(path, "wb") as f:
+        w.write(f)
+
+
+def read_c3d(path):
+    import c3d
+
+    with open(path, "rb") as f:
+        return np.stack([p[:, :3] for _, p, _ in c3d.Reader(f).read_frames()]).astype(np.float64)
+
+
+def case(doma, work, name, tracks, observed, events, seed, as_c3d):
     mask, hidden = hide(observed, events, np.random.default_rng(seed))
-    data = work / f"{name}.npz"
-    np.savez(data, tracks=np.where(mask[..., None], tracks, np.nan).astype(np.float32), observed=mask)
+    ext = "c3d" if as_c3d else "npz"
+    data = work / f"{name}.{ext}"
+    if as_c3d:
+        write_c3d(data, tracks, mask)
+    else:
+        np.savez(data, tracks=np.where(mask[..., None], tracks, np.nan).astype(np.float32), observed=mask)
     run = work / f"{name}-run"
     fit_s, fit_mb = timed([doma, "fit", str(data), "--out", str(run), "--quiet", "--seed", str(seed)])
-    out = work / f"{name}-filled.npz"
+    out = work / f"{name}-filled.{ext}"
     complete_s, complete_mb = timed([doma, "complete", str(run), "--out", str(out)])
-    filled = np.load(out)["tracks"].astype(np.float64)
+    filled = read_c3d(out) if as_c3d else np.load(out)["tracks"].astype(np.float64)
     errors = [np.linalg.norm(filled[s : s + g][:, m] - tracks[s : s + g][:, m], axis=2).mean() for s, g, m in hidden]
     return {
         "frames": len(tracks), "fit_s": fit_s, "fit_mb": fit_mb, "complete_s": complete_s,
         "complete_mb": complete_mb, "events": len(hidden), "error_mm": float(np.mean(errors)),
         "data_mb": tracks.size * 4 / 2**20,  # as the .npz holds them: float32
+        "file_mb": data.stat().st_size / 2**20,
     }
 
 
@@ -113,6 +153,7 @@ def main():
     target = os.environ.get("CARGO_TARGET_DIR", str(ROOT / "target"))
     p.add_argument("doma", nargs="?", default=f"{target}/release/doma")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--c3d", action="store_true", help="C3D recordings with analog channels")
     args = p.parse_args()
     tracks, observed = source_tracks()
     tracks, observed = tracks[:, :MARKERS], observed[:, :MARKERS]
@@ -120,17 +161,20 @@ def main():
     whole_o = ping_pong(observed, 4 * FRAMES)
     with tempfile.TemporaryDirectory() as tmp:
         work = pathlib.Path(tmp)
+        at = lambda name, frames, events: case(
+            args.doma, work, name, whole_t[:frames], whole_o[:frames], events, args.seed, args.c3d
+        )
         rows = [
-            ("5 s excerpt", case(args.doma, work, "excerpt", whole_t[:1000], whole_o[:1000], 20, args.seed)),
-            ("60 s", case(args.doma, work, "whole", whole_t[:FRAMES], whole_o[:FRAMES], 240, args.seed)),
-            ("120 s", case(args.doma, work, "double", whole_t[: 2 * FRAMES], whole_o[: 2 * FRAMES], 480, args.seed)),
-            ("240 s", case(args.doma, work, "quad", whole_t, whole_o, 960, args.seed)),
+            ("5 s excerpt", at("excerpt", 1000, 20)),
+            ("60 s", at("whole", FRAMES, 240)),
+            ("120 s", at("double", 2 * FRAMES, 480)),
+            ("240 s", at("quad", 4 * FRAMES, 960)),
         ]
-    print("| recording | frames × markers | fit (s) | fit peak (MB) | complete (s) | complete peak (MB) | data (MB) | 0.5 s gaps, 3 markers | error (mm) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| recording | frames × markers | fit (s) | fit peak (MB) | complete (s) | complete peak (MB) | data (MB) | file (MB) | 0.5 s gaps, 3 markers | error (mm) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name, r in rows:
         print(f"| {name} | {r['frames']} × {MARKERS} | {r['fit_s']:.0f} | {r['fit_mb']:.0f} | {r['complete_s']:.0f} | "
-              f"{r['complete_mb']:.0f} | {r['data_mb']:.1f} | {r['events']} | {r['error_mm']:.2f} |")
+              f"{r['complete_mb']:.0f} | {r['data_mb']:.1f} | {r['file_mb']:.1f} | {r['events']} | {r['error_mm']:.2f} |")
     one, four = rows[1][1], rows[3][1]
     data = four["data_mb"] - one["data_mb"]
     print(f"\nfrom 60 s to 240 s, per MB more tracks: fit peak +{(four['fit_mb'] - one['fit_mb']) / data:.1f} MB, "
