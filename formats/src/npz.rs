@@ -40,17 +40,30 @@ fn le_u64(b: &[u8], at: usize) -> Result<u64, String> {
         .ok_or_else(|| "truncated zip record".to_string())
 }
 
-/// The same integers read from a source ([`Source::bytes_at`]).
+/// The `len` bytes of a zip record at `at` of `src`: a record past the end is a truncated
+/// one, as [`le_u32`] says it.
+fn record<S: Source + ?Sized>(
+    src: &S,
+    at: usize,
+    len: usize,
+) -> Result<std::borrow::Cow<'_, [u8]>, String> {
+    if at.checked_add(len).is_none_or(|end| end > src.size()) {
+        return Err("truncated zip record".into());
+    }
+    src.bytes_at(at, len)
+}
+
+/// The same integers read from a source ([`record`]).
 fn u16_at<S: Source + ?Sized>(src: &S, at: usize) -> Result<u64, String> {
-    le_u16(&src.bytes_at(at, 2)?, 0)
+    le_u16(&record(src, at, 2)?, 0)
 }
 
 fn u32_at<S: Source + ?Sized>(src: &S, at: usize) -> Result<u64, String> {
-    le_u32(&src.bytes_at(at, 4)?, 0)
+    le_u32(&record(src, at, 4)?, 0)
 }
 
 fn u64_at<S: Source + ?Sized>(src: &S, at: usize) -> Result<u64, String> {
-    le_u64(&src.bytes_at(at, 8)?, 0)
+    le_u64(&record(src, at, 8)?, 0)
 }
 
 /// One member of a `.npz` archive, as its directory describes it; nothing is inflated yet.
@@ -139,7 +152,7 @@ fn directory_entry<S: Source + ?Sized>(src: &S, at: usize) -> Result<(NpzMember,
     if u32_at(src, at)? != 0x0201_4b50 {
         return Err(format!("the zip directory is corrupt at byte {at}"));
     }
-    let entry = src.bytes_at(at, 46)?;
+    let entry = record(src, at, 46)?;
     let method = le_u16(&entry, 10)?;
     let crc = le_u32(&entry, 16)? as u32;
     let mut packed = le_u32(&entry, 20)?;
