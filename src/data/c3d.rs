@@ -86,8 +86,8 @@ fn copy_patched<S: Source + ?Sized>(
 
 /// The markers as tracks: an entry is observed where the file holds a point
 /// ([`C3d::present`]). A measured point that is not finite is refused, naming its frame
-/// and marker.
-pub fn c3d_tracks(c: &C3d) -> std::result::Result<Tracks, String> {
+/// and marker. Takes the markers, so that their positions are not copied.
+pub fn c3d_tracks(c: C3d) -> std::result::Result<Tracks, String> {
     let present = c.present();
     if let Some(e) = (0..present.len())
         .find(|&e| present[e] && c.positions[3 * e..3 * e + 3].iter().any(|v| !v.is_finite()))
@@ -100,7 +100,7 @@ pub fn c3d_tracks(c: &C3d) -> std::result::Result<Tracks, String> {
             &c.positions[3 * e..3 * e + 3]
         ));
     }
-    Tracks::new(c.frames, c.points, c.positions.clone(), present)
+    Tracks::new(c.frames, c.points, c.positions, present)
 }
 
 /// Writes `data` to `path` as a C3D file, atomically (temporary file, then rename).
@@ -183,12 +183,12 @@ mod tests {
             residuals: vec![1.0, 1.0, 1.0, 1.0],
             cameras: vec![0; 4],
         };
-        let e = c3d_tracks(&c).unwrap_err();
+        let e = c3d_tracks(c.clone()).unwrap_err();
         assert!(e.contains("frame 1") && e.contains("\"RASI\""), "{e}");
         // The origin counts as not measured, whatever its residual.
         let mut ok = c.clone();
         ok.residuals[3] = -1.0;
-        let t = c3d_tracks(&ok).unwrap();
+        let t = c3d_tracks(ok).unwrap();
         assert_eq!(t.observed(), &[true, false, true, false]);
     }
 }

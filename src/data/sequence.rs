@@ -303,7 +303,7 @@ pub fn read_tracks(data: &Path, file: &TrackFile) -> Result<(Tracks, Option<Vec<
 
 /// A C3D file's markers as tracks ([`c3d::c3d_tracks`]), every defect naming the file.
 fn read_c3d_tracks(data: &Path) -> Result<Tracks> {
-    c3d::c3d_tracks(&c3d::read_c3d(data)?).map_err(|reason| DomaError::Malformed {
+    c3d::c3d_tracks(c3d::read_c3d(data)?).map_err(|reason| DomaError::Malformed {
         path: data.to_path_buf(),
         reason,
     })

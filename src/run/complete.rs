@@ -258,11 +258,12 @@ fn complete_with(
     let read_input = || -> Result<(Tracks, Range<usize>, Option<f32>)> {
         let (mut input, rate) = if is_c3d(&config.data) {
             let markers = read_c3d(&config.data)?;
-            let tracks = c3d_tracks(&markers).map_err(|reason| DomaError::Malformed {
+            let rate = markers.rate;
+            let tracks = c3d_tracks(markers).map_err(|reason| DomaError::Malformed {
                 path: config.data.clone(),
                 reason,
             })?;
-            (tracks, Some(markers.rate))
+            (tracks, Some(rate))
         } else {
             (read_tracks(&config.data, &config.tracks)?.0, None)
         };

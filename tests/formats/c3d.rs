@@ -67,7 +67,7 @@ fn a_written_file_reads_back_with_its_gaps() {
     for (a, b) in back.residuals.iter().zip(&c.residuals) {
         assert!((a - b).abs() < 1e-6, "{a} vs {b}");
     }
-    let tracks = c3d_tracks(&back).unwrap();
+    let tracks = c3d_tracks(back.clone()).unwrap();
     let gaps: Vec<usize> = (0..12).filter(|&e| !tracks.observed()[e]).collect();
     assert_eq!(gaps, vec![2, 6, 7]);
     // A vendor file through the writer reads as the same markers.
