@@ -285,7 +285,9 @@ impl Tracks {
                 self.points
             )));
         }
-        let filled = self.marked().linear();
+        // Filled in place: a long recording is not held twice while it loads.
+        let mut filled = self.positions;
+        crate::gaps::classic::fill_linear(&mut filled, &self.observed, self.frames, self.points);
         let canonical = canonical_positions(self.frames, self.points, &filled, &self.observed, r)?;
         let data = Trajectories::new(self.frames, self.points, filled)?.with_observations(
             self.observed,

@@ -16,12 +16,7 @@ impl Marked<'_> {
     /// observed entries are read; a track never observed is left as it is.
     pub fn linear(&self) -> Vec<f32> {
         let mut out = self.positions.to_vec();
-        for gap in gaps(self) {
-            for k in gap.frames.clone() {
-                let e = 3 * (k * self.points + gap.track);
-                out[e..e + 3].copy_from_slice(&self.linear_at(k, gap.track, gap.before, gap.after));
-            }
-        }
+        fill_linear(&mut out, self.observed, self.frames, self.points);
         out
     }
 
@@ -34,17 +29,7 @@ impl Marked<'_> {
         before: Option<usize>,
         after: Option<usize>,
     ) -> [f32; 3] {
-        let at = |j: usize| self.at(j, i);
-        match (before, after) {
-            (Some(a), Some(b)) => {
-                let w = (k - a) as f32 / (b - a) as f32;
-                let (p, q) = (at(a), at(b));
-                std::array::from_fn(|c| p[c] + w * (q[c] - p[c]))
-            }
-            (Some(a), None) => at(a),
-            (None, Some(b)) => at(b),
-            (None, None) => at(k),
-        }
+        linear_between(self.positions, self.points, k, i, before, after)
     }
 
     /// Each track's natural cubic spline through its observed frames (per coordinate, in
@@ -172,6 +157,46 @@ impl Marked<'_> {
             }
         }
         out
+    }
+}
+
+/// [`Marked::linear`] written into `positions` (`[T, N, 3]`, its mask `observed`) in
+/// place: only observed entries are read, and only unobserved ones written, so that the
+/// tracks need no second copy.
+pub fn fill_linear(positions: &mut [f32], observed: &[bool], frames: usize, points: usize) {
+    let gaps: Vec<_> = gaps(&Marked::new(frames, points, positions, observed)).collect();
+    for gap in gaps {
+        for k in gap.frames.clone() {
+            let v = linear_between(positions, points, k, gap.track, gap.before, gap.after);
+            let e = 3 * (k * points + gap.track);
+            positions[e..e + 3].copy_from_slice(&v);
+        }
+    }
+}
+
+/// Frame `k` of track `i` of `positions` (`[T, N, 3]`), linear between its observations at
+/// `before` and `after` (`None` past an end; neither: the entry as it is).
+fn linear_between(
+    positions: &[f32],
+    points: usize,
+    k: usize,
+    i: usize,
+    before: Option<usize>,
+    after: Option<usize>,
+) -> [f32; 3] {
+    let at = |j: usize| -> [f32; 3] {
+        let e = 3 * (j * points + i);
+        [positions[e], positions[e + 1], positions[e + 2]]
+    };
+    match (before, after) {
+        (Some(a), Some(b)) => {
+            let w = (k - a) as f32 / (b - a) as f32;
+            let (p, q) = (at(a), at(b));
+            std::array::from_fn(|c| p[c] + w * (q[c] - p[c]))
+        }
+        (Some(a), None) => at(a),
+        (None, Some(b)) => at(b),
+        (None, None) => at(k),
     }
 }
 

@@ -120,17 +120,46 @@ impl<M> Outcome<M> {
     }
 }
 
-/// Reads an iteration's step losses back (one device sync), each a `[2]` tensor
-/// (primary loss, total) in the order `order` of frames; stops with
+/// A step's summed primary and total loss: on the host already (the fused step computes
+/// them there), or a `[2]` tensor still on the device.
+pub(super) enum StepLoss {
+    /// The two losses, as the `f32` a tensor would hold.
+    Host([f32; 2]),
+    /// The `[2]` tensor, read back with the iteration's others (boxed: a tensor is large
+    /// beside two floats).
+    Device(Box<Tensor<1>>),
+}
+
+/// Reads an iteration's step losses back (one device sync for those on the device; those
+/// on the host never become tensors, whose autodiff bookkeeping cost tens of megabytes an
+/// iteration), each (primary loss, total) in the order `order` of frames; stops with
 /// [`DomaError::NonFiniteLoss`] naming the iteration and frame if any is not finite, else
 /// returns the two means.
 pub(super) fn read_step_losses(
-    step_losses: Vec<Tensor<1>>,
+    step_losses: Vec<StepLoss>,
     first_frames: &[usize],
     frames: usize,
     iteration: usize,
 ) -> Result<(f64, f64)> {
-    let losses = crate::readback::to_vec::<f64, 2, _>(Tensor::stack::<2>(step_losses, 0))?;
+    let mut on_device = Vec::new();
+    for l in &step_losses {
+        if let StepLoss::Device(t) = l {
+            on_device.push((**t).clone());
+        }
+    }
+    let read = if on_device.is_empty() {
+        Vec::new()
+    } else {
+        crate::readback::to_vec::<f64, 2, _>(Tensor::stack::<2>(on_device, 0))?
+    };
+    let mut read = read.chunks_exact(2);
+    let mut losses = Vec::with_capacity(2 * step_losses.len());
+    for l in &step_losses {
+        match l {
+            StepLoss::Host(pair) => losses.extend(pair.map(f64::from)),
+            StepLoss::Device(_) => losses.extend(read.next().into_iter().flatten().copied()),
+        }
+    }
     if let Some(i) = losses.iter().position(|v| !v.is_finite()) {
         return Err(DomaError::NonFiniteLoss {
             iteration,

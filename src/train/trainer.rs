@@ -17,7 +17,7 @@ use super::config::FitConfig;
 use super::fused::{self, FusedStep, StepKind};
 use super::hooks::Hooks;
 use super::objective::Objective;
-use super::record::{Fitted, IterationRecord, Outcome, read_step_losses};
+use super::record::{Fitted, IterationRecord, Outcome, StepLoss, read_step_losses};
 use super::schedule::{Convergence, ScheduleConfig};
 use super::trajectory::TrajectoryObjective;
 use crate::data::Trajectories;
@@ -205,6 +205,17 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
     /// loss, so it is the paper's step). Returns the (detached) summed primary and total
     /// loss as a `[2]` tensor.
     pub fn step_frames(&mut self, frames: &[usize], lr: f64) -> Result<Tensor<1>> {
+        Ok(match self.step_loss(frames, lr)? {
+            StepLoss::Host(values) => {
+                let device = self.device.clone().unwrap_or_default();
+                Tensor::from_data(TensorData::new(values.to_vec(), [2]), &device)
+            }
+            StepLoss::Device(losses) => *losses,
+        })
+    }
+
+    /// [`Trainer::step_frames`], its losses left on the host where the step computed them.
+    fn step_loss(&mut self, frames: &[usize], lr: f64) -> Result<StepLoss> {
         match self.device.clone() {
             Some(device) => {
                 crate::backend::on_worker(&device, || self.step_frames_here(frames, lr))
@@ -213,7 +224,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         }
     }
 
-    fn step_frames_here(&mut self, frames: &[usize], lr: f64) -> Result<Tensor<1>> {
+    fn step_frames_here(&mut self, frames: &[usize], lr: f64) -> Result<StepLoss> {
         if let (Some(fused), [k]) = (self.fused.as_mut(), frames) {
             let batch = self
                 .objective
@@ -222,9 +233,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
                     DomaError::InvalidConfig("the objective gives no host batches".into())
                 })?;
             let losses = fused.step(&batch.batch(), lr);
-            let device = self.device.clone().unwrap_or_default();
-            let values = vec![losses.data as f32, losses.total as f32];
-            return Ok(Tensor::from_data(TensorData::new(values, [2]), &device));
+            return Ok(StepLoss::Host([losses.data as f32, losses.total as f32]));
         }
         let field = self.field.take().expect("the field is always put back");
         let iteration = self.history.len();
@@ -257,7 +266,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         self.objective.after_backward(&grads, lr);
         let grads = GradientsParams::from_grads(grads, &field);
         self.field = Some(self.optim.step(lr, field, grads));
-        Ok(losses)
+        Ok(StepLoss::Device(Box::new(losses)))
     }
 
     /// The frames an iteration visits: all of them, or at most `frames_per_iteration`.
@@ -284,7 +293,7 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         let mut step_losses = Vec::with_capacity(order.len());
         let mut first_frames = Vec::with_capacity(order.len());
         for frames in order.chunks(self.frames_per_step) {
-            step_losses.push(self.step_frames(frames, lr)?);
+            step_losses.push(self.step_loss(frames, lr)?);
             first_frames.push(frames[0]);
         }
         self.sync_field();
