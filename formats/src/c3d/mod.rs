@@ -25,7 +25,7 @@ mod patch;
 mod read;
 mod write;
 
-pub use patch::{PointEdit, PointWords, patch, patch_in_place, patch_words};
+pub use patch::{PointEdit, PointWords, patch, patch_words, write_patched};
 pub use read::{parse, parse_from};
 pub use write::encode;
 

@@ -1,6 +1,8 @@
-//! Rewriting points of a C3D file in place: the file's bytes with only the given points
+//! Rewriting points of a C3D file: a copy of its bytes with only the given points
 //! changed, in its own byte order and number format, so that every group and parameter
 //! (in its order), every analog sample and every event is kept.
+
+use std::io::{self, Write};
 
 use super::Processor;
 use super::read::{Layout, head, parameters};
@@ -23,24 +25,38 @@ pub struct PointEdit {
 }
 
 /// `bytes` (a C3D file that [`super::parse`] reads) with each of `edits` written over its
-/// point's `x y z w` words ([`patch_in_place`]), in a copy.
+/// point's `x y z w` words ([`patch_words`], [`write_patched`]), in a copy.
 pub fn patch(bytes: &[u8], edits: &[PointEdit]) -> Result<Vec<u8>, String> {
-    let mut out = bytes.to_vec();
-    patch_in_place(&mut out, edits)?;
+    let words = patch_words(bytes, edits)?;
+    let mut out = Vec::with_capacity(bytes.len());
+    write_patched(bytes, &words, &mut out).map_err(|e| e.to_string())?;
     Ok(out)
 }
 
-/// Writes each of `edits` over its point's `x y z w` words in `bytes` (a C3D file that
-/// [`super::parse`] reads), in the file's processor format (Intel, DEC or MIPS) and number
-/// format (floats, or `i16` multiples of the scale); every other byte stays as it was. The
-/// residual word is encoded as the reader decodes it: `−1` for not measured, else the
-/// residual in units of `|scale|` (rounded, at most 255) with the camera mask above it.
-/// Refuses an edit outside the file's frames or points, a position that is not finite,
-/// and a position that an integer file cannot hold (past ±32767 × the scale); every edit
-/// is checked before any is written, so a refusal leaves `bytes` as they were.
-pub fn patch_in_place(bytes: &mut [u8], edits: &[PointEdit]) -> Result<(), String> {
-    for w in patch_words(&*bytes, edits)? {
-        bytes[w.at..w.at + w.len].copy_from_slice(w.bytes());
+/// Copies the C3D file `src` to `w` [`Source::piece`] bytes at a time, with `words` (as
+/// [`patch_words`] orders them) written over each piece: a file read from disk is never
+/// held whole, whichever pieces the words straddle.
+pub fn write_patched<S: Source + ?Sized>(
+    src: &S,
+    words: &[PointWords],
+    w: &mut impl Write,
+) -> io::Result<()> {
+    let (size, mut first, mut at) = (src.size(), 0, 0);
+    while at < size {
+        let len = (size - at).min(src.piece().max(1));
+        let mut bytes = src.bytes_at(at, len).map_err(io::Error::other)?;
+        // The words that reach into this piece, each written in the part that falls here.
+        while first < words.len() && words[first].at + words[first].len <= at {
+            first += 1;
+        }
+        let here = words[first..].iter().take_while(|word| word.at < at + len);
+        for word in here {
+            let (from, to) = (word.at.max(at), (word.at + word.len).min(at + len));
+            bytes.to_mut()[from - at..to - at]
+                .copy_from_slice(&word.bytes()[from - word.at..to - word.at]);
+        }
+        w.write_all(&bytes)?;
+        at += len;
     }
     Ok(())
 }
@@ -61,9 +77,13 @@ impl PointWords {
     }
 }
 
-/// What [`patch_in_place`] writes into the C3D file `src`, checked (the same refusals), in
-/// the order of the bytes they go to (two edits of one point in the order given): for a
-/// caller that copies the file a piece at a time and writes each piece's words over it.
+/// The words that `edits` write over their points in the C3D file `src`, in the order of
+/// the bytes they go to (two edits of one point in the order given), in the file's
+/// processor format (Intel, DEC or MIPS) and number format (floats, or `i16` multiples of
+/// the scale). The residual word is encoded as the reader decodes it: `−1` for not
+/// measured, else the residual in units of `|scale|` (rounded, at most 255) with the camera
+/// mask above it. Refuses an edit outside the file's frames or points, a position that is
+/// not finite, and a position that an integer file cannot hold (past ±32767 × the scale).
 /// Reads the file's header and parameters alone.
 pub fn patch_words<S: Source + ?Sized>(
     src: &S,
@@ -143,6 +163,7 @@ fn point_words(
 mod tests {
     use super::super::{C3d, encode, parse};
     use super::*;
+    use crate::source::Pieces;
 
     fn sample(scale: f32) -> C3d {
         C3d {
@@ -238,14 +259,37 @@ mod tests {
         };
         assert!(patch(&bytes, &[nan]).unwrap_err().contains("not finite"));
         assert_eq!(patch(&bytes, &[]).unwrap(), bytes);
-        // A refused edit after a good one: nothing is written.
-        let good = PointEdit {
-            position: [1.0, 2.0, 3.0],
-            ..outside
+    }
+
+    /// Copied in pieces of a few bytes, with the words written over each piece, a file is
+    /// the patch made in one piece, whatever pieces the words straddle.
+    #[test]
+    fn a_file_copied_in_pieces_is_patched_as_in_one() {
+        let bytes = encode(&sample(-0.1)).unwrap();
+        let edit = |frame, point, x| PointEdit {
+            frame,
+            point,
+            position: [x, -x, 2.0 * x],
+            residual: 0.0,
+            cameras: 0,
         };
-        let good = PointEdit { frame: 0, ..good };
-        let mut in_place = bytes.clone();
-        assert!(patch_in_place(&mut in_place, &[good, nan]).is_err());
-        assert_eq!(in_place, bytes);
+        let edits = [
+            edit(2, 1, 5.5),
+            edit(0, 0, -1.25),
+            edit(2, 1, 7.0),
+            edit(3, 2, 3.0),
+        ];
+        let expected = patch(&bytes, &edits).unwrap();
+        assert_ne!(expected, bytes);
+        assert_eq!(
+            parse(&expected).unwrap().positions[3 * 7..3 * 8],
+            [7.0, -7.0, 14.0]
+        );
+        let words = patch_words(&bytes[..], &edits).unwrap();
+        for piece in [1, 5, 16, 100] {
+            let mut out = Vec::new();
+            write_patched(&Pieces(&bytes, piece), &words, &mut out).unwrap();
+            assert_eq!(out, expected, "piece {piece}");
+        }
     }
 }
