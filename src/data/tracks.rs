@@ -120,6 +120,11 @@ impl Tracks {
         self.positions
     }
 
+    /// The positions `[T, N, 3]` and the mask `[T, N]`, the tracks consumed.
+    pub fn into_parts(self) -> (Vec<f32>, Vec<bool>) {
+        (self.positions, self.observed)
+    }
+
     /// `T`.
     pub fn frames(&self) -> usize {
         self.frames

@@ -135,43 +135,66 @@ pub fn complete_run_with(
             config.data.display()
         )));
     }
-    let done = complete_with(run, &config, policy, device)?;
-    let (t, n) = (done.frames, done.points);
+    let fill = fill_run(run, &config, policy, device)?;
+    let (t, n) = (fill.frames, fill.points);
+    let past_ends = fill.past_ends();
+    let extrapolated = fill
+        .entries
+        .iter()
+        .filter(|&&(k, i)| past_ends(k, i))
+        .count();
+    let observed = fill.seen.iter().filter(|&&o| o).count();
+    let completion = Completion {
+        frames: t,
+        tracks: n,
+        observed,
+        filled: fill.entries.len() - extrapolated,
+        extrapolated,
+        unfilled: t * n - observed - fill.entries.len(),
+        blend: fill.blend.clone(),
+    };
     if to_c3d {
         // The input file itself, with only the filled entries written: every group,
         // parameter, analog sample and event kept, and the frames outside the fitted clip
-        // (or between its strided frames) as they were.
-        let source_points: Vec<usize> = done.kept.clone().unwrap_or_else(|| (0..n).collect());
-        let edits: Vec<PointEdit> = (0..t * n)
-            .filter(|&e| done.filled[e])
-            .map(|e| PointEdit {
-                frame: done.source_frames[e / n],
-                point: source_points[e % n],
-                position: [
-                    done.tracks[3 * e],
-                    done.tracks[3 * e + 1],
-                    done.tracks[3 * e + 2],
-                ],
+        // (or between its strided frames) as they were. The input's other values are never
+        // read again.
+        let source_point = |i: usize| fill.kept.as_ref().map_or(i, |kept| kept[i]);
+        let edits: Vec<PointEdit> = fill
+            .entries
+            .iter()
+            .zip(&fill.values)
+            .map(|(&(k, i), &position)| PointEdit {
+                frame: fill.source_frames[k],
+                point: source_point(i),
+                position,
                 residual: 0.0,
                 cameras: 0,
             })
             .collect();
+        drop(fill);
         write_c3d_patched(out, &config.data, &edits)?;
     } else {
+        let tracks = fill.tracks(&config)?;
+        // PointOdyssey's `valids`: every entry that holds a point.
+        let valid = (layout == Some(Layout::PointOdyssey)).then(|| {
+            let mut valid = fill.seen.clone();
+            for &(k, i) in &fill.entries {
+                valid[k * n + i] = true;
+            }
+            valid
+        });
+        let RunFill { seen, kept, .. } = fill;
+        let done = Written {
+            frames: t,
+            points: n,
+            tracks: &tracks,
+            observed: &seen,
+            valid: valid.as_deref(),
+            kept: kept.as_deref(),
+        };
         write_npz(out, &done, layout)?;
     }
-    let count = |mask: &[bool]| mask.iter().filter(|&&o| o).count();
-    let (observed, filled) = (count(&done.observed), count(&done.filled));
-    let extrapolated = count(&done.extrapolated);
-    Ok(Completion {
-        frames: t,
-        tracks: n,
-        observed,
-        filled: filled - extrapolated,
-        extrapolated,
-        unfilled: t * n - observed - filled,
-        blend: done.blend,
-    })
+    Ok(completion)
 }
 
 /// Every track of a run at every frame of its clip ([`complete_tracks`]), in the input's
@@ -208,7 +231,7 @@ pub fn complete_tracks(
     device: &Device,
 ) -> Result<CompletedTracks> {
     let config = run.load_config()?;
-    complete_with(run, &config, policy, device)
+    fill_run(run, &config, policy, device)?.into_completed(&config)
 }
 
 fn is_c3d(path: &Path) -> bool {
@@ -216,13 +239,129 @@ fn is_c3d(path: &Path) -> bool {
         .is_some_and(|e| e.eq_ignore_ascii_case("c3d"))
 }
 
-/// [`complete_tracks`] of the run's `config`.
-fn complete_with(
+/// The fill of a run's chosen entries ([`fill_run`]), before it is written anywhere.
+struct RunFill {
+    frames: usize,
+    points: usize,
+    /// `[T, N]`: the input's mask (held-out observations count as observed).
+    seen: Vec<bool>,
+    /// `(frame, track)` of each entry filled, in frame-major order.
+    entries: Vec<(usize, usize)>,
+    /// Each entry's value, in the input's frame and units.
+    values: Vec<[f32; 3]>,
+    kept: Option<Vec<usize>>,
+    source_frames: Vec<usize>,
+    blend: Blend,
+}
+
+impl RunFill {
+    /// Whether entry `(frame, track)` lies before the track's first observation or after
+    /// its last.
+    fn past_ends(&self) -> impl Fn(usize, usize) -> bool + use<> {
+        let n = self.points;
+        let mut ends: Vec<Option<(usize, usize)>> = vec![None; n];
+        for (e, _) in self.seen.iter().enumerate().filter(|&(_, &o)| o) {
+            let (k, i) = (e / n, e % n);
+            ends[i] = Some(ends[i].map_or((k, k), |(a, _)| (a, k)));
+        }
+        move |k, i| ends[i].is_none_or(|(a, b)| k < a || k > b)
+    }
+
+    /// Every track at every frame, `[T, N, 3]`: the input read again for its
+    /// observations (rather than kept through the fill), the filled entries written in, the
+    /// others NaN.
+    fn tracks(&self, config: &RunConfig) -> Result<Vec<f32>> {
+        let n = self.points;
+        let (input, _, _) = read_input(config, self.kept.as_deref(), self.frames, n)?;
+        let mut tracks = input.into_positions();
+        for (e, v) in tracks.chunks_exact_mut(3).enumerate() {
+            if !self.seen[e] {
+                v.fill(f32::NAN);
+            }
+        }
+        for (&(k, i), v) in self.entries.iter().zip(&self.values) {
+            let e = 3 * (k * n + i);
+            tracks[e..e + 3].copy_from_slice(v);
+        }
+        Ok(tracks)
+    }
+
+    /// [`Self::tracks`] with the masks of what was filled.
+    fn into_completed(self, config: &RunConfig) -> Result<CompletedTracks> {
+        let (t, n) = (self.frames, self.points);
+        let tracks = self.tracks(config)?;
+        let past_ends = self.past_ends();
+        let mut filled = vec![false; t * n];
+        let mut extrapolated = vec![false; t * n];
+        for &(k, i) in &self.entries {
+            let e = k * n + i;
+            filled[e] = true;
+            extrapolated[e] = past_ends(k, i);
+        }
+        Ok(CompletedTracks {
+            frames: t,
+            points: n,
+            tracks,
+            observed: self.seen,
+            filled,
+            extrapolated,
+            kept: self.kept,
+            source_frames: self.source_frames,
+            blend: self.blend,
+        })
+    }
+}
+
+/// The input of the run's `config` again, clipped and kept as the fit's data was (`kept`),
+/// for its own values: `t` frames of `n` tracks, or an error naming the file; with the
+/// input's frames that the clip covers, and a C3D's rate (for a `--max-gap` in seconds).
+fn read_input(
+    config: &RunConfig,
+    kept: Option<&[usize]>,
+    t: usize,
+    n: usize,
+) -> Result<(Tracks, Range<usize>, Option<f32>)> {
+    let (mut input, rate) = if is_c3d(&config.data) {
+        let markers = read_c3d(&config.data)?;
+        let rate = markers.rate;
+        let tracks = c3d_tracks(markers).map_err(|reason| DomaError::Malformed {
+            path: config.data.clone(),
+            reason,
+        })?;
+        (tracks, Some(rate))
+    } else {
+        (read_tracks(&config.data, &config.tracks)?.0, None)
+    };
+    let frame_range = config.frames.map_or(0..input.frames(), |[a, b]| a..b);
+    if config.frames.is_some() || config.stride > 1 {
+        input = input
+            .select_frames(frame_range.clone(), config.stride)
+            .map_err(DomaError::InvalidData)?;
+    }
+    if let Some(kept) = kept {
+        input = input.select_points(kept);
+    }
+    if (input.frames(), input.points()) != (t, n) {
+        return Err(DomaError::Malformed {
+            path: config.data.clone(),
+            reason: format!(
+                "now holds {} frames of {} tracks; the run fitted {t} of {n}",
+                input.frames(),
+                input.points(),
+            ),
+        });
+    }
+    Ok((input, frame_range, rate))
+}
+
+/// The fill that `policy` asks for of the run's `config`: the entries it chooses and their
+/// values, what a long recording holds beyond its positions and mask.
+fn fill_run(
     run: &RunDir,
     config: &RunConfig,
     policy: FillPolicy,
     device: &Device,
-) -> Result<CompletedTracks> {
+) -> Result<RunFill> {
     let field = run.load_field(config, device)?;
     let Sequence {
         trajectories: data,
@@ -232,6 +371,8 @@ fn complete_with(
         kept,
         ..
     } = run.load_data(config)?;
+    // The blind spans' places alone: their values are the input's.
+    let blind = blind.map(|b| b.entries);
     let (t, n) = (data.frames(), data.points());
     // The field's prediction: of the whole recording where the fill takes it whole, else
     // of each window of time as its fill starts (`gaps::window`), from the windows'
@@ -252,52 +393,12 @@ fn complete_with(
     let whole = (t <= window_frames(n))
         .then(|| field_at_frames(&field, &points, 0..t, t, device))
         .transpose()?;
-    // The input again, clipped and kept as the fit's data was, for its own values (and a
-    // C3D's rate, for a --max-gap in seconds); read when needed rather than kept through
-    // the fill.
-    let read_input = || -> Result<(Tracks, Range<usize>, Option<f32>)> {
-        let (mut input, rate) = if is_c3d(&config.data) {
-            let markers = read_c3d(&config.data)?;
-            let rate = markers.rate;
-            let tracks = c3d_tracks(markers).map_err(|reason| DomaError::Malformed {
-                path: config.data.clone(),
-                reason,
-            })?;
-            (tracks, Some(rate))
-        } else {
-            (read_tracks(&config.data, &config.tracks)?.0, None)
-        };
-        let frame_range = config.frames.map_or(0..input.frames(), |[a, b]| a..b);
-        if config.frames.is_some() || config.stride > 1 {
-            input = input
-                .select_frames(frame_range.clone(), config.stride)
-                .map_err(DomaError::InvalidData)?;
-        }
-        if let Some(kept) = &kept {
-            input = input.select_points(kept);
-        }
-        if (input.frames(), input.points()) != (t, n) {
-            return Err(DomaError::Malformed {
-                path: config.data.clone(),
-                reason: format!(
-                    "now holds {} frames of {} tracks; the run fitted {t} of {n}",
-                    input.frames(),
-                    input.points(),
-                ),
-            });
-        }
-        Ok((input, frame_range, rate))
-    };
-    let (input, frame_range, rate) = read_input()?;
-    let seen = input.observed().to_vec();
-    // In the fit's normalised coordinates, where the field predicts.
-    let normalised: Vec<f32> = input
-        .positions()
-        .iter()
-        .enumerate()
-        .map(|(e, &v)| (v - c[e % 3]) / s)
-        .collect();
-    drop(input);
+    let (input, frame_range, rate) = read_input(config, kept.as_deref(), t, n)?;
+    // In the fit's normalised coordinates, where the field predicts, in place.
+    let (mut normalised, seen) = input.into_parts();
+    for (e, v) in normalised.iter_mut().enumerate() {
+        *v = (*v - c[e % 3]) / s;
+    }
     let field = match &whole {
         Some(predicted) => FieldPrediction::new(n, predicted, &canonical, &seen),
         None => FieldPrediction::on_demand(n, &predict, &canonical, &seen),
@@ -306,13 +407,11 @@ fn complete_with(
     let stride = config.stride.max(1);
     let source_frames: Vec<usize> = frame_range.step_by(stride).collect();
     let rate = rate.map(f64::from);
-    let (filled, extrapolated) = chosen(&tracks, &source_frames, policy, rate, &config.data)?;
+    let entries = chosen(&tracks, &source_frames, policy, rate, &config.data)?;
     // The fill of the chosen entries alone: a long recording holds no second copy of itself.
-    let mut entries = Vec::with_capacity(filled.iter().filter(|&&f| f).count());
-    entries.extend((0..t * n).filter(|&e| filled[e]).map(|e| (e / n, e % n)));
-    let (fills, blend) = match policy.method {
+    let (mut values, blend) = match policy.method {
         None => {
-            let blind = blind.as_ref().map_or(&[][..], |b| &b.entries[..]);
+            let blind = blind.as_deref().unwrap_or(&[]);
             blended_fill_at(&tracks, &field, config.fit.seed, blind, &entries)
         }
         Some(filler) => (
@@ -325,43 +424,34 @@ fn complete_with(
     if let Some(e) = failed.into_inner().ok().flatten() {
         return Err(e);
     }
-    // Observed entries exactly as the input holds them (read again rather than kept
-    // through the fill); filled ones back in its units.
-    let mut values = read_input()?.0.into_positions();
-    for (e, v) in values.chunks_exact_mut(3).enumerate() {
-        if !seen[e] {
-            v.fill(f32::NAN);
-        }
-    }
-    for (&(k, i), v) in entries.iter().zip(fills) {
-        let e = 3 * (k * n + i);
+    // Back in the input's units.
+    for v in &mut values {
         for d in 0..3 {
-            values[e + d] = v[d] * s + c[d];
+            v[d] = v[d] * s + c[d];
         }
     }
-    Ok(CompletedTracks {
+    Ok(RunFill {
         frames: t,
         points: n,
-        tracks: values,
-        observed: seen,
-        filled,
-        extrapolated,
+        seen,
+        entries,
+        values,
         kept,
         source_frames,
         blend,
     })
 }
 
-/// The unobserved entries `policy` fills, and those of them past a track's ends: `[T, N]`
-/// each. A gap's length is counted in the input's frames (`source_frames` maps the clip's),
-/// in seconds at `rate` for [`MaxGap::Seconds`].
+/// The unobserved entries `policy` fills, `(frame, track)` in frame-major order. A gap's
+/// length is counted in the input's frames (`source_frames` maps the clip's), in seconds at
+/// `rate` for [`MaxGap::Seconds`].
 fn chosen(
     tracks: &Marked,
     source_frames: &[usize],
     policy: FillPolicy,
     rate: Option<f64>,
     data: &Path,
-) -> Result<(Vec<bool>, Vec<bool>)> {
+) -> Result<Vec<(usize, usize)>> {
     let longest = match policy.max_gap {
         None => usize::MAX,
         Some(MaxGap::Frames(f)) => f,
@@ -376,33 +466,38 @@ fn chosen(
             }
         },
     };
-    let n = tracks.points;
-    let mut filled = vec![false; tracks.frames * n];
-    let mut extrapolated = vec![false; tracks.frames * n];
-    for gap in crate::gaps::spans::gaps(tracks) {
-        let fill = match (gap.before, gap.after) {
+    let gaps: Vec<_> = crate::gaps::spans::gaps(tracks)
+        .filter(|gap| match (gap.before, gap.after) {
             (Some(a), Some(b)) => source_frames[b] - source_frames[a] - 1 <= longest,
             _ => policy.extrapolate,
-        };
-        if fill {
-            for k in gap.frames.clone() {
-                filled[k * n + gap.track] = true;
-                extrapolated[k * n + gap.track] = !gap.is_interior();
-            }
-        }
+        })
+        .collect();
+    let mut entries = Vec::with_capacity(gaps.iter().map(|g| g.len()).sum());
+    for gap in gaps {
+        entries.extend(gap.frames.map(|k| (k, gap.track)));
     }
-    Ok((filled, extrapolated))
+    // The gaps come track by track.
+    entries.sort_unstable();
+    Ok(entries)
+}
+
+/// What a `.npz` completion holds ([`complete_run`]).
+struct Written<'a> {
+    frames: usize,
+    points: usize,
+    /// `[T, N, 3]`.
+    tracks: &'a [f32],
+    /// `[T, N]`: the input's mask.
+    observed: &'a [bool],
+    /// `[T, N]`: every entry that holds a point (PointOdyssey's `valids`).
+    valid: Option<&'a [bool]>,
+    kept: Option<&'a [usize]>,
 }
 
 /// The completion as a `.npz`, in the keys of `layout` ([`complete_run`]).
-fn write_npz(out: &Path, done: &CompletedTracks, layout: Option<Layout>) -> Result<()> {
+fn write_npz(out: &Path, done: &Written, layout: Option<Layout>) -> Result<()> {
     let (t, n) = (done.frames, done.points);
-    let (tracks, observed, kept) = (&done.tracks, &done.observed, done.kept.as_deref());
-    let kept: Option<Vec<i64>> = kept.map(|k| k.iter().map(|&i| i as i64).collect());
-    // PointOdyssey's `valids`: every entry that holds a point.
-    let all_valid: Vec<bool> = (0..t * n)
-        .map(|e| done.observed[e] || done.filled[e])
-        .collect();
+    let kept: Option<Vec<i64>> = done.kept.map(|k| k.iter().map(|&i| i as i64).collect());
     let (tracks_key, mask_key) = match layout {
         Some(Layout::PointOdyssey) => ("trajs_3d", "visibs"),
         Some(Layout::TapVid3d) => ("tracks_XYZ", "visibility"),
@@ -410,11 +505,11 @@ fn write_npz(out: &Path, done: &CompletedTracks, layout: Option<Layout>) -> Resu
     };
     let (shape3, shape2, shape1) = ([t, n, 3], [t, n], [n]);
     let mut members: Vec<(&str, &[usize], NpyValues)> = vec![
-        (tracks_key, &shape3, NpyValues::F32(tracks)),
-        (mask_key, &shape2, NpyValues::Bool(observed)),
+        (tracks_key, &shape3, NpyValues::F32(done.tracks)),
+        (mask_key, &shape2, NpyValues::Bool(done.observed)),
     ];
-    if layout == Some(Layout::PointOdyssey) {
-        members.push(("valids", &shape2, NpyValues::Bool(&all_valid)));
+    if let Some(valid) = done.valid {
+        members.push(("valids", &shape2, NpyValues::Bool(valid)));
     }
     if let Some(kept) = &kept {
         members.push(("kept", &shape1, NpyValues::I64(kept)));
