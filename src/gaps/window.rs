@@ -95,14 +95,20 @@ pub type Entry = (usize, usize, usize);
 /// `fill`'s values at `entries`, unobserved entries of `sources`, each computed from the
 /// sources of the window that fills it (module docs): `fill` is given a window's sources
 /// and its entries in the window's frames, and returns one value per entry. One call on
-/// the whole recording where it fits in one window. The windows run on every core.
+/// the whole recording where it fits in one window, none where there is no entry. The
+/// windows run on every core.
 pub fn windowed<R, F>(sources: &Sources, entries: &[Entry], fill: F) -> Vec<R>
 where
     R: Copy + Default + Send,
     F: Fn(&Sources, &[Entry]) -> Vec<R> + Sync,
 {
     let tracks = &sources.marked;
-    if tracks.frames <= window_frames(tracks.points) || entries.is_empty() {
+    // Nothing to fill computes nothing: a filler given no entries would still learn from
+    // the whole recording.
+    if entries.is_empty() {
+        return Vec::new();
+    }
+    if tracks.frames <= window_frames(tracks.points) {
         return fill(sources, entries);
     }
     let parts: Vec<(Vec<usize>, Vec<R>)> = plan(tracks, entries)
@@ -213,6 +219,8 @@ mod tests {
             .filter(|&e| !observed[e])
             .map(|e| (e / n, e % n, 0))
             .collect();
+        let none: Vec<[f32; 2]> = windowed(&sources, &[], |_, _| unreachable!("no entry"));
+        assert!(none.is_empty());
         let plan = plan(&tracks, &entries);
         assert!(plan.len() > 3, "{} windows", plan.len());
         for (frames, js) in &plan {
