@@ -247,12 +247,24 @@ fn a_completion_fills_what_its_policy_asks_for() {
         // The completion in memory is the file's, its masks the printed counts.
         let memory = doma::run::complete_tracks(&run, policy, &Device::flex()).unwrap();
         let same = |a: &f32, b: &f32| a.to_bits() == b.to_bits();
-        assert!(memory.tracks.iter().zip(tracks.positions()).all(|(a, b)| same(a, b)));
+        assert!(
+            memory
+                .tracks
+                .iter()
+                .zip(tracks.positions())
+                .all(|(a, b)| same(a, b))
+        );
         assert_eq!(memory.observed, tracks.observed());
         let count = |mask: &[bool]| mask.iter().filter(|&&f| f).count();
         assert_eq!(count(&memory.extrapolated), done.extrapolated);
         assert_eq!(count(&memory.filled), done.filled + done.extrapolated);
-        assert!(memory.extrapolated.iter().zip(&memory.filled).all(|(&x, &f)| f || !x));
+        assert!(
+            memory
+                .extrapolated
+                .iter()
+                .zip(&memory.filled)
+                .all(|(&x, &f)| f || !x)
+        );
         (done, tracks)
     };
     let (every, all) = read(EVERY_ENTRY);
