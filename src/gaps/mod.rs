@@ -1,6 +1,6 @@
 //! Gap filling: every unobserved entry of a set of tracks, by the fitted field and by the
 //! fillers of the motion-capture gap-filling literature. Numbers in, numbers out: nothing
-//! here touches a model, a tensor or the trainer; `run/complete.rs` and
+//! here touches a model, a tensor or the trainer; `run/complete/` and
 //! `run/gap_report.rs` evaluate the field and pass its prediction in (for a long
 //! recording, a function that predicts the frames a window asks for:
 //! [`FieldPrediction::on_demand`]).

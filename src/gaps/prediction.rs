@@ -10,7 +10,7 @@ use super::field_fill::LENDER_CANDIDATES;
 use crate::knn::PointTree;
 
 /// The field's prediction at the frames asked, `[F, N, 3]` for `F` frames: what
-/// `run/complete.rs` evaluates on the fill's behalf. Called from the windows' threads.
+/// `run/complete/` evaluates on the fill's behalf. Called from the windows' threads.
 pub type Predict<'a> = dyn Fn(Range<usize>) -> Vec<f32> + Sync + 'a;
 
 /// The fitted field's prediction of a set of tracks, with what its fill needs besides: each
