@@ -133,7 +133,8 @@ fn fit_holding<'a>(
     }
     match trainer.run_with(hooks)? {
         Outcome::Finished(fitted) => {
-            finish(run, &config, &sequence, &fitted, device).map(FitOutcome::Finished)
+            drop(train);
+            finish(run, &config, sequence, &fitted, device).map(FitOutcome::Finished)
         }
         Outcome::Interrupted { iterations_done } => Ok(FitOutcome::Interrupted { iterations_done }),
     }
@@ -165,14 +166,13 @@ fn start(run: &RunDir, config: &RunConfig, held: Option<RunLock>) -> Result<RunL
 fn finish(
     run: &RunDir,
     config: &RunConfig,
-    sequence: &Sequence,
+    sequence: Sequence,
     fitted: &Fitted<Model>,
     device: &Device,
 ) -> Result<Report> {
     let encoded = fitted.field.encode(Precision::F32)?;
     // The learned canonical positions of the training tracks go into every track's.
-    let placed = sequence;
-    let sequence = match &fitted.canonical {
+    let learned = match &fitted.canonical {
         Some(learned) => {
             let (train, _) = config.split_indices(sequence.trajectories.points())?;
             let mut all = sequence.trajectories.canonical().to_vec();
@@ -180,8 +180,17 @@ fn finish(
                 all[3 * i..3 * i + 3].copy_from_slice(&learned[3 * r..3 * r + 3]);
             }
             crate::data::npy::write_npy(run.canonical(), &[all.len() / 3, 3], &all)?;
+            Some(all)
+        }
+        None => None,
+    };
+    // The gap report fills the held-out entries from the data's own canonical positions
+    // (`placed`) and measures the field at the learned ones: only it needs both, and so a
+    // second copy of the trajectories.
+    let (placed, sequence) = match learned {
+        Some(all) if sequence.held_out.is_some() => {
             // Field by field: `..sequence.clone()` would copy the trajectories twice.
-            &Sequence {
+            let with = Sequence {
                 name: sequence.name.clone(),
                 trajectories: sequence.trajectories.clone().with_canonical(all)?,
                 faces: sequence.faces.clone(),
@@ -190,10 +199,18 @@ fn finish(
                 held_out: sequence.held_out.clone(),
                 blind: sequence.blind.clone(),
                 kept: sequence.kept.clone(),
-            }
+            };
+            (Some(sequence), with)
         }
-        None => sequence,
+        Some(all) => {
+            let mut sequence = sequence;
+            sequence.trajectories = sequence.trajectories.with_canonical(all)?;
+            (None, sequence)
+        }
+        None => (None, sequence),
     };
+    let placed = placed.as_ref().unwrap_or(&sequence);
+    let sequence = &sequence;
     let (test, what) = config.measured(&sequence.trajectories)?;
     write_atomic(&run.model(), &encoded)?;
     let report = Report {

@@ -18,16 +18,6 @@ pub(super) enum StepRows {
     Nothing,
 }
 
-/// What a frame observes of the training points.
-enum FrameRows {
-    /// Every point.
-    All,
-    /// These rows (on the device; boxed, as [`StepRows::Rows`]).
-    Some(Box<Tensor<1, Int>>),
-    /// No point.
-    Nothing,
-}
-
 /// The rows of an iteration's steps, drawn at its start and uploaded at once.
 #[derive(Clone)]
 pub(super) struct PreparedRows {
@@ -42,9 +32,6 @@ pub(super) struct PreparedRows {
 /// The row selection of a fit: each frame's observed rows, the subset size, and the
 /// current iteration's drawn subsets.
 pub(super) struct TrainingRows {
-    /// Made at the first step that reads them: the fused step gathers its rows on the host,
-    /// and a tensor per frame costs hundreds of bytes beside a frame's few rows.
-    frames: Option<Vec<FrameRows>>,
     /// Training points per step when fewer than all.
     subset: Option<usize>,
     prepared: Option<PreparedRows>,
@@ -56,33 +43,30 @@ impl TrainingRows {
     /// on `ad`.
     pub fn new(data: &Trajectories, subset: Option<usize>, ad: &Device) -> Self {
         TrainingRows {
-            frames: None,
             subset: subset.filter(|&k| k < data.points()),
             prepared: None,
             ad: ad.clone(),
         }
     }
 
-    /// What each frame of `data` observes, as rows on `ad`.
-    fn frame_rows(data: &Trajectories, ad: &Device) -> Vec<FrameRows> {
-        (0..data.frames())
-            .map(|k| {
-                let Some(seen) = data.observed_in_frame(k) else {
-                    return FrameRows::All;
-                };
-                if seen.iter().all(|&o| o) {
-                    return FrameRows::All;
-                }
-                let rows: Vec<i64> = (0..data.points())
-                    .filter(|&i| seen[i])
-                    .map(|i| i as i64)
-                    .collect();
-                match rows.len() {
-                    0 => FrameRows::Nothing,
-                    len => FrameRows::Some(Box::new(upload(rows, len, ad))),
-                }
-            })
-            .collect()
+    /// What frame `k` of `data` observes, as rows on `ad`: made for the step, not kept (a
+    /// tensor per frame held through the fit costs hundreds of bytes beside a frame's few
+    /// rows).
+    fn frame_rows(data: &Trajectories, k: usize, ad: &Device) -> StepRows {
+        let Some(seen) = data.observed_in_frame(k) else {
+            return StepRows::All;
+        };
+        if seen.iter().all(|&o| o) {
+            return StepRows::All;
+        }
+        let rows: Vec<i64> = (0..data.points())
+            .filter(|&i| seen[i])
+            .map(|i| i as i64)
+            .collect();
+        match rows.len() {
+            0 => StepRows::Nothing,
+            len => StepRows::Rows(Box::new(upload(rows, len, ad))),
+        }
     }
 
     /// Training points per step when fewer than all.
@@ -134,15 +118,7 @@ impl TrainingRows {
     /// step outside `Trainer::iteration`, as benchmarks take).
     pub fn step(&mut self, data: &Trajectories, k: usize, rng: &mut ChaCha8Rng) -> StepRows {
         let Some(take) = self.subset else {
-            let ad = &self.ad;
-            let frames = self
-                .frames
-                .get_or_insert_with(|| Self::frame_rows(data, ad));
-            return match &frames[k] {
-                FrameRows::All => StepRows::All,
-                FrameRows::Some(rows) => StepRows::Rows(rows.clone()),
-                FrameRows::Nothing => StepRows::Nothing,
-            };
+            return Self::frame_rows(data, k, &self.ad);
         };
         let rows = match self.prepared.as_mut() {
             Some(p) if p.next < p.spans.len() => {

@@ -158,12 +158,6 @@ impl<M: MotionField + Module, O: Objective<M>> Trainer<M, O> {
         }
     }
 
-    /// The objective (for tests).
-    #[cfg(test)]
-    pub(super) fn objective(&self) -> &O {
-        &self.objective
-    }
-
     /// Whether the fused step takes this fit's steps ([`StepKind`]).
     pub fn is_fused(&self) -> bool {
         self.fused.is_some()

@@ -6,7 +6,6 @@
 //! reference frame ([`super::learned`]).
 
 use std::borrow::Cow;
-use std::cell::OnceCell;
 
 use burn::tensor::{Device, Gradients, Tensor, TensorData};
 use rand_chacha::ChaCha8Rng;
@@ -41,10 +40,6 @@ pub struct TrajectoryObjective<'a> {
     ad: Device,
     /// Every fitted track's canonical position `[N, 3]`.
     x0: Tensor<2>,
-    /// Each frame's positions and weights as tensors, made at the first composed step: the
-    /// fused step reads the frames on the host, and a tensor per frame costs hundreds of
-    /// bytes beside a frame of a few dozen markers.
-    frames: OnceCell<FrameTensors>,
     rows: TrainingRows,
     /// `L_H`'s own sample points, when they are not the training points.
     samples: Option<SmoothnessSamples>,
@@ -106,7 +101,6 @@ impl<'a> TrajectoryObjective<'a> {
             rows: TrainingRows::new(&data, config.points_per_step, &ad),
             learned: LearnedPositions::new(&data, &ad),
             x0: data.canonical_tensor(&ad),
-            frames: OnceCell::new(),
             warp_needs_jacobian: config.loss.elasticity_weight > 0.0 || (w_h > 0.0 && !separate_h),
             method: config.jacobian.method(),
             loss: config.loss.clone(),
@@ -118,12 +112,6 @@ impl<'a> TrajectoryObjective<'a> {
             samples,
             host: None,
         })
-    }
-
-    /// Whether the composed step's per-frame tensors were made.
-    #[cfg(test)]
-    pub(super) fn holds_frame_tensors(&self) -> bool {
-        self.frames.get().is_some()
     }
 
     /// The data term on frame `k` at time `t` over `rows` (none when the frame observes no
@@ -141,11 +129,14 @@ impl<'a> TrajectoryObjective<'a> {
             None => self.x0.clone(),
             Some(l) => l.positions(self.x0.clone()),
         };
-        let frames = self
-            .frames
-            .get_or_init(|| FrameTensors::new(&self.data, &self.ad));
-        let target = frames.targets[k].clone();
-        let weights = frames.weights.as_ref().map(|w| w[k].clone());
+        // The frame's positions and weights made for this step, not kept: a tensor per
+        // frame held through the fit costs more than the frame's values, and a long
+        // recording's fit would hold its data several times over.
+        let target = self.data.frame_tensor(k, &self.ad);
+        let weights = self
+            .data
+            .weights_in_frame(k)
+            .map(|w| Tensor::<2>::from_data(TensorData::new(w.to_vec(), [w.len(), 1]), &self.ad));
         let (x0, target, weights) = match rows {
             StepRows::All => (x0, target, weights),
             StepRows::Rows(rows) => (
@@ -370,33 +361,6 @@ impl<M: MotionField> Objective<M> for TrajectoryObjective<'_> {
         match &self.validation {
             Some((tracks, device)) => crate::metrics::evaluate_epe(field, tracks, device).map(Some),
             None => Ok(None),
-        }
-    }
-}
-
-/// The frames of the composed step's data term, on the autodiff device.
-struct FrameTensors {
-    /// Each frame's positions `[N, 3]`.
-    targets: Vec<Tensor<2>>,
-    /// Each frame's confidence weights `[N, 1]`, when the data has them.
-    weights: Option<Vec<Tensor<2>>>,
-}
-
-impl FrameTensors {
-    fn new(data: &Trajectories, ad: &Device) -> Self {
-        FrameTensors {
-            targets: (0..data.frames())
-                .map(|k| data.frame_tensor(k, ad))
-                .collect(),
-            weights: (0..data.frames())
-                .map(|k| {
-                    let w = data.weights_in_frame(k)?;
-                    Some(Tensor::<2>::from_data(
-                        TensorData::new(w.to_vec(), [w.len(), 1]),
-                        ad,
-                    ))
-                })
-                .collect(),
         }
     }
 }
