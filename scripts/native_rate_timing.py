@@ -12,9 +12,11 @@ growth from one minute to four against the tracks' own.
 
 With --c3d each recording is a C3D file instead (floats, with 38 analog channels sampled
 10 times a frame, a force plate's 2,000 Hz), fitted from the .c3d and completed to a .c3d,
-as a lab's trial is.
+as a lab's trial is. With --unseen no frame sees every marker (marker 0 is hidden for the
+first half, marker 1 for the second), as in many real captures: the fit then learns the
+canonical positions of the markers that its reference frame misses.
 
-    python scripts/native_rate_timing.py [DOMA_BINARY] [--c3d]
+    python scripts/native_rate_timing.py [DOMA_BINARY] [--c3d] [--unseen]
 
 Needs numpy and the doma binary (default $CARGO_TARGET_DIR/release/doma); /usr/bin/time
 for the peak memory; the `c3d` package for --c3d.
@@ -126,7 +128,15 @@ def read_c3d(path):
         return np.stack([p[:, :3] for _, p, _ in c3d.Reader(f).read_frames()]).astype(np.float64)
 
 
-def case(doma, work, name, tracks, observed, events, seed, as_c3d):
+def case(doma, work, name, tracks, observed, events, seed, as_c3d, unseen):
+    if unseen:
+        # No frame sees every marker, as in many real captures: the fit learns the
+        # canonical positions of the markers its reference frame misses (before the
+        # events are drawn, so that they fall where the markers are seen).
+        observed = observed.copy()
+        half = len(observed) // 2
+        observed[:half, 0] = False
+        observed[half:, 1] = False
     mask, hidden = hide(observed, events, np.random.default_rng(seed))
     ext = "c3d" if as_c3d else "npz"
     data = work / f"{name}.{ext}"
@@ -154,6 +164,8 @@ def main():
     p.add_argument("doma", nargs="?", default=f"{target}/release/doma")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--c3d", action="store_true", help="C3D recordings with analog channels")
+    p.add_argument("--unseen", action="store_true",
+                   help="marker 0 hidden for the first half and marker 1 for the second, so that no frame sees every marker")
     args = p.parse_args()
     tracks, observed = source_tracks()
     tracks, observed = tracks[:, :MARKERS], observed[:, :MARKERS]
@@ -162,7 +174,7 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         work = pathlib.Path(tmp)
         at = lambda name, frames, events: case(
-            args.doma, work, name, whole_t[:frames], whole_o[:frames], events, args.seed, args.c3d
+            args.doma, work, name, whole_t[:frames], whole_o[:frames], events, args.seed, args.c3d, args.unseen
         )
         rows = [
             ("5 s excerpt", at("excerpt", 1000, 20)),
