@@ -181,6 +181,7 @@ fn main() -> anyhow::Result<()> {
     let field = DomaField {
         siren: Siren::from_weights(&layers(&init.data), 30.0, &ad),
         variant: Variant::Affinity,
+        time_scale: 1.0,
     };
     let replay = Replay {
         canon: canon.data.clone(),

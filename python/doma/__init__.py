@@ -560,6 +560,9 @@ def fit(
             a recipe's).
         init_scale: the initialisation's weight scale: every SIREN weight but the output
             layer's drawn this many times wider (default 1, the authors').
+        time_scale: the factor s on the time the field reads, f(x, s·t) (default 1 up to
+            1,000 frames, else the frames over 1,000: a long recording's field keeps the
+            frequencies per frame of a short clip).
         t_weight: the weight of the temporal smoothness loss L_T, the squared acceleration
             of the fitted tracks' paths (default 0: off).
         recipe: ``"paper"`` (the paper's protocol, the default), ``"fast"`` (1.5 times

@@ -17,7 +17,7 @@
 //! `model` (or `variant`, as the flag: `trans`, `se3`, `scaled-se3`, `affinity`, `dpf`),
 //! `backend`, `jacobian`, `iterations` (or `iters`), `h_weight` (a number or `"auto"`), `seed`, `mesh`, `frames` (`[start,
 //! end)`), `stride`, `test_fraction`, `checkpoint_every`, `points_per_step`,
-//! `frames_per_step`, `frames_per_iteration`, and for tracker output `layout`, `frame`, `count_hidden`,
+//! `frames_per_step`, `frames_per_iteration`, `init_scale`, `time_scale`, and for tracker output `layout`, `frame`, `count_hidden`,
 //! `reference_frame`, `drop_unobserved`, `holdout_observations`, `blind_validation`,
 //! `confidence`,
 //! `robust` (`"huber:0.01"`, as `--robust` spells it; the older `data_penalty` object

@@ -165,6 +165,13 @@ pub trait MotionField {
         None
     }
 
+    /// The factor `s` on the time that the model's SIREN reads, `[x, s·t]`
+    /// ([`DomaFieldConfig::time_scale`]): what the fused step feeds the same SIREN. 1 (the
+    /// default) for every model but a DOMA field fitted to a long recording.
+    fn time_scale(&self) -> f64 {
+        1.0
+    }
+
     /// Whether the model's network is made of SIREN layers (the default), which every
     /// Jacobian method can differentiate.
     fn has_siren_layers(&self) -> bool {
@@ -272,6 +279,24 @@ pub fn time_input(x: Tensor<2>, t: f64) -> Tensor<2> {
     Tensor::cat(vec![x, time], 1)
 }
 
+/// The frames whose normalised times `[−1, 1]` a DOMA field's SIREN reads as they are;
+/// a fit to a longer recording stretches them to `[−s, s]`, `s = T / 1000`
+/// ([`DomaFieldConfig::time_scale`], [`time_scale_for`]).
+pub const TIME_SPAN_FRAMES: usize = 1000;
+
+/// The time scale `s` a fit gives a DOMA field for a recording of `frames` frames:
+/// `None` (1) up to [`TIME_SPAN_FRAMES`], else `T / TIME_SPAN_FRAMES`.
+///
+/// A SIREN's first layer starts with a fixed band of frequencies over its input's range
+/// (Eq. 1, `ω₀ = 30`), so on normalised times a recording twelve times as long is asked
+/// for motion twelve times as fast: on a minute at 200 Hz (12,000 frames) the field
+/// fitted the training tracks five times worse than on its first 5 s, and filled gaps
+/// twice as badly. Stretching time keeps the frequencies per frame of a 1,000-frame clip
+/// (docs/design.md §7).
+pub fn time_scale_for(frames: usize) -> Option<f64> {
+    (frames > TIME_SPAN_FRAMES).then(|| frames as f64 / TIME_SPAN_FRAMES as f64)
+}
+
 /// The shape of a DOMA field: its variant (the head, Eq. 4, 10–12) and its SIREN body.
 #[derive(Config, Debug)]
 pub struct DomaFieldConfig {
@@ -280,6 +305,10 @@ pub struct DomaFieldConfig {
     /// The SIREN's width, depth and frequency.
     #[config(default = "SirenShape::new()")]
     pub shape: SirenShape,
+    /// The factor `s` on the normalised time `t` that the SIREN reads: `f(x, s·t)`, so
+    /// that the times of a long recording span `[−s, s]` ([`time_scale_for`]). `None` (a
+    /// config without the field) is 1: the paper's field, bit for bit.
+    pub time_scale: Option<f64>,
 }
 
 impl WithSirenShape for DomaFieldConfig {
@@ -299,6 +328,17 @@ impl DomaFieldConfig {
         DomaField {
             siren: self.siren().init(seed, device),
             variant: self.variant,
+            time_scale: self.time_scale.unwrap_or(1.0),
+        }
+    }
+
+    /// Refuses a time scale that is not a positive number.
+    pub fn validate(&self) -> crate::Result<()> {
+        match self.time_scale {
+            Some(s) if !(s.is_finite() && s > 0.0) => Err(crate::DomaError::InvalidConfig(
+                format!("time scale {s} must be positive"),
+            )),
+            _ => self.shape.validate(),
         }
     }
 }
@@ -311,17 +351,22 @@ pub struct DomaField {
     /// The head.
     #[module(skip)]
     pub variant: Variant,
+    /// The factor on the time the SIREN reads ([`DomaFieldConfig::time_scale`]).
+    #[module(skip)]
+    pub time_scale: f64,
 }
 
 impl MotionField for DomaField {
     fn raw(&self, x: Dual, t: f64, method: &dyn JacobianMethod) -> Dual {
-        siren_raw(&self.siren, x, method, |x| time_input(x, t))
+        siren_raw(&self.siren, x, method, |x| {
+            time_input(x, self.time_scale * t)
+        })
     }
 
     /// The method seeds its own tangents, so `x`'s seed (an upload and a `repeat` per
     /// call, two kernel dispatches on a GPU) is not built.
     fn raw_dual(&self, x: Tensor<2>, t: f64, method: &dyn JacobianMethod) -> Dual {
-        method.forward_dual(&self.siren, time_input(x, t))
+        method.forward_dual(&self.siren, time_input(x, self.time_scale * t))
     }
 
     fn head(&self) -> Variant {
@@ -330,6 +375,10 @@ impl MotionField for DomaField {
 
     fn siren(&self) -> Option<&Siren> {
         Some(&self.siren)
+    }
+
+    fn time_scale(&self) -> f64 {
+        self.time_scale
     }
 
     fn param_count(&self) -> usize {

@@ -213,7 +213,7 @@ impl ModelConfig {
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(DomaError::InvalidConfig(m));
         match self {
-            ModelConfig::Doma(c) => c.shape.validate()?,
+            ModelConfig::Doma(c) => c.validate()?,
             ModelConfig::Dpf(c) => {
                 c.shape.validate()?;
                 if c.frames == 0 {
@@ -379,6 +379,10 @@ impl MotionField for Model {
 
     fn siren(&self) -> Option<&crate::siren::Siren> {
         self.as_field().siren()
+    }
+
+    fn time_scale(&self) -> f64 {
+        self.as_field().time_scale()
     }
 
     fn param_count(&self) -> usize {

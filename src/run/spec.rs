@@ -120,6 +120,12 @@ pub struct RunSpec {
     #[arg(long, value_name = "ALPHA", value_parser = positive, help_heading = "Model")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub init_scale: Option<f64>,
+    /// The factor s on the time a DOMA field reads, f(x, s·t) (default: 1 up to 1,000
+    /// frames, else the frames over 1,000, so that a long recording's field keeps the
+    /// frequencies per frame of a short clip; docs/design.md §7).
+    #[arg(long, value_name = "S", value_parser = positive, help_heading = "Model")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_scale: Option<f64>,
     /// The weight of the smoothness loss L_H (Eq. 13; 0 = off; default 0, or 0.1 for tracks
     /// with gaps), or `auto`: chosen by validation on held-out training points before the
     /// fit (the grid goes into config.json and the plots).

@@ -105,7 +105,8 @@ impl<'a, M: MotionField + Module> Trainer<M, TrajectoryObjective<'a>> {
             smoothness_weight: config.loss.smoothness_weight,
             smoothness_norm: config.loss.smoothness_norm,
         };
-        let mut step = FusedStep::from_siren(siren, field.head(), loss, adam)?;
+        let mut step = FusedStep::from_siren(siren, field.head(), loss, adam)?
+            .with_time_scale(field.time_scale());
         if let Some(soap) = config.soap {
             step = step.with_soap(soap);
         }

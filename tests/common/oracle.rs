@@ -258,6 +258,7 @@ pub fn fd_theta_grad_at(
         let f = DomaField {
             siren: Siren::from_weights(&w, field.siren.omega, device),
             variant: field.variant,
+            time_scale: field.time_scale,
         };
         to_vec(jacobian_loss(&f, x, elastic, &Autodiff, device))[0]
     };

@@ -192,6 +192,7 @@ fn a_perfect_field_has_zero_epe() {
     let field = doma::field::DomaField {
         siren: zero_out,
         variant: field.variant,
+        time_scale: field.time_scale,
     };
     let p: Vec<f32> = common::random_points(10, 1)
         .iter()

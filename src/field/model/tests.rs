@@ -3,7 +3,11 @@ use crate::siren::WithSirenShape;
 
 fn every_model(frames: usize) -> Vec<ModelConfig> {
     vec![
-        ModelConfig::Doma(DomaFieldConfig::new(Variant::Affinity).with_n_hidden(3)),
+        ModelConfig::Doma(
+            DomaFieldConfig::new(Variant::Affinity)
+                .with_n_hidden(3)
+                .with_time_scale(Some(2.0)),
+        ),
         ModelConfig::Dpf(DpfConfig::new(frames).with_hidden(32)),
         ModelConfig::Mlp(MlpConfig::new().with_pe_octaves(6)),
         ModelConfig::Mlp(MlpConfig::new().with_layers(0)),
@@ -12,6 +16,41 @@ fn every_model(frames: usize) -> Vec<ModelConfig> {
         ModelConfig::Banmo(BanmoConfig::new(frames).with_transform_layers(3)),
         ModelConfig::BoneCloud(BoneCloudConfig::new(frames)),
     ]
+}
+
+/// A field that reads its time scaled by `s` is the same SIREN read at `s·t`: its raw
+/// outputs and their spatial Jacobians at `t` are, bit for bit, those of the unscaled field
+/// (the same weights) at `s·t`.
+#[test]
+fn a_time_scaled_field_is_the_same_siren_at_the_scaled_time() {
+    use crate::jacobian::Analytic;
+    use burn::tensor::{Tensor, TensorData};
+    let device = Device::flex();
+    let config = DomaFieldConfig::new(Variant::Affinity).with_hidden(16);
+    let plain = config.init(4, &device);
+    let scaled = config.clone().with_time_scale(Some(12.0)).init(4, &device);
+    let values = |t: Tensor<2>| crate::readback::to_vec::<f32, 2, _>(t).unwrap();
+    let x = || {
+        let p = vec![0.1f32, -0.4, 0.7, 0.5, 0.2, -0.9];
+        Tensor::<2>::from_data(TensorData::new(p, [2, 3]), &device)
+    };
+    for t in [-1.0, -0.3, 0.25, 1.0] {
+        let (a, b) = (
+            scaled.raw_dual(x(), t, &Analytic),
+            plain.raw_dual(x(), 12.0 * t, &Analytic),
+        );
+        let tangent = |d: &Dual| values(d.tangent.clone().unwrap().reshape([-1, 1]));
+        assert_eq!(tangent(&a), tangent(&b), "t = {t}");
+        assert_eq!(values(a.value), values(b.value), "t = {t}");
+        assert_ne!(
+            values(scaled.raw_values(x(), t, &Analytic)),
+            values(plain.raw_values(x(), t, &Analytic)),
+            "t = {t}"
+        );
+    }
+    assert_eq!(crate::field::time_scale_for(1000), None);
+    assert_eq!(crate::field::time_scale_for(1001), Some(1.001));
+    assert_eq!(crate::field::time_scale_for(12_000), Some(12.0));
 }
 
 #[test]

@@ -128,6 +128,17 @@ impl RunSpec {
                 }
             }
         }
+        if let Some(s) = self.time_scale {
+            match &mut fit.model {
+                ModelConfig::Doma(c) => c.time_scale = Some(s),
+                other => {
+                    return Err(DomaError::InvalidConfig(format!(
+                        "time_scale: the {} model reads no time through a DOMA field",
+                        other.name()
+                    )));
+                }
+            }
+        }
         // After the model (whose variant sets the `L_H` sampling), before the flags.
         let mut fit = RecipeChoice {
             recipe: self.recipe,
@@ -242,6 +253,13 @@ impl RunSpec {
             dpf.frames = sequence.trajectories.frames();
             // Its size is known now.
             config.validate()?;
+        }
+        // A long recording's field reads its time stretched, unless the options or the
+        // config file chose a scale.
+        if let ModelConfig::Doma(c) = &mut config.fit.model
+            && c.time_scale.is_none()
+        {
+            c.time_scale = crate::field::time_scale_for(sequence.trajectories.frames());
         }
         // Sparse tracks with gaps: the gap-filling defaults where the options set nothing
         // (docs/results.md, real markers: without L_H the field strays inside gaps, and

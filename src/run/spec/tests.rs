@@ -1,6 +1,8 @@
 use std::path::Path;
 
 use super::*;
+use crate::field::model::ModelConfig;
+use crate::train::select::WeightSearch;
 
 #[test]
 fn an_entry_reads_from_json_and_refuses_unknown_fields() {
@@ -48,4 +50,42 @@ fn overrides_fall_back_to_the_defaults_and_paths_to_the_base() {
     .fit_config(|| Ok(12))
     .unwrap();
     assert_eq!(dpf.model.frames(), Some(12));
+}
+
+/// A DOMA field of a recording longer than 1,000 frames reads its time stretched by the
+/// frames over 1,000, unless the options choose a scale; up to 1,000 frames nothing is
+/// set (the paper's field); a model without a DOMA field refuses a scale.
+#[test]
+fn a_long_recordings_field_reads_its_time_stretched() {
+    let dir = tempfile::tempdir().unwrap();
+    let prepared = |frames: usize, time_scale: Option<f64>| {
+        let path = dir.path().join(format!("walk{frames}.npy"));
+        let positions: Vec<f32> = (0..frames * 2 * 3)
+            .map(|e| (e % 7) as f32 + (e / 6) as f32 * 1e-3)
+            .collect();
+        crate::data::npy::write_npy(&path, &[frames, 2, 3], &positions).unwrap();
+        let spec = RunSpec {
+            data: Some(path),
+            iterations: Some(1),
+            time_scale,
+            ..RunSpec::default()
+        };
+        let fit = spec.prepare(&WeightSearch::default(), |_| {}).unwrap();
+        match fit.config.fit.model {
+            ModelConfig::Doma(c) => c.time_scale,
+            other => panic!("{other:?}"),
+        }
+    };
+    assert_eq!(prepared(1000, None), None);
+    assert_eq!(prepared(2500, None), Some(2.5));
+    assert_eq!(prepared(2500, Some(0.5)), Some(0.5));
+    let err = RunSpec {
+        model: Some(ModelChoice::Dpf),
+        time_scale: Some(2.0),
+        ..RunSpec::default()
+    }
+    .fit_config(|| Ok(12))
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("time_scale"), "{err}");
 }

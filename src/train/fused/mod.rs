@@ -210,6 +210,8 @@ pub struct StepLoss {
 #[derive(Clone, Debug)]
 pub struct FusedStep<E> {
     variant: Variant,
+    /// The factor on the frame's time that the SIREN reads ([`crate::field::MotionField::time_scale`]).
+    time_scale: f64,
     /// The network's op without tangents, and with them.
     specs: [OpSpec; 2],
     loss: StepLoss,
@@ -231,11 +233,21 @@ impl<E: Float + Send + Sync> FusedStep<E> {
         let len = params.len();
         Ok(FusedStep {
             variant,
+            time_scale: 1.0,
             specs: [OpSpec::of(siren, false), OpSpec::of(siren, true)],
             loss,
             params,
             optimizer: Optimizer::Adam(AdamState::new(adam, len)),
         })
+    }
+
+    /// The same step for a field that reads its time scaled by `scale`
+    /// ([`crate::field::MotionField::time_scale`]).
+    pub fn with_time_scale(self, scale: f64) -> Self {
+        FusedStep {
+            time_scale: scale,
+            ..self
+        }
     }
 
     /// The flat parameters `[W_0, b_0, …, W_o, b_o]`.
@@ -314,7 +326,7 @@ impl<E: Float + Send + Sync> FusedStep<E> {
         let h_on_rows = self.rows_dual(batch);
         let net_spec = self.spec(h_on_rows);
         let net = Net::new(&self.params, net_spec);
-        let input = with_time(batch.x0, batch.time);
+        let input = with_time(batch.x0, self.time_scale * batch.time);
         let (out, acts) = net.forward(&input);
         let values = &out[..n * o];
         let mut y = vec![E::zero(); n * 3];
@@ -344,7 +356,7 @@ impl<E: Float + Send + Sync> FusedStep<E> {
         let (p, o) = (samples.len() / 3, self.variant.outputs());
         let net_spec = self.spec(true);
         let net = Net::new(&self.params, net_spec);
-        let input = with_time(samples, batch.time);
+        let input = with_time(samples, self.time_scale * batch.time);
         let (out, acts) = net.forward(&input);
         let mut g_out = vec![E::zero(); out.len()];
         let h = smoothness(&out[p * o..], p, self.loss, &mut g_out[p * o..]);
