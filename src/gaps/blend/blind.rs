@@ -29,22 +29,25 @@ pub(super) fn blind_residuals(
     blind: &[(usize, usize)],
     blend: &Blend,
 ) -> Vec<Classes<STAGE_TWO>> {
-    let (folds, left) = blind_draws(tracks, blind);
-    // Every fold hides all the blind spans, so one fill serves them all.
-    let all: Vec<(usize, usize)> = folds.concat();
-    let sources = Sources::new(tracks.with_observed(&left), field);
     let (fixed, framewise) = (
         Filler::FieldFill.index(),
         Filler::FieldFillFramewise.index(),
     );
     // Stage 1's fillers with a weight, and the field's two fills.
     let fillers = blend.in_use() | Filler::FieldFill.bit() | Filler::FieldFillFramewise.bit();
-    let mut residuals = residuals(&sources, &all, fillers).into_iter();
-    folds
+    let n = tracks.points;
+    blind_draws(tracks, blind)
         .iter()
         .map(|fold| {
+            // The fold's spans hidden, the other folds' seen: each filler fills them from
+            // what it has in the real gaps, the blind spans included, less one fold.
+            let mut left = tracks.observed.to_vec();
+            for &(k, i) in fold {
+                left[k * n + i] = false;
+            }
+            let sources = Sources::new(tracks.with_observed(&left), field);
             let mut classes = empty_classes();
-            for r in residuals.by_ref().take(fold.len()).flatten() {
+            for r in residuals(&sources, fold, fillers).into_iter().flatten() {
                 // Stage 1's blend of the values, less the truth: its blend of the errors.
                 let three = Arc::new(Residual {
                     errors: [
@@ -142,23 +145,18 @@ pub(super) const BLIND_ENTRIES: usize = WINDOW_ENTRIES / 8;
 
 /// The observed entries of `blind`, split into [`VALIDATION_FOLDS`] folds span by span
 /// (none where `blind` holds no observed entry; past [`BLIND_ENTRIES`] of them, every
-/// so many spans alone), and the `[T, N]` mask of what is left observed with all of them
-/// hidden.
-pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> (Vec<Hidden>, Vec<bool>) {
+/// so many spans alone).
+pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> Vec<Hidden> {
     let (n, observed) = (tracks.points, tracks.observed);
     let mut blind: Vec<(usize, usize)> = blind
         .iter()
         .copied()
         .filter(|&(k, i)| observed[k * n + i])
         .collect();
-    let mut left = observed.to_vec();
-    for &(k, i) in &blind {
-        left[k * n + i] = false;
-    }
     // Span by span (a track's consecutive frames), so that a fold never judges a span
     // whose other half another fold learned from.
     blind.sort_unstable_by_key(|&(k, i)| (i, k));
-    // Past [`BLIND_ENTRIES`], every `every`-th span alone, the others still hidden.
+    // Past [`BLIND_ENTRIES`], every `every`-th span alone.
     let every = blind.len().div_ceil(BLIND_ENTRIES).max(1);
     let mut folds = vec![Vec::new(); VALIDATION_FOLDS];
     let mut span = 0;
@@ -171,7 +169,7 @@ pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> (Vec<Hid
         }
     }
     folds.retain(|f| !f.is_empty());
-    (folds, left)
+    folds
 }
 
 #[cfg(test)]
@@ -179,7 +177,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn past_the_cap_stage_2_weighs_every_other_span_whole_and_hides_them_all() {
+    fn past_the_cap_stage_2_weighs_every_other_span_whole() {
         // 8 tracks of 20,000 frames, blind in spans of 2 frames every 4: 80,000 blind
         // entries, past the cap of 65,536, so every other span is weighed.
         let (t, n) = (20_000, 8);
@@ -190,8 +188,7 @@ mod tests {
             .flat_map(|i| (0..t).filter(|k| k % 4 < 2).map(move |k| (k, i)))
             .collect();
         assert!(blind.len() > BLIND_ENTRIES);
-        let (folds, left) = blind_draws(&tracks, &blind);
-        assert_eq!(left.iter().filter(|&&o| !o).count(), blind.len());
+        let folds = blind_draws(&tracks, &blind);
         let mut weighed: Vec<(usize, usize)> = folds.concat();
         assert_eq!(weighed.len(), blind.len() / 2);
         weighed.sort_unstable_by_key(|&(k, i)| (i, k));
@@ -205,6 +202,27 @@ mod tests {
         for fold in &folds {
             let own: std::collections::HashSet<&(usize, usize)> = fold.iter().collect();
             assert!(fold.iter().all(|&(k, i)| own.contains(&(k ^ 1, i))));
+        }
+    }
+
+    /// One track with a real one-frame gap at frame 12 and blind spans at 10–11 and
+    /// 13–14: two spans, two folds. Each fold is filled with the other's span seen, as
+    /// the real gaps are filled with every blind span seen: a gap of 3 frames (its span
+    /// and the real gap), not the 5 that hiding both spans makes.
+    #[test]
+    fn each_fold_is_filled_with_the_other_folds_spans_seen() {
+        let (t, n) = (30, 2);
+        let positions: Vec<f32> = (0..3 * t * n).map(|e| (e % 7) as f32).collect();
+        let mut observed = vec![true; t * n];
+        observed[12 * n] = false;
+        let tracks = Marked::new(t, n, &positions, &observed);
+        let field = FieldPrediction::new(n, &positions, &positions[..3 * n], &observed);
+        let blind = [(10, 0), (11, 0), (13, 0), (14, 0)];
+        let folds = blind_residuals(&tracks, &field, &blind, &Blend::only(Filler::Linear));
+        assert_eq!(folds.len(), 2);
+        for fold in &folds {
+            let lens: Vec<usize> = fold.iter().flatten().map(|r| r.len).collect();
+            assert_eq!(lens, [3, 3]);
         }
     }
 

@@ -159,13 +159,12 @@ fn blind_spans_judge_a_field_that_only_memorised_what_it_saw() {
     }
     assert!(worst(&seen) < 0.1, "{}", worst(&seen));
 
-    // Each blind span lands whole in one fold, and every fold hides all of them.
-    let (folds, left) = blind::blind_draws(&tracks, &blind);
+    // Each blind span lands whole in one fold.
+    let folds = blind::blind_draws(&tracks, &blind);
     assert_eq!(folds.len(), VALIDATION_FOLDS);
     let mut all: Vec<(usize, usize)> = folds.concat();
     all.sort_unstable();
     assert_eq!(all, blind);
-    assert!(blind.iter().all(|&(k, i)| !left[k * n + i]));
     for hidden in &folds {
         for &(k, i) in hidden {
             let whole = (k.saturating_sub(2)..k + 3)
