@@ -17,14 +17,16 @@ event is the mean Euclidean distance over its hidden entries, in the file's unit
 a case's figure is the mean over its events.
 
     python scripts/native_rate_gaps.py MOCAP_DIR [--draws 20] [--recordings A,B] [--out DIR]
-        [--add FILLER,...] [--no-blind-validation] [--fits DIR]
+        [--add FILLER,...] [--fit-option KEY=VALUE] [--no-blind-validation] [--fits DIR]
 
 Needs the doma wheel (scripts/build_wheel.sh), numpy and `c3d` (for the rate). Writes one
 JSON per recording to --out (default results/native) and prints the table. A recording
 whose JSON exists is not run again; `--add` fills its draw sets (the same, drawn from the
 same seed) with the fillers named and adds their columns, without fitting.
-`--no-blind-validation` fits with `blind_validation=False` (every observation fitted, the
-field's fills left out of doma's blend). `--fits DIR` keeps each fitted run there and loads it on the next run
+`--fit-option KEY=VALUE` passes a `doma.fit` option over the defaults (`time_scale=1`;
+`seed=1` refits with another seed on the same events). `--no-blind-validation` fits with
+`blind_validation=False` (every observation fitted, the field's fills left out of doma's
+blend). `--fits DIR` keeps each fitted run there and loads it on the next run
 instead of fitting: the blend's weights are learned by `complete()`, so a change to the
 blend or a filler reruns without a fit.
 """
@@ -137,7 +139,7 @@ def add_fillers(path, report, methods, draws, seed):
     return report
 
 
-def run_recording(path, draws, seed, blind=True, fits=None):
+def run_recording(path, draws, seed, blind=True, fits=None, fit_options=None):
     seq = doma.read_tracks(path)
     tracks, observed = seq.tracks, seq.observed
     truth = tracks.astype(np.float64)
@@ -152,7 +154,8 @@ def run_recording(path, draws, seed, blind=True, fits=None):
         if loaded:
             field = doma.load(saved)
         else:
-            field = doma.fit(tracks, mask, drop_unobserved=True, seed=seed, progress=False, blind_validation=blind)
+            options = dict(drop_unobserved=True, seed=seed, progress=False, blind_validation=blind)
+            field = doma.fit(tracks, mask, **{**options, **(fit_options or {})})
             if saved is not None:
                 field.save(saved)
         fit_s = time.time() - started
@@ -227,7 +230,13 @@ def main():
                         "(the blend's weights are learned by complete(), so a change to the blend reruns in minutes)")
     p.add_argument("--no-blind-validation", dest="blind_validation", action="store_false",
                    help="fit with blind_validation=False: every observation fitted, the field's fills left out of the blend")
+    p.add_argument("--fit-option", action="append", default=[], metavar="KEY=VALUE",
+                   help="a doma.fit option over the defaults, VALUE read as JSON (time_scale=1, seed=1); repeatable")
     args = p.parse_args()
+    fit_options = {}
+    for option in args.fit_option:
+        key, _, value = option.partition("=")
+        fit_options[key] = json.loads(value)
     added = [m for m in args.add.split(",") if m]
     for m in added:
         if m not in METHODS:
@@ -244,8 +253,9 @@ def main():
                 report.write_text(json.dumps(r, indent=1))
             results.append(r)
             continue
-        r = run_recording(path, args.draws, args.seed, args.blind_validation, args.fits)
+        r = run_recording(path, args.draws, args.seed, args.blind_validation, args.fits, fit_options)
         r["blind_validation"] = args.blind_validation
+        r["fit_options"] = fit_options
         report.write_text(json.dumps(r, indent=1))
         results.append(r)
     print(table(results))

@@ -16,7 +16,11 @@ as a lab's trial is. With --unseen no frame sees every marker (marker 0 is hidde
 first half, marker 1 for the second), as in many real captures: the fit then learns the
 canonical positions of the markers that its reference frame misses.
 
-    python scripts/native_rate_timing.py [DOMA_BINARY] [--c3d] [--unseen]
+With --method FILLER `doma complete` fills with that filler alone (`field_fill`, `segment`,
+`kalman`, ...) instead of doma's fill, and --only picks some of the four recordings
+(`--only 5s,60s`).
+
+    python scripts/native_rate_timing.py [DOMA_BINARY] [--c3d] [--unseen] [--method FILLER] [--only 5s,60s,120s,240s]
 
 Needs numpy and the doma binary (default $CARGO_TARGET_DIR/release/doma); /usr/bin/time
 for the peak memory; the `c3d` package for --c3d.
@@ -128,7 +132,7 @@ def read_c3d(path):
         return np.stack([p[:, :3] for _, p, _ in c3d.Reader(f).read_frames()]).astype(np.float64)
 
 
-def case(doma, work, name, tracks, observed, events, seed, as_c3d, unseen):
+def case(doma, work, name, tracks, observed, events, seed, as_c3d, unseen, method=None):
     if unseen:
         # No frame sees every marker, as in many real captures: the fit learns the
         # canonical positions of the markers its reference frame misses (before the
@@ -147,7 +151,8 @@ def case(doma, work, name, tracks, observed, events, seed, as_c3d, unseen):
     run = work / f"{name}-run"
     fit_s, fit_mb = timed([doma, "fit", str(data), "--out", str(run), "--quiet", "--seed", str(seed)])
     out = work / f"{name}-filled.{ext}"
-    complete_s, complete_mb = timed([doma, "complete", str(run), "--out", str(out)])
+    method_args = ["--method", method] if method else []
+    complete_s, complete_mb = timed([doma, "complete", str(run), "--out", str(out), *method_args])
     filled = read_c3d(out) if as_c3d else np.load(out)["tracks"].astype(np.float64)
     errors = [np.linalg.norm(filled[s : s + g][:, m] - tracks[s : s + g][:, m], axis=2).mean() for s, g, m in hidden]
     return {
@@ -166,7 +171,12 @@ def main():
     p.add_argument("--c3d", action="store_true", help="C3D recordings with analog channels")
     p.add_argument("--unseen", action="store_true",
                    help="marker 0 hidden for the first half and marker 1 for the second, so that no frame sees every marker")
+    p.add_argument("--method", help="fill with this filler alone (doma complete --method)")
+    p.add_argument("--only", default="5s,60s,120s,240s", help="the recordings to run, of 5s,60s,120s,240s")
     args = p.parse_args()
+    only = set(args.only.split(","))
+    if not only <= {"5s", "60s", "120s", "240s"}:
+        raise SystemExit(f"--only {args.only}: not among 5s,60s,120s,240s")
     tracks, observed = source_tracks()
     tracks, observed = tracks[:, :MARKERS], observed[:, :MARKERS]
     whole_t = ping_pong(tracks, 4 * FRAMES).astype(np.float64)
@@ -174,23 +184,27 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         work = pathlib.Path(tmp)
         at = lambda name, frames, events: case(
-            args.doma, work, name, whole_t[:frames], whole_o[:frames], events, args.seed, args.c3d, args.unseen
+            args.doma, work, name, whole_t[:frames], whole_o[:frames], events, args.seed, args.c3d, args.unseen,
+            args.method,
         )
-        rows = [
-            ("5 s excerpt", at("excerpt", 1000, 20)),
-            ("60 s", at("whole", FRAMES, 240)),
-            ("120 s", at("double", 2 * FRAMES, 480)),
-            ("240 s", at("quad", 4 * FRAMES, 960)),
+        plan = [
+            ("5s", "5 s excerpt", "excerpt", 1000, 20),
+            ("60s", "60 s", "whole", FRAMES, 240),
+            ("120s", "120 s", "double", 2 * FRAMES, 480),
+            ("240s", "240 s", "quad", 4 * FRAMES, 960),
         ]
+        rows = [(label, at(name, frames, events)) for key, label, name, frames, events in plan if key in only]
     print("| recording | frames × markers | fit (s) | fit peak (MB) | complete (s) | complete peak (MB) | data (MB) | file (MB) | 0.5 s gaps, 3 markers | error (mm) |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for name, r in rows:
         print(f"| {name} | {r['frames']} × {MARKERS} | {r['fit_s']:.0f} | {r['fit_mb']:.0f} | {r['complete_s']:.0f} | "
               f"{r['complete_mb']:.0f} | {r['data_mb']:.1f} | {r['file_mb']:.1f} | {r['events']} | {r['error_mm']:.2f} |")
-    one, four = rows[1][1], rows[3][1]
-    data = four["data_mb"] - one["data_mb"]
-    print(f"\nfrom 60 s to 240 s, per MB more tracks: fit peak +{(four['fit_mb'] - one['fit_mb']) / data:.1f} MB, "
-          f"complete peak +{(four['complete_mb'] - one['complete_mb']) / data:.1f} MB")
+    ran = dict(rows)
+    if "60 s" in ran and "240 s" in ran:
+        one, four = ran["60 s"], ran["240 s"]
+        data = four["data_mb"] - one["data_mb"]
+        print(f"\nfrom 60 s to 240 s, per MB more tracks: fit peak +{(four['fit_mb'] - one['fit_mb']) / data:.1f} MB, "
+              f"complete peak +{(four['complete_mb'] - one['complete_mb']) / data:.1f} MB")
 
 
 if __name__ == "__main__":
