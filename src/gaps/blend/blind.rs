@@ -140,12 +140,16 @@ fn clearly_positive(gains: &[f64]) -> bool {
 /// The blind entries that stage 2 weighs at most, about: an eighth of a window of time
 /// ([`WINDOW_ENTRIES`]), more than a recording in one window holds (a tenth of its
 /// observations, [`blind_spans`](super::blind_spans)). A long recording's blind spans grow
-/// with it; its stage 2 weighs an even share of them, as its fill's memory must not grow.
+/// with it; its stage 2 weighs a stretch of them, as its fill's memory and time must not
+/// grow.
 pub(super) const BLIND_ENTRIES: usize = WINDOW_ENTRIES / 8;
 
 /// The observed entries of `blind`, split into [`VALIDATION_FOLDS`] folds span by span
-/// (none where `blind` holds no observed entry; past [`BLIND_ENTRIES`] of them, every
-/// so many spans alone).
+/// (none where `blind` holds no observed entry). Past [`BLIND_ENTRIES`] of them, the
+/// spans of one stretch of time in the recording's middle, as many as fit in
+/// [`BLIND_ENTRIES`]: each fold is filled on its own, in the windows of time that hold
+/// its spans, so spans spread over a long recording would have every fold fill every
+/// window.
 pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> Vec<Hidden> {
     let (n, observed) = (tracks.points, tracks.observed);
     let mut blind: Vec<(usize, usize)> = blind
@@ -156,17 +160,27 @@ pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> Vec<Hidd
     // Span by span (a track's consecutive frames), so that a fold never judges a span
     // whose other half another fold learned from.
     blind.sort_unstable_by_key(|&(k, i)| (i, k));
-    // Past [`BLIND_ENTRIES`], every `every`-th span alone.
-    let every = blind.len().div_ceil(BLIND_ENTRIES).max(1);
+    let mut spans: Vec<&[(usize, usize)]> = blind
+        .chunk_by(|&(k, i), &(l, j)| i == j && l == k + 1)
+        .collect();
+    if blind.len() > BLIND_ENTRIES {
+        // The middle stretch: the spans by their first frame, the run around the median.
+        spans.sort_by_key(|span| span[0]);
+        let (mut from, mut to, mut held) = (spans.len() / 2, spans.len() / 2, 0);
+        while to < spans.len() && held + spans[to].len() <= BLIND_ENTRIES {
+            held += spans[to].len();
+            to += 1;
+            if from > 0 && held + spans[from - 1].len() <= BLIND_ENTRIES {
+                from -= 1;
+                held += spans[from].len();
+            }
+        }
+        spans = spans[from..to].to_vec();
+        spans.sort_by_key(|span| (span[0].1, span[0].0));
+    }
     let mut folds = vec![Vec::new(); VALIDATION_FOLDS];
-    let mut span = 0;
-    for (r, &(k, i)) in blind.iter().enumerate() {
-        if r > 0 && blind[r - 1] != (k.wrapping_sub(1), i) {
-            span += 1;
-        }
-        if span % every == 0 {
-            folds[span / every % VALIDATION_FOLDS].push((k, i));
-        }
+    for (s, span) in spans.iter().enumerate() {
+        folds[s % VALIDATION_FOLDS].extend_from_slice(span);
     }
     folds.retain(|f| !f.is_empty());
     folds
@@ -177,9 +191,9 @@ mod tests {
     use super::*;
 
     #[test]
-    fn past_the_cap_stage_2_weighs_every_other_span_whole() {
+    fn past_the_cap_stage_2_weighs_a_stretch_of_whole_spans_in_the_middle() {
         // 8 tracks of 20,000 frames, blind in spans of 2 frames every 4: 80,000 blind
-        // entries, past the cap of 65,536, so every other span is weighed.
+        // entries, past the cap of 65,536.
         let (t, n) = (20_000, 8);
         let observed = vec![true; t * n];
         let positions = vec![0f32; 3 * t * n];
@@ -189,16 +203,22 @@ mod tests {
             .collect();
         assert!(blind.len() > BLIND_ENTRIES);
         let folds = blind_draws(&tracks, &blind);
-        let mut weighed: Vec<(usize, usize)> = folds.concat();
-        assert_eq!(weighed.len(), blind.len() / 2);
-        weighed.sort_unstable_by_key(|&(k, i)| (i, k));
-        // Whole spans of 2, every other one of each track: frames 0–1, 8–9, 16–17, ...
+        let weighed: Vec<(usize, usize)> = folds.concat();
         assert!(
-            weighed.iter().all(|&(k, _)| k % 8 < 2),
-            "{:?}",
-            &weighed[..4]
+            weighed.len() <= BLIND_ENTRIES && weighed.len() > BLIND_ENTRIES - 16,
+            "{}",
+            weighed.len()
         );
-        // No span split between folds.
+        // One stretch of time around the middle: its frames are the same for every
+        // track, give or take the one span at each end, and they hold frame 10,000.
+        let first = weighed.iter().map(|&(k, _)| k).min().unwrap();
+        let last = weighed.iter().map(|&(k, _)| k).max().unwrap();
+        assert!(first < 10_000 && last > 10_000, "{first}..{last}");
+        assert!(
+            (last - first + 1) * n / 2 <= weighed.len() + 4 * n,
+            "{first}..{last} is not one stretch"
+        );
+        // No span split between folds, and every span whole.
         for fold in &folds {
             let own: std::collections::HashSet<&(usize, usize)> = fold.iter().collect();
             assert!(fold.iter().all(|&(k, i)| own.contains(&(k ^ 1, i))));
