@@ -284,6 +284,9 @@ pub fn time_input(x: Tensor<2>, t: f64) -> Tensor<2> {
 /// ([`DomaFieldConfig::time_scale`], [`time_scale_for`]).
 pub const TIME_SPAN_FRAMES: usize = 1000;
 
+/// The largest time scale a DOMA field takes ([`DomaFieldConfig::time_scale`]).
+pub const MAX_TIME_SCALE: f64 = 1e6;
+
 /// The time scale `s` a fit gives a DOMA field for a recording of `frames` frames:
 /// `None` (1) up to [`TIME_SPAN_FRAMES`], else `T / TIME_SPAN_FRAMES`.
 ///
@@ -332,12 +335,15 @@ impl DomaFieldConfig {
         }
     }
 
-    /// Refuses a time scale that is not a positive number.
+    /// Refuses a time scale that is not a positive number up to [`MAX_TIME_SCALE`].
     pub fn validate(&self) -> crate::Result<()> {
         match self.time_scale {
-            Some(s) if !(s.is_finite() && s > 0.0) => Err(crate::DomaError::InvalidConfig(
-                format!("time scale {s} must be positive"),
-            )),
+            Some(s) if !(s > 0.0 && s <= MAX_TIME_SCALE) => {
+                Err(crate::DomaError::InvalidConfig(format!(
+                    "time scale {s} must be positive and at most {MAX_TIME_SCALE:e} \
+                     (the SIREN reads s·t as f32, and sin of a larger time is noise)"
+                )))
+            }
             _ => self.shape.validate(),
         }
     }

@@ -48,6 +48,11 @@ fn a_time_scaled_field_is_the_same_siren_at_the_scaled_time() {
             "t = {t}"
         );
     }
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY, 2e6] {
+        let refused = config.clone().with_time_scale(Some(bad)).validate();
+        assert!(refused.is_err(), "time scale {bad}");
+    }
+    assert!(config.clone().with_time_scale(Some(1e6)).validate().is_ok());
     assert_eq!(crate::field::time_scale_for(1000), None);
     assert_eq!(crate::field::time_scale_for(1001), Some(1.001));
     assert_eq!(crate::field::time_scale_for(12_000), Some(12.0));
