@@ -36,18 +36,19 @@ pub(super) fn blind_residuals(
     // Stage 1's fillers with a weight, and the field's two fills.
     let fillers = blend.in_use() | Filler::FieldFill.bit() | Filler::FieldFillFramewise.bit();
     let n = tracks.points;
+    // One mask for every fold: the fold's spans hidden, then seen again.
+    let mut left = tracks.observed.to_vec();
     blind_draws(tracks, blind)
         .iter()
         .map(|fold| {
             // The fold's spans hidden, the other folds' seen: each filler fills them from
             // what it has in the real gaps, the blind spans included, less one fold.
-            let mut left = tracks.observed.to_vec();
-            for &(k, i) in fold {
-                left[k * n + i] = false;
-            }
+            fold.iter().for_each(|&(k, i)| left[k * n + i] = false);
             let sources = Sources::new(tracks.with_observed(&left), field);
+            let found = residuals(&sources, fold, fillers);
+            fold.iter().for_each(|&(k, i)| left[k * n + i] = true);
             let mut classes = empty_classes();
-            for r in residuals(&sources, fold, fillers).into_iter().flatten() {
+            for r in found.into_iter().flatten() {
                 // Stage 1's blend of the values, less the truth: its blend of the errors.
                 let three = Arc::new(Residual {
                     errors: [
