@@ -4,8 +4,8 @@
 Each FITS folder holds the runs that `native_rate_gaps.py --fits FITS` kept for the same
 draw sets (the same events, drawn with the same --seed and --draws), fitted with different
 options, e.g. another fit seed (`--fit-option seed=1`). For every draw set, doma's fill
-(`Field.complete()`) of each run is scored on the set's events, and so is their mean,
-entry by entry. REPORTS is a `native_rate_gaps.py --out` folder of those draw sets: its
+(`Field.complete()`) of each run is scored on the set's events, the fits' events pooled
+("pooled": the mean of their errors), and their fills' mean, entry by entry ("mean"). REPORTS is a `native_rate_gaps.py --out` folder of those draw sets: its
 named fillers' columns (spline, pattern, rigid body, Kalman, Gløersen) give the best named
 filler each fill is set against. Prints, for each fit and for the mean, the acceptance
 (below the best named filler at 0.5 s and beyond, within 5 % at shorter gaps), the worst
@@ -34,12 +34,7 @@ def fills_of(fits, name, set_index, shape):
     out = []
     for base in fits:
         done = doma.load(base / name / f"set{set_index}").complete()
-        filled = done.tracks
-        if done.kept is not None:
-            full = np.full(shape, np.nan, np.float32)
-            full[:, done.kept] = filled
-            filled = full
-        out.append(filled.astype(np.float64))
+        out.append(nr.in_input_order(done.tracks, done.kept, shape).astype(np.float64))
     return out
 
 
@@ -54,7 +49,10 @@ def main():
     args = p.parse_args()
     if len(args.fits) < 2:
         raise SystemExit("give two FITS folders or more")
-    names = [f"fit {k}" for k in range(len(args.fits))] + ["mean"]
+    fitted = [f"fit {k}" for k in range(len(args.fits))]
+    # "pooled": every fit's events in one case (the mean of the fits' errors), "mean": the
+    # fits' fills averaged, then scored.
+    names = fitted + ["pooled", "mean"]
     ratios = {n: [] for n in names}
     met = {n: 0 for n in names}
     for name in args.recordings.split(","):
@@ -69,8 +67,9 @@ def main():
             fills.append(sum(fills) / len(fills))
             for e in events:
                 per = errors.setdefault(f"{count}x{e[0]}", {n: [] for n in names})
-                for n, f in zip(names, fills):
+                for n, f in zip(fitted + ["mean"], fills):
                     per[n].append(nr.event_errors(f, truth, e))
+                per["pooled"].extend(per[n][-1] for n in fitted)
         for key, per in sorted(errors.items()):
             case = cases[key]
             best = min(case[m] for m in nr.NAMED if nr.runs(case, m))

@@ -169,13 +169,8 @@ def run_recording(path, draws, seed, blind=True, fits=None, fit_options=None):
             started = time.time()
             fills[m] = doma.fill(tracks, mask, m)
             filler_s[m] = time.time() - started
-        kept = done.kept
-        if kept is not None:
-            # A fit drops the tracks never seen: put its fills back in the input's order.
-            for name in ("doma", "field_fill"):
-                full = np.full(tracks.shape, np.nan, np.float32)
-                full[:, kept] = fills[name]
-                fills[name] = full
+        fills["field_fill"] = in_input_order(fills["field_fill"], done.kept, tracks.shape)
+        fills["doma"] = in_input_order(fills["doma"], done.kept, tracks.shape)
         for e in events_of_set:
             key = f"{count}x{e[0]}"
             for name, f in fills.items():
@@ -189,6 +184,17 @@ def run_recording(path, draws, seed, blind=True, fits=None, fit_options=None):
         out["cases"][key] = {name: float(np.mean(v)) for name, v in per.items()}
         out["cases"][key]["events"] = len(per["doma"])
     return out
+
+
+def in_input_order(filled, kept, shape):
+    """A fit's fill [T, N', 3] in the input's track order [T, N, 3]: a fit drops the
+    tracks never seen (`kept`: the input's index of each track it kept; None: none
+    dropped), which come back NaN."""
+    if kept is None:
+        return filled
+    full = np.full(shape, np.nan, np.float32)
+    full[:, kept] = filled
+    return full
 
 
 def runs(case, method):
