@@ -596,6 +596,9 @@ def fit(
             observations from the fit and weigh the field's fills in :meth:`Field.complete`'s
             blend on them, where the field has not seen the answer (default True; False fits
             every observation, and the blend holds the classic fillers alone).
+        fits: fit K fields, with ``seed`` and the K - 1 seeds after it, and fill each gap
+            in :meth:`Field.complete` with the median of their fills (the mean of two),
+            at K times the cost (default 1; the others fitted into ``out/fits/2``, ...).
         robust: ``"huber[:delta]"`` or ``"charbonnier[:eps]"``, a robust trajectory loss.
         checkpoint_every: iterations between checkpoints (default 50).
         progress: True: a bar on a terminal, else (a notebook, a log) a line every tenth

@@ -106,3 +106,25 @@ def test_a_blind_validation_fit_completes_with_every_observation_as_given(tmp_pa
     assert np.isfinite(done.tracks[gap]).all()
     with pytest.raises(TypeError, match="blind_validation"):
         doma.fit(tracks, observed, iters=2, progress=False, blind_validation=0.5)
+
+
+def test_three_fits_complete_with_the_median_of_their_fills(tmp_path):
+    """`fits=3` fits three fields into the run folder (the others under `fits/`), and the
+    completion fills each gap with the median of their fills, between theirs."""
+    tracks, observed, i, a, b = hidden_gap()
+    clip = slice(a - 40, b + 40)
+    tracks, observed = tracks[clip], observed[clip]
+    out = tmp_path / "run"
+    field = doma.fit(tracks, observed, iters=2, progress=False, drop_unobserved=True, fits=3, out=out)
+    assert (out / "fits" / "2" / "model.bpk").is_file() and (out / "fits" / "3" / "model.bpk").is_file()
+    done = field.complete()
+    assert np.array_equal(done.tracks[observed], tracks[observed])
+    gap = ~observed & observed.any(axis=0)
+    each = [doma.load(d).complete().tracks[gap] for d in (out / "fits" / "2", out / "fits" / "3")]
+    ours = done.tracks[gap]
+    assert np.isfinite(ours).all()
+    # The median of three lies between the other two fits' values, whatever the third's.
+    assert ((np.minimum(*each) <= ours) & (ours <= np.maximum(*each))).all()
+    assert not np.array_equal(each[0], each[1])
+    with pytest.raises(ValueError, match="fits"):
+        doma.fit(tracks, observed, iters=2, progress=False, fits=0)

@@ -82,6 +82,13 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
         };
         eprintln!("  {} entries left unfilled: {why}", c.unfilled);
     }
+    if c.fits > 1 {
+        let how = if c.fits == 2 { "mean" } else { "median" };
+        eprintln!(
+            "  each entry the {how} of {} fits' fills; the weights below are the first's",
+            c.fits
+        );
+    }
     let b = &c.blend;
     // One filler alone, or the blend's weights.
     let weights = |w: &crate::gaps::blend::Weights, count: usize| {

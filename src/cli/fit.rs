@@ -123,12 +123,12 @@ mod tests {
     fn flags_and_json_are_one_options_type() {
         let flags = "a.traj --out r --variant scaled-se3 --iters 20 --h-weight auto \
                      --frames 3..=9 --robust huber:0.02 --count-hidden --test-fraction 0.5 \
-                     --recipe fast --learning-rate 3e-4";
+                     --recipe fast --learning-rate 3e-4 --fits 3";
         let flags = parse(&flags.split_whitespace().collect::<Vec<_>>()).unwrap();
         let json: RunSpec = serde_json::from_str(
             r#"{"data": "a.traj", "model": "scaled-se3", "iterations": 20, "h_weight": "auto",
                 "frames": [3, 10], "robust": "huber:0.02", "count_hidden": true,
-                "test_fraction": 0.5, "recipe": "fast", "learning_rate": 3e-4}"#,
+                "test_fraction": 0.5, "recipe": "fast", "learning_rate": 3e-4, "fits": 3}"#,
         )
         .unwrap();
         assert_eq!(flags.spec(), json);
@@ -176,5 +176,9 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("at least 1"), "{err}");
+        let err = parse(&["a.traj", "--out", "r", "--fits", "10"])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("from 1 to 9"), "{err}");
     }
 }

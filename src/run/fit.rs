@@ -74,6 +74,9 @@ pub fn fit_run_locked<'a>(
     )
 }
 
+/// The run's own fit, then the others of a run that combines several
+/// ([`RunConfig::fits`]), each into its folder ([`RunDir::member`]), in turn: a resumed run
+/// goes on with the first unfinished one.
 fn fit_holding<'a>(
     run: &RunDir,
     new: Option<NewFit>,
@@ -81,8 +84,66 @@ fn fit_holding<'a>(
     device: &Device,
     interrupt: &'a AtomicBool,
     stop_after: Option<usize>,
-    progress: Progress<'a>,
+    mut progress: Progress<'a>,
 ) -> Result<FitOutcome> {
+    let mut one = |dir: &RunDir, new: Option<NewFit>, held: Option<RunLock>| {
+        fit_one(
+            dir,
+            new,
+            held,
+            device,
+            interrupt,
+            stop_after,
+            progress.by_ref(),
+        )
+    };
+    let resumed = match &new {
+        Some(_) => None,
+        None => Some(run.load_config()?),
+    };
+    // A resumed run whose own fit is done goes on with the others, under its lock.
+    let (report, _lock) = match resumed.filter(|c| c.fits > 1 && run.model().is_file()) {
+        Some(_) => (
+            crate::io::load_json::<Report>(&run.report())?,
+            Some(RunLock::acquire(&run.dir)?),
+        ),
+        None => match one(run, new, held)? {
+            (FitOutcome::Finished(report), lock) => (report, lock),
+            (interrupted, _) => return Ok(interrupted),
+        },
+    };
+    let config = run.load_config()?;
+    for k in 2..=config.fits {
+        let member = run.member(k);
+        if member.model().is_file() {
+            continue;
+        }
+        let new = if member.config().is_file() {
+            None
+        } else {
+            std::fs::create_dir_all(run.dir.join("fits"))
+                .map_err(|e| DomaError::io(run.dir.join("fits"), e))?;
+            Some(NewFit::load(config.member(k))?)
+        };
+        let (outcome, _) = one(&member, new, None)?;
+        if let FitOutcome::Interrupted { .. } = outcome {
+            return Ok(outcome);
+        }
+    }
+    Ok(FitOutcome::Finished(report))
+}
+
+/// One fit into `run`: new (`new`), or resumed from its checkpoint; with the lock that it
+/// held, to hold while the run's other fits go on.
+fn fit_one<'a>(
+    run: &RunDir,
+    new: Option<NewFit>,
+    held: Option<RunLock>,
+    device: &Device,
+    interrupt: &'a AtomicBool,
+    stop_after: Option<usize>,
+    progress: Progress<'a>,
+) -> Result<(FitOutcome, Option<RunLock>)> {
     let resume = new.is_none();
     let (NewFit { config, sequence }, resumed) = match new {
         Some(NewFit { config, sequence }) => (
@@ -106,7 +167,7 @@ fn fit_holding<'a>(
         Trainer::new(field, fit, &train, device)?.progress(matches!(progress, Progress::Shown));
     // A new fit's folder is made only now, once the trainer took the data: a refusal
     // until here leaves nothing behind.
-    let _lock = match resumed {
+    let lock = match resumed {
         Some(lock) => lock,
         None => start(run, &config, held)?,
     };
@@ -131,13 +192,14 @@ fn fit_holding<'a>(
     if let Progress::Each(each) = progress {
         hooks = hooks.each(each);
     }
-    match trainer.run_with(hooks)? {
+    let outcome = match trainer.run_with(hooks)? {
         Outcome::Finished(fitted) => {
             drop(train);
-            finish(run, &config, sequence, &fitted, device).map(FitOutcome::Finished)
+            FitOutcome::Finished(finish(run, &config, sequence, &fitted, device)?)
         }
-        Outcome::Interrupted { iterations_done } => Ok(FitOutcome::Interrupted { iterations_done }),
-    }
+        Outcome::Interrupted { iterations_done } => FitOutcome::Interrupted { iterations_done },
+    };
+    Ok((outcome, Some(lock)))
 }
 
 /// Claims the run folder of a new fit ([`super::Claim`]: made, locked, refused if it holds

@@ -56,6 +56,17 @@ pub struct RunInfo {
     /// nothing to the fit; the field there follows from the frames around them).
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub frames_without_observations: Option<usize>,
+    /// The fits whose fills `complete` combines ([`super::RunConfig::fits`]), and those of
+    /// them finished (`model.bpk` written).
+    #[serde(default = "one")]
+    pub fits: usize,
+    /// See `fits`.
+    #[serde(default)]
+    pub fits_finished: usize,
+}
+
+fn one() -> usize {
+    1
 }
 
 /// Describes the run in `run`.
@@ -99,5 +110,10 @@ pub fn info(run: &RunDir) -> Result<RunInfo> {
         fitted_tracks: fitted.len(),
         test_fraction: config.test_fraction,
         frames_without_observations: masked.then_some(empty_frames),
+        fits: config.fits,
+        fits_finished: usize::from(run.model().is_file())
+            + (2..=config.fits)
+                .filter(|&k| run.member(k).model().is_file())
+                .count(),
     })
 }

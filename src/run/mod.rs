@@ -8,6 +8,7 @@
 //! | `model.bpk` | the fitted field's parameters (burnpack), once the fit is done |
 //! | `report.json` | [`Report`]: the metrics on the held-out points |
 //! | `canonical.npy` | the canonical positions `[N, 3]` (normalised) of every track, where the fit learned those of tracks unseen in the reference frame |
+//! | `fits/2/`, … | the other fits of a run whose fill combines several ([`RunConfig::fits`]), each a run folder of its own |
 //!
 //! `.lock` holds the process id of the fit that holds the folder ([`RunLock`]).
 //!
@@ -21,6 +22,7 @@ mod claim;
 mod complete;
 mod eval;
 mod fit;
+mod folder;
 mod gap_report;
 mod info;
 mod lock;
@@ -36,6 +38,7 @@ pub use complete::{
 };
 pub use eval::{eval_run, eval_run_as, evaluate, field_at_frames, field_everywhere};
 pub use fit::{FitOutcome, fit_run, fit_run_locked};
+pub use folder::{OpenRun, RunDir};
 pub use gap_report::{GapErrors, GapReport, gap_report};
 pub use info::{RunInfo, info};
 pub use lock::RunLock;
@@ -49,14 +52,11 @@ pub use warp::warp_run;
 use std::borrow::Cow;
 use std::path::PathBuf;
 
-use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
-use crate::checkpoint::decode_checkpoint;
 use crate::data::Trajectories;
 use crate::data::layout::TrackFile;
 use crate::data::sequence::{HoldOut, LoadOptions, Sequence, load_sequence_with, split_indices};
-use crate::field::model::{Model, ModelConfig};
 use crate::gaps::spans::DEFAULT_SPANS;
 use crate::train::FitConfig;
 use crate::{DomaError, Result};
@@ -110,6 +110,14 @@ pub struct RunConfig {
     /// (false) in runs fitted before it was.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub blind_validation: bool,
+    /// The fits whose fills doma's fill combines, entry by entry (their median; the mean
+    /// of two): this run's field and `fits − 1` more in `fits/2`, `fits/3`, … ([`RunDir::member`]),
+    /// each fitted as this one with the next seed, and so with its own initial weights,
+    /// frame order, blind spans and validation draws. Each fill weighs its fillers on a few
+    /// validation spans per class of gap length, and a fill that chose wrongly on them
+    /// costs the combination a half (two fits) or nothing (three); docs/results.md.
+    #[serde(default = "one_fit", skip_serializing_if = "is_one_fit")]
+    pub fits: usize,
     /// A digest of the data as the fit read it ([`data_digest`]), so that a run whose data
     /// file was replaced or edited since is refused rather than read with another
     /// normalisation (absent in runs made before it was recorded: not checked).
@@ -149,6 +157,17 @@ pub fn data_digest(data: &Sequence) -> String {
     format!("fnv1a64:{h:016x}")
 }
 
+/// The most fits a run combines ([`RunConfig::fits`]).
+pub const MAX_FITS: usize = 9;
+
+fn one_fit() -> usize {
+    1
+}
+
+fn is_one_fit(fits: &usize) -> bool {
+    *fits == 1
+}
+
 fn default_backend() -> crate::backend::BackendKind {
     crate::backend::BackendKind::Flex
 }
@@ -173,6 +192,7 @@ impl RunConfig {
             holdout_observations: None,
             holdout_span: None,
             blind_validation: true,
+            fits: 1,
             data_digest: None,
         }
     }
@@ -199,7 +219,23 @@ impl RunConfig {
                 "checkpoint interval and stride must be at least 1".into(),
             ));
         }
+        if !(1..=MAX_FITS).contains(&self.fits) {
+            return Err(DomaError::InvalidConfig(format!(
+                "{} fits: a run combines 1 to {MAX_FITS}",
+                self.fits
+            )));
+        }
         Ok(())
+    }
+
+    /// The config of fit `k` (from 2) of this run ([`RunConfig::fits`]): this one with
+    /// the seed `k − 1` past its own, a fit of its own.
+    pub fn member(&self, k: usize) -> RunConfig {
+        let mut member = self.clone();
+        member.fit.seed = self.fit.seed.wrapping_add(k as u64 - 1);
+        member.fits = 1;
+        member.data_digest = None;
+        member
     }
 
     /// Loads the run's data, normalised as when it was fitted, with its held-out
@@ -325,175 +361,5 @@ mod nan_as_null {
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
         let v: Vec<Option<f64>> = Vec::deserialize(d)?;
         Ok(v.into_iter().map(|x| x.unwrap_or(f64::NAN)).collect())
-    }
-}
-
-/// A fitted run opened for warping or showing it (`warp`, `export`, `view`).
-pub struct OpenRun {
-    /// Its config.
-    pub config: RunConfig,
-    /// Its fitted field.
-    pub field: Model,
-    /// Its data, normalised as when it was fitted.
-    pub data: Sequence,
-    /// The frames asked for, checked to lie within the data's.
-    pub frames: std::ops::Range<usize>,
-}
-
-/// The files of a run folder.
-#[derive(Clone, Debug)]
-pub struct RunDir {
-    /// The folder.
-    pub dir: PathBuf,
-}
-
-impl RunDir {
-    /// The run folder `dir`.
-    pub fn new(dir: impl Into<PathBuf>) -> Self {
-        RunDir { dir: dir.into() }
-    }
-    /// `config.json`.
-    pub fn config(&self) -> PathBuf {
-        self.dir.join("config.json")
-    }
-    /// `model.bpk`.
-    pub fn model(&self) -> PathBuf {
-        self.dir.join("model.bpk")
-    }
-    /// `resume.ckpt`.
-    pub fn resume(&self) -> PathBuf {
-        self.dir.join("resume.ckpt")
-    }
-    /// `history.json`.
-    pub fn history(&self) -> PathBuf {
-        self.dir.join("history.json")
-    }
-    /// `report.json`.
-    pub fn report(&self) -> PathBuf {
-        self.dir.join("report.json")
-    }
-    /// `canonical.npy`.
-    pub fn canonical(&self) -> PathBuf {
-        self.dir.join("canonical.npy")
-    }
-
-    /// The run's data as [`RunConfig::load`] gives it, with the canonical positions the fit
-    /// learned (`canonical.npy`), if it learned any.
-    pub fn load_data(&self, config: &RunConfig) -> Result<Sequence> {
-        let mut data = config.load()?;
-        let path = self.canonical();
-        if path.is_file() {
-            let array = crate::data::npy::read_npy(&path)?;
-            let points = data.trajectories.points();
-            if array.shape != [points, 3] {
-                return Err(DomaError::Malformed {
-                    path,
-                    reason: format!(
-                        "shape {:?}, but the run's data has {points} tracks",
-                        array.shape
-                    ),
-                });
-            }
-            data.trajectories =
-                data.trajectories
-                    .with_canonical(array.data)
-                    .map_err(|e| DomaError::Malformed {
-                        path,
-                        reason: e.to_string(),
-                    })?;
-        }
-        Ok(data)
-    }
-
-    /// The run's config; a folder without one is not a run.
-    pub fn load_config(&self) -> Result<RunConfig> {
-        let path = self.config();
-        if !self.dir.exists() {
-            return Err(DomaError::io(
-                &self.dir,
-                std::io::Error::new(std::io::ErrorKind::NotFound, "no such run folder"),
-            ));
-        }
-        if !path.is_file() {
-            return Err(DomaError::Malformed {
-                path: self.dir.clone(),
-                reason: "not a doma run folder (no config.json)".into(),
-            });
-        }
-        let given: serde_json::Value = crate::io::load_json(&path)?;
-        let malformed = |e: serde_json::Error| DomaError::Malformed {
-            path: path.clone(),
-            reason: e.to_string(),
-        };
-        let config: RunConfig = serde_json::from_value(given.clone()).map_err(malformed)?;
-        // A field that no run config has (an edit with a typo, another layout) is refused
-        // rather than ignored.
-        let known = serde_json::to_value(&config).map_err(malformed)?;
-        if let Some(field) = crate::io::unknown_field(&given, &known, "") {
-            return Err(DomaError::Malformed {
-                path,
-                reason: format!("no run config has the field `{field}`"),
-            });
-        }
-        config.validate().map_err(|e| DomaError::Malformed {
-            path,
-            reason: e.to_string(),
-        })?;
-        Ok(config)
-    }
-
-    /// The fitted field (from `model.bpk`, else from the last checkpoint, read in memory:
-    /// nothing is written into the run folder).
-    pub fn load_field(&self, config: &RunConfig, device: &Device) -> Result<Model> {
-        let canonical = self.canonical_training_points(config)?;
-        let fresh = config.fit.model.init(config.fit.seed, &canonical, device);
-        let path = self.model();
-        if path.is_file() {
-            let bytes = std::fs::read(&path).map_err(|e| DomaError::io(&path, e))?;
-            return fresh.decode(&bytes).map_err(|e| DomaError::Malformed {
-                path,
-                reason: format!(
-                    "does not hold the model that {} describes: {e}",
-                    self.config().display()
-                ),
-            });
-        }
-        let snapshot = self.read_resume()?;
-        decode_checkpoint(fresh, &snapshot.model).map_err(|e| DomaError::Malformed {
-            path: self.resume(),
-            reason: format!("the model part: {e}"),
-        })
-    }
-
-    /// Loads the run's config, field and data, and checks `frames` (default: all of the
-    /// run's frames) against them.
-    pub fn open(&self, frames: Option<std::ops::Range<usize>>, device: &Device) -> Result<OpenRun> {
-        let config = self.load_config()?;
-        let field = self.load_field(&config, device)?;
-        let data = self.load_data(&config)?;
-        let total = data.trajectories.frames();
-        let frames = frames.unwrap_or(0..total);
-        if frames.start >= frames.end || frames.end > total {
-            return Err(DomaError::InvalidConfig(format!(
-                "frames {}..{} are not within the run's {total} frames",
-                frames.start, frames.end
-            )));
-        }
-        Ok(OpenRun {
-            config,
-            field,
-            data,
-            frames,
-        })
-    }
-
-    /// The canonical training points, which place BoneCloud's bones (the other models do
-    /// not read them; the parameters come from the checkpoint anyway).
-    fn canonical_training_points(&self, config: &RunConfig) -> Result<Vec<f32>> {
-        if !matches!(config.fit.model, ModelConfig::BoneCloud(_)) {
-            return Ok(Vec::new());
-        }
-        let sequence = config.load()?;
-        Ok(config.split(&sequence.trajectories)?.0.canonical().to_vec())
     }
 }

@@ -229,6 +229,13 @@ pub struct RunSpec {
     #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", help_heading = "Gap filling")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub blind_validation: Option<bool>,
+    /// Fit K fields, with the seed and the K − 1 after it, and fill each gap with the median
+    /// of their fills (the mean of two): each weighs its fillers on its own validation
+    /// spans, and one that chose wrongly counts for half, or not at all; K times the fit's
+    /// and `complete`'s time (default 1; the others are fitted into RUN/fits/2, …).
+    #[arg(long, value_name = "K", value_parser = fit_count, help_heading = "Gap filling")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fits: Option<usize>,
     /// The probability from which a tracker's float visibility counts as observed
     /// (default 0.5); a bool or 0/1 visibility is read as it is.
     #[arg(long, value_name = "P", help_heading = "Tracker files")]
@@ -270,6 +277,17 @@ fn at_least_one(s: &str) -> std::result::Result<usize, String> {
     match s.parse::<usize>() {
         Ok(n) if n >= 1 => Ok(n),
         _ => Err(format!("`{s}` is not a whole number of at least 1")),
+    }
+}
+
+/// A count of fits a run combines (1 to [`super::MAX_FITS`]).
+fn fit_count(s: &str) -> std::result::Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(k) if (1..=super::MAX_FITS).contains(&k) => Ok(k),
+        _ => Err(format!(
+            "`{s}` is not a whole number from 1 to {}",
+            super::MAX_FITS
+        )),
     }
 }
 

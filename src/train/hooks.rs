@@ -24,6 +24,17 @@ pub enum Progress<'a> {
     Each(EachFn<'a>),
 }
 
+impl Progress<'_> {
+    /// The same progress for one fit of several in turn, `Each`'s callable borrowed.
+    pub fn by_ref(&mut self) -> Progress<'_> {
+        match self {
+            Progress::Off => Progress::Off,
+            Progress::Shown => Progress::Shown,
+            Progress::Each(each) => Progress::Each(Box::new(|record, n| each(record, n))),
+        }
+    }
+}
+
 impl From<bool> for Progress<'_> {
     fn from(shown: bool) -> Self {
         if shown {

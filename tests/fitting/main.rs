@@ -7,6 +7,7 @@ mod common;
 mod alignment;
 mod experiments_small;
 mod fit;
+mod fits;
 mod recipe;
 mod run;
 mod tracks;

@@ -630,4 +630,18 @@ fn tracks_with_gaps_take_the_gap_filling_defaults_unless_the_options_set_them() 
     );
     // Complete data keeps the paper's protocol.
     assert_eq!(prepared(&traj, |_| {}), (1000, 0.0));
+    // One fit unless the options ask for more.
+    let fits = |edit: fn(&mut RunSpec)| {
+        let mut spec = RunSpec {
+            data: Some(npz.clone()),
+            drop_unobserved: Some(true),
+            ..RunSpec::default()
+        };
+        edit(&mut spec);
+        spec.prepare(&WeightSearch::default(), |_| {})
+            .unwrap()
+            .config
+            .fits
+    };
+    assert_eq!((fits(|_| {}), fits(|s| s.fits = Some(3))), (1, 3));
 }

@@ -20,7 +20,9 @@ use crate::gaps::{FieldPrediction, Marked};
 use crate::{DomaError, Result};
 use doma_formats::c3d::PointEdit;
 
+mod combined;
 mod policy;
+use combined::median_of;
 use policy::chosen;
 pub use policy::{FillPolicy, MaxGap};
 
@@ -41,6 +43,8 @@ pub struct Completion {
     /// Entries left unfilled (a gap past [`FillPolicy::max_gap`], or past a track's ends
     /// without [`FillPolicy::extrapolate`]).
     pub unfilled: usize,
+    /// The fits whose fills were combined ([`RunConfig::fits`]); `blend` is the first's.
+    pub fits: usize,
     /// The weights of the fill ([`crate::gaps::blend`]).
     pub blend: Blend,
 }
@@ -116,6 +120,7 @@ pub fn complete_run_with(
         filled: fill.entries.len() - extrapolated,
         extrapolated,
         unfilled: t * n - observed - fill.entries.len(),
+        fits: config.fits,
         blend: fill.blend.clone(),
     };
     if to_c3d {
@@ -320,8 +325,47 @@ fn read_input(
 }
 
 /// The fill that `policy` asks for of the run's `config`: the entries it chooses and their
-/// values, what a long recording holds beyond its positions and mask.
+/// values, what a long recording holds beyond its positions and mask. Of a run that
+/// combines several fits ([`RunConfig::fits`]), each entry's value is the median of
+/// theirs, coordinate by coordinate, and the blend reported is the run's own fit's.
 fn fill_run(
+    run: &RunDir,
+    config: &RunConfig,
+    policy: FillPolicy,
+    device: &Device,
+) -> Result<RunFill> {
+    let mut fill = fill_one(run, config, policy, device)?;
+    if config.fits == 1 {
+        return Ok(fill);
+    }
+    let mut values = vec![std::mem::take(&mut fill.values)];
+    for k in 2..=config.fits {
+        let member = run.member(k);
+        let other = member.load_config()?;
+        if other.data != config.data
+            || other.frames != config.frames
+            || other.stride != config.stride
+        {
+            return Err(DomaError::Malformed {
+                path: member.config(),
+                reason: format!("fits other data than the run in {}", run.dir.display()),
+            });
+        }
+        let other = fill_one(&member, &other, policy, device)?;
+        if other.entries != fill.entries {
+            return Err(DomaError::Malformed {
+                path: member.dir,
+                reason: "fills other entries than the run's own fit".into(),
+            });
+        }
+        values.push(other.values);
+    }
+    fill.values = median_of(&values);
+    Ok(fill)
+}
+
+/// [`fill_run`] of one fit.
+fn fill_one(
     run: &RunDir,
     config: &RunConfig,
     policy: FillPolicy,

@@ -222,6 +222,7 @@ impl RunSpec {
         config.holdout_observations = self.holdout_observations;
         config.holdout_span = self.holdout_span;
         config.blind_validation = self.blind_validation.unwrap_or(true);
+        config.fits = self.fits.unwrap_or(1);
         if let Some([a, b]) = self.frames
             && a >= b
         {
