@@ -5,9 +5,10 @@ Each FITS folder holds the runs that `native_rate_gaps.py --fits FITS` kept for 
 draw sets (the same events, drawn with the same --seed and --draws), fitted with different
 options, e.g. another fit seed (`--fit-option seed=1`). For every draw set, doma's fill
 (`Field.complete()`) of each run is scored on the set's events, the fits' events pooled
-("pooled": the mean of their errors), and their fills' mean, entry by entry ("mean"). REPORTS is a `native_rate_gaps.py --out` folder of those draw sets: its
+("pooled": the mean of their errors), and their fills' mean and median, entry by entry
+("mean", "median"; the median of two fills is their mean). REPORTS is a `native_rate_gaps.py --out` folder of those draw sets: its
 named fillers' columns (spline, pattern, rigid body, Kalman, Gløersen) give the best named
-filler each fill is set against. Prints, for each fit and for the mean, the acceptance
+filler each fill is set against. Prints, for each fit and for each combination, the acceptance
 (below the best named filler at 0.5 s and beyond, within 5 % at shorter gaps), the worst
 and the geometric mean of doma / best named.
 
@@ -18,6 +19,7 @@ Needs the doma wheel, numpy and `c3d`, as native_rate_gaps.py does.
 """
 
 import argparse
+import itertools
 import json
 import math
 import pathlib
@@ -50,9 +52,12 @@ def main():
     if len(args.fits) < 2:
         raise SystemExit("give two FITS folders or more")
     fitted = [f"fit {k}" for k in range(len(args.fits))]
-    # "pooled": every fit's events in one case (the mean of the fits' errors), "mean": the
-    # fits' fills averaged, then scored.
-    names = fitted + ["pooled", "mean"]
+    # "pooled": every fit's events in one case (the mean of the fits' errors), "mean" and
+    # "median": the fits' fills combined entry by entry, then scored.
+    # With three fits or more, each pair's mean too: what two fits would have given.
+    pairs = list(itertools.combinations(range(len(args.fits)), 2)) if len(args.fits) > 2 else []
+    paired = [f"mean {a}+{b}" for a, b in pairs]
+    names = fitted + ["pooled", "mean", "median"] + paired
     ratios = {n: [] for n in names}
     met = {n: 0 for n in names}
     for name in args.recordings.split(","):
@@ -64,10 +69,13 @@ def main():
         errors = {}
         for set_index, (count, events, _) in enumerate(nr.masks(observed, nr.rate_of(path), args.draws, args.seed)):
             fills = fills_of(args.fits, name, set_index, tracks.shape)
-            fills.append(sum(fills) / len(fills))
+            stacked = np.stack(fills)
+            fills += [stacked.mean(axis=0), np.median(stacked, axis=0)]
+            fills += [(stacked[a] + stacked[b]) / 2 for a, b in pairs]
+            del stacked
             for e in events:
                 per = errors.setdefault(f"{count}x{e[0]}", {n: [] for n in names})
-                for n, f in zip(fitted + ["mean"], fills):
+                for n, f in zip(fitted + ["mean", "median"] + paired, fills):
                     per[n].append(nr.event_errors(f, truth, e))
                 per["pooled"].extend(per[n][-1] for n in fitted)
         for key, per in sorted(errors.items()):

@@ -17,10 +17,11 @@ first half, marker 1 for the second), as in many real captures: the fit then lea
 canonical positions of the markers that its reference frame misses.
 
 With --method FILLER `doma complete` fills with that filler alone (`field_fill`, `segment`,
-`kalman`, ...) instead of doma's fill, and --only picks some of the four recordings
-(`--only 5s,60s`).
+`kalman`, ...) instead of doma's fill, --fits K fits K fields (`doma fit --fits K`; default
+doma fit's, two), and --only picks some of the four recordings (`--only 5s,60s`).
 
-    python scripts/native_rate_timing.py [DOMA_BINARY] [--c3d] [--unseen] [--method FILLER] [--only 5s,60s,120s,240s]
+    python scripts/native_rate_timing.py [DOMA_BINARY] [--c3d] [--unseen] [--method FILLER] [--fits K]
+        [--only 5s,60s,120s,240s]
 
 Needs numpy and the doma binary (default $CARGO_TARGET_DIR/release/doma); /usr/bin/time
 for the peak memory; the `c3d` package for --c3d.
@@ -132,7 +133,7 @@ def read_c3d(path):
         return np.stack([p[:, :3] for _, p, _ in c3d.Reader(f).read_frames()]).astype(np.float64)
 
 
-def case(doma, work, name, tracks, observed, events, seed, as_c3d, unseen, method=None):
+def case(doma, work, name, tracks, observed, events, seed, as_c3d, unseen, method=None, fits=None):
     if unseen:
         # No frame sees every marker, as in many real captures: the fit learns the
         # canonical positions of the markers its reference frame misses (before the
@@ -149,7 +150,8 @@ def case(doma, work, name, tracks, observed, events, seed, as_c3d, unseen, metho
     else:
         np.savez(data, tracks=np.where(mask[..., None], tracks, np.nan).astype(np.float32), observed=mask)
     run = work / f"{name}-run"
-    fit_s, fit_mb = timed([doma, "fit", str(data), "--out", str(run), "--quiet", "--seed", str(seed)])
+    fits_args = ["--fits", str(fits)] if fits else []
+    fit_s, fit_mb = timed([doma, "fit", str(data), "--out", str(run), "--quiet", "--seed", str(seed), *fits_args])
     out = work / f"{name}-filled.{ext}"
     method_args = ["--method", method] if method else []
     complete_s, complete_mb = timed([doma, "complete", str(run), "--out", str(out), *method_args])
@@ -172,6 +174,7 @@ def main():
     p.add_argument("--unseen", action="store_true",
                    help="marker 0 hidden for the first half and marker 1 for the second, so that no frame sees every marker")
     p.add_argument("--method", help="fill with this filler alone (doma complete --method)")
+    p.add_argument("--fits", type=int, help="doma fit --fits K (default: doma fit's, 2 on tracks with gaps)")
     p.add_argument("--only", default="5s,60s,120s,240s", help="the recordings to run, of 5s,60s,120s,240s")
     args = p.parse_args()
     only = set(args.only.split(","))
@@ -185,7 +188,7 @@ def main():
         work = pathlib.Path(tmp)
         at = lambda name, frames, events: case(
             args.doma, work, name, whole_t[:frames], whole_o[:frames], events, args.seed, args.c3d, args.unseen,
-            args.method,
+            args.method, args.fits,
         )
         plan = [
             ("5s", "5 s excerpt", "excerpt", 1000, 20),
