@@ -149,6 +149,8 @@ fn a_run_interrupted_in_its_second_fit_resumes_there_bit_for_bit() {
     .unwrap();
     assert_eq!(outcome, FitOutcome::Interrupted { iterations_done: 2 });
     assert!(parts.model().is_file() && !parts.member(2).model().is_file());
+    let refused = complete_tracks(&parts, FillPolicy::default(), &device).unwrap_err();
+    assert!(refused.to_string().contains("--resume"), "{refused}");
 
     let FitOutcome::Finished(report) = fit_run(&parts, None, &device, &never, None, false).unwrap()
     else {

@@ -341,6 +341,16 @@ fn fill_run(
     let mut values = vec![std::mem::take(&mut fill.values)];
     for k in 2..=config.fits {
         let member = run.member(k);
+        // The run's own field may be read from its last checkpoint; the others' fills are
+        // combined with it only once they are fitted.
+        if member.config().is_file() && !member.model().is_file() {
+            return Err(DomaError::Usage(format!(
+                "fit {k} of {} in {} is not finished: doma fit --resume {}",
+                config.fits,
+                member.dir.display(),
+                run.dir.display()
+            )));
+        }
         let other = member.load_config()?;
         if other.data != config.data
             || other.frames != config.frames
