@@ -102,17 +102,18 @@ fn fit_holding<'a>(
         None => Some(run.load_config()?),
     };
     // A resumed run whose own fit is done goes on with the others, under its lock.
-    let (report, _lock) = match resumed.filter(|c| c.fits > 1 && run.model().is_file()) {
-        Some(_) => (
+    let (report, _lock, config) = match resumed {
+        Some(config) if config.fits > 1 && run.model().is_file() => (
             crate::io::load_json::<Report>(&run.report())?,
             Some(RunLock::acquire(&run.dir)?),
+            config,
         ),
-        None => match one(run, new, held)? {
-            (FitOutcome::Finished(report), lock) => (report, lock),
+        _ => match one(run, new, held)? {
+            // The config as the run's own fit saved it.
+            (FitOutcome::Finished(report), lock) => (report, lock, run.load_config()?),
             (interrupted, _) => return Ok(interrupted),
         },
     };
-    let config = run.load_config()?;
     for k in 2..=config.fits {
         let member = run.member(k);
         if member.model().is_file() {

@@ -58,15 +58,11 @@ pub struct RunInfo {
     pub frames_without_observations: Option<usize>,
     /// The fits whose fills `complete` combines ([`super::RunConfig::fits`]), and those of
     /// them finished (`model.bpk` written).
-    #[serde(default = "one")]
+    #[serde(default = "super::one_fit")]
     pub fits: usize,
     /// See `fits`.
     #[serde(default)]
     pub fits_finished: usize,
-}
-
-fn one() -> usize {
-    1
 }
 
 /// Describes the run in `run`.

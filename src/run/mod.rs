@@ -160,7 +160,7 @@ pub fn data_digest(data: &Sequence) -> String {
 /// The most fits a run combines ([`RunConfig::fits`]).
 pub const MAX_FITS: usize = 9;
 
-fn one_fit() -> usize {
+pub(super) fn one_fit() -> usize {
     1
 }
 

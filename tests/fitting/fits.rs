@@ -5,8 +5,7 @@
 use crate::common::{self, new_fit};
 
 use std::path::Path;
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use burn::tensor::Device;
 use doma::DomaError;
@@ -129,11 +128,9 @@ fn a_run_interrupted_in_its_second_fit_resumes_there_bit_for_bit() {
 
     // Interrupted two iterations into the second fit (the hook is polled after each one).
     let interrupt = AtomicBool::new(false);
-    let seen = Mutex::new(0usize);
+    let seen = AtomicUsize::new(0);
     let each = |_: &IterationRecord, _: usize| -> doma::Result<()> {
-        let mut n = seen.lock().unwrap();
-        *n += 1;
-        if *n == ITERATIONS + 2 {
+        if seen.fetch_add(1, Ordering::SeqCst) + 1 == ITERATIONS + 2 {
             interrupt.store(true, Ordering::SeqCst);
         }
         Ok(())
