@@ -38,8 +38,8 @@ seeds = sys.argv[1].split()
 # The field's fills are not baselines (reports before 2026-12 called them carried and
 # framewise).
 FIELDS = {"doma", "field", "field_fill", "field_fill_framewise", "carried", "framewise"}
-# doma's own donor filler is reported, not counted as a baseline.
-OWN = {"segment"}
+# doma's own donor fillers are reported, not counted as baselines.
+OWN = {"segment", "chain"}
 first = json.load(open(f"results/mocap/85_12_2-8_{seeds[0]}.json"))["held_out_observations"]
 cols = list(first["distance"])
 base = [c for c in cols if c not in FIELDS | OWN]

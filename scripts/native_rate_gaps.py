@@ -11,8 +11,9 @@ entries hidden), and each set is fitted once, at `doma fit`'s defaults. Every me
 the same set's mask: doma's fill (`Field.complete()`), the field's fill alone, and the
 classic fillers (`doma.fill`): spline, linear, pattern and rigid-body fill (Vicon Nexus's),
 the Kalman smoother (Burke & Lasenby, as pyCGM2 runs it), Gløersen & Federolf's PCA fill
-(strategy R2), iterative PCA, and doma's segment fill (the rigid-body fill with its donors
-judged on the track's own observations around the gap; not a named filler). The error of an
+(strategy R2), iterative PCA, and doma's segment and chain fills (the rigid-body fill with
+its donors judged on the track's own observations around the gap, and with its donors
+handed over where they are lost; not named fillers). The error of an
 event is the mean Euclidean distance over its hidden entries, in the file's units (mm);
 a case's figure is the mean over its events.
 
@@ -43,8 +44,9 @@ import doma
 
 LENGTHS = [0.1, 0.25, 0.5, 1.0, 2.0]
 COUNTS = [1, 3]
-METHODS = ["spline", "linear", "pattern", "rigid_body", "kalman", "gloersen", "iterative_pca", "segment"]
-# "segment" is doma's own: the rigid-body fill with its donors judged around the gap.
+METHODS = ["spline", "linear", "pattern", "rigid_body", "kalman", "gloersen", "iterative_pca", "segment", "chain"]
+# "segment" and "chain" are doma's own: the rigid-body fill with its donors judged around
+# the gap, and with its donors handed over where they are lost.
 # The named fillers of the literature, and those that give the linear fill where they cannot
 # run (Kalman: no two frames see every marker; Gløersen: every marker has a gap).
 NAMED = ["spline", "pattern", "rigid_body", "kalman", "gloersen"]

@@ -504,10 +504,12 @@ def fill(tracks: Any, observed: Any, method: str = "rigid_body", *, time_axis: O
     low-dimensional Kalman smoother, as pyCGM2 runs it), ``gloersen`` (Gløersen &
     Federolf's PCA fill, strategy R2 of their ``PredictMissingMarkers``), ``segment``
     (doma's: the rigid-body fill from the three donors that best carry the marker through
-    its own observations around the gap). Where a gap is
-    not interior or has too few donors, ``rigid_body``, ``segment`` and ``pattern`` give the linear
-    fill; where no two frames see every marker, so does ``kalman``; where every marker has
-    a gap, so does ``gloersen``.
+    its own observations around the gap), ``chain`` (doma's: the rigid-body fill with its
+    donors passed on to others where they are lost, for gaps that no three markers are
+    seen through). Where a gap is not interior or has too few donors, ``rigid_body``,
+    ``segment`` and ``pattern`` give the linear fill (``chain`` where it is not interior);
+    where no two frames see every marker, so does ``kalman``; where every marker has a
+    gap, so does ``gloersen``.
 
     Returns a new [T, N, 3] float32 array: the observed entries as given, every unobserved
     entry of a track observed somewhere filled, a track never observed as given.

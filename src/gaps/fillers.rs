@@ -102,11 +102,14 @@ pub enum Filler {
     /// The rigid-body fill from the three donors that best carry the track through its
     /// own observations around the gap ([`Marked::segment`]).
     Segment,
+    /// The rigid-body fill with its donors passed on where they are lost, for gaps that
+    /// no three markers are seen through ([`Marked::chain`]).
+    Chain,
 }
 
 impl Filler {
     /// The number of fillers.
-    pub const COUNT: usize = 11;
+    pub const COUNT: usize = 12;
 
     /// Every filler, in the order of a blend's weights: a tie in the blend goes to the
     /// earlier (the field's fill first).
@@ -122,6 +125,7 @@ impl Filler {
         Filler::Kalman,
         Filler::Gloersen,
         Filler::Segment,
+        Filler::Chain,
     ];
 
     /// Its place in [`Filler::ALL`].
@@ -143,6 +147,7 @@ impl Filler {
             Filler::Kalman => "kalman",
             Filler::Gloersen => "gloersen",
             Filler::Segment => "segment",
+            Filler::Chain => "chain",
         }
     }
 
@@ -160,6 +165,7 @@ impl Filler {
             Filler::Kalman => "Kalman smoother",
             Filler::Gloersen => "Gløersen PCA",
             Filler::Segment => "segment (rigid body, donors judged)",
+            Filler::Chain => "chain (rigid body, donors passed on)",
         }
     }
 
@@ -226,6 +232,7 @@ impl Filler {
             Filler::Pattern => return Some(marked.pattern(entries)),
             Filler::RigidBody => return Some(marked.rigid_body(entries)),
             Filler::Segment => return Some(marked.segment(entries)),
+            Filler::Chain => return Some(marked.chain(entries)),
         };
         Some(pick(&whole, entries, marked.points))
     }

@@ -17,7 +17,8 @@
 //!   ones (linear, spline, the neighbours' motion, iterative PCA), capture software's that
 //!   borrow *donor* markers' motion (pattern and rigid-body fill), Burke & Lasenby's
 //!   Kalman smoother, Gløersen & Federolf's PCA fill, the rigid-body fill with its donors
-//!   judged on the track's own observations (the *segment* fill), and the field's two.
+//!   judged on the track's own observations (the *segment* fill) or passed on through
+//!   the gap (the *chain* fill), and the field's two.
 //! - The **field's fill** ([`field_fill::field_fill`]) is the field's prediction corrected
 //!   by the residual of the track's nearest tracks at that frame (its *lenders*), then by
 //!   the track's own residual carried across the gap ([`field_fill::carry_residuals`],
@@ -42,6 +43,7 @@
 //! | `gloersen.rs` | Gløersen & Federolf's PCA fill (R2): a method of [`Marked`] |
 //! | `donors.rs` | pattern and rigid-body fill: methods of [`Marked`] |
 //! | `segment.rs` | the segment fill: rigid-body fill from the donors that carry the track best around its gap |
+//! | `chain.rs` | the chained rigid-body fill: donors passed on through a gap that no three markers are seen through |
 //! | `field_fill.rs` | the field's fill: the lenders ([`Lending`]), the residual carry |
 //! | `prediction.rs` | [`FieldPrediction`]: the field's prediction, given or computed window by window |
 //! | `blend.rs` | [`blend::Weights`] (one per filler), learning them per class of gap length and applying a blend (tests in `blend/tests.rs`) |
@@ -56,6 +58,7 @@
 //! (docs/design.md §7).
 
 pub mod blend;
+pub mod chain;
 pub mod classic;
 pub mod donors;
 pub mod eigen;

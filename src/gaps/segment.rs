@@ -152,7 +152,7 @@ impl Marked<'_> {
 }
 
 /// At most [`SEGMENT_SAMPLES`] of `frames`, evenly spaced.
-fn sample(frames: Vec<usize>) -> Vec<usize> {
+pub(super) fn sample(frames: Vec<usize>) -> Vec<usize> {
     let n = frames.len();
     if n <= SEGMENT_SAMPLES {
         return frames;

@@ -72,13 +72,14 @@ fn a_jittering_translation_with_a_wrong_field_is_filled_by_the_neighbours() {
     let field = FieldPrediction::new(n, &predicted, &[f32::NAN; 3].repeat(n), &observed);
     let (filled, blend) = blended_fill(&Marked::new(t, n, &truth, &observed), &field, 7, &[]);
     assert!(blend.validated[0] > 0, "{blend:?}");
-    // The neighbours' motion, pattern, rigid-body and segment fill are all exact for a
+    // The neighbours' motion, pattern, rigid-body, segment and chain fill are all exact for a
     // translation: the weight goes to them, to one alone where no blend of them beats it.
     let exact = [
         Filler::Neighbours,
         Filler::Pattern,
         Filler::RigidBody,
         Filler::Segment,
+        Filler::Chain,
     ];
     let on_exact: f64 = exact.iter().map(|&f| blend.short[f]).sum();
     assert!(on_exact > 0.95, "{blend:?}");
@@ -181,6 +182,7 @@ fn blind_spans_judge_a_field_that_only_memorised_what_it_saw() {
         Filler::Pattern,
         Filler::RigidBody,
         Filler::Segment,
+        Filler::Chain,
     ];
     for weights in [blend.short, blend.long] {
         let on_exact: f64 = exact.iter().map(|&f| weights[f]).sum();
