@@ -29,8 +29,6 @@
 //! bounds. Not a filler of capture software: doma's own, blended and reported beside the
 //! named ones.
 
-use std::collections::HashMap;
-
 use super::donors::{RIGID_BODY_DONORS, rigid_motion};
 use super::fillers::Marked;
 use super::segment::{NEARNESS, SEGMENT_CANDIDATES, sample, window};
@@ -44,24 +42,11 @@ impl Marked<'_> {
     /// fill (held), as the other donor fillers give, and an entry of a track never
     /// observed is whatever its position holds.
     pub fn chain(&self, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
-        let mut gaps: HashMap<(usize, usize), Vec<[f64; 3]>> = HashMap::new();
-        entries
-            .iter()
-            .map(|&(k, i)| {
-                if self.seen(k, i) {
-                    return self.at(k, i);
-                }
-                let before = (0..k).rev().find(|&f| self.seen(f, i));
-                let after = (k + 1..self.frames).find(|&f| self.seen(f, i));
-                let (Some(a), Some(b)) = (before, after) else {
-                    return self.linear_at(k, i, before, after);
-                };
-                let fill = gaps
-                    .entry((i, a))
-                    .or_insert_with(|| self.chain_gap(i, a, b));
-                fill[k - a - 1].map(|v| v as f32)
-            })
-            .collect()
+        self.by_donors(
+            entries,
+            |i, a, b| Some((a, self.chain_gap(i, a, b))),
+            |(a, fill), k| fill[k - a - 1],
+        )
     }
 
     /// Track `i`'s gap between its observations at `a` and `b`, frames `a + 1..b`: the
@@ -217,6 +202,7 @@ impl Marked<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gaps::segment::tests::worst_error as worst;
 
     /// Seven markers of one rigid body turning and moving over 60 frames; marker 0 hidden
     /// at frames 20..40, markers 1–3 at 30..45 and markers 4–6 at 10..25: no three are
@@ -257,16 +243,6 @@ mod tests {
         hide(30..45, 1..4);
         hide(10..25, 4..7);
         (t, n, positions, observed)
-    }
-
-    fn worst(tracks: &Marked, entries: &[(usize, usize)], fill: &[[f32; 3]]) -> f32 {
-        fill.iter()
-            .zip(entries)
-            .map(|(p, &(k, i))| {
-                let truth = tracks.at(k, i);
-                (0..3).map(|c| (p[c] - truth[c]).abs()).fold(0f32, f32::max)
-            })
-            .fold(0f32, f32::max)
     }
 
     #[test]

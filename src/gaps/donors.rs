@@ -72,14 +72,14 @@ impl Marked<'_> {
 
     /// `fill(gap, k)` at each entry of an interior gap whose donors `choose(track, before,
     /// after)` finds; the linear interpolation elsewhere, computed at that entry alone. The
-    /// donors are found once per gap.
-    pub(super) fn by_donors(
+    /// donors (whatever `choose` prepares for a gap) are found once per gap.
+    pub(super) fn by_donors<G>(
         &self,
         entries: &[(usize, usize)],
-        choose: impl Fn(usize, usize, usize) -> Option<DonorGap>,
-        fill: impl Fn(&DonorGap, usize) -> [f64; 3],
+        choose: impl Fn(usize, usize, usize) -> Option<G>,
+        fill: impl Fn(&G, usize) -> [f64; 3],
     ) -> Vec<[f32; 3]> {
-        let mut gaps: HashMap<(usize, usize), Option<DonorGap>> = HashMap::new();
+        let mut gaps: HashMap<(usize, usize), Option<G>> = HashMap::new();
         entries
             .iter()
             .map(|&(k, i)| {

@@ -163,7 +163,7 @@ pub(super) fn sample(frames: Vec<usize>) -> Vec<usize> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
     /// A rigid body of four markers (0..4) turning over 40 frames, and three markers
@@ -199,7 +199,12 @@ mod tests {
         (positions, observed)
     }
 
-    fn worst_error(tracks: &Marked, entries: &[(usize, usize)], fill: &[[f32; 3]]) -> f32 {
+    /// The largest coordinate error of `fill` at `entries`.
+    pub(in crate::gaps) fn worst_error(
+        tracks: &Marked,
+        entries: &[(usize, usize)],
+        fill: &[[f32; 3]],
+    ) -> f32 {
         fill.iter()
             .zip(entries)
             .map(|(p, &(k, i))| {
