@@ -29,9 +29,11 @@
 //! bounds. Not a filler of capture software: doma's own, blended and reported beside the
 //! named ones.
 
+use std::collections::HashMap;
+
 use super::donors::{RIGID_BODY_DONORS, rigid_motion};
 use super::fillers::Marked;
-use super::segment::{NEARNESS, SEGMENT_CANDIDATES, sample, window};
+use super::segment::{NEARNESS, SEGMENT_CANDIDATES, best_triple, sample, window};
 
 /// The tracks nearest to the carried position among which a hand-over ranks its donors.
 pub const CHAIN_POOL: usize = 12;
@@ -44,21 +46,49 @@ impl Marked<'_> {
     pub fn chain(&self, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
         self.by_donors(
             entries,
-            |i, a, b| Some((a, self.chain_gap(i, a, b))),
+            |i, a, b| Some((a, ChainGap::new(self, i, a, b).fill())),
             |(a, fill), k| fill[k - a - 1],
         )
     }
+}
 
-    /// Track `i`'s gap between its observations at `a` and `b`, frames `a + 1..b`: the
-    /// carries from both borders blended linearly in time.
-    fn chain_gap(&self, i: usize, a: usize, b: usize) -> Vec<[f64; 3]> {
+/// Track `i`'s gap between its observations at `a` and `b`, with what its hand-overs
+/// judge again and again, kept for the gap: each candidate's rank and each triple's error
+/// carried from each border (neither depends on the frame of the hand-over).
+struct ChainGap<'t, 'a> {
+    tracks: &'t Marked<'a>,
+    i: usize,
+    a: usize,
+    b: usize,
+    /// The track's observed frames around the gap ([`window`]).
+    around: Vec<usize>,
+    rank: HashMap<usize, f64>,
+    carried: HashMap<(usize, [usize; RIGID_BODY_DONORS]), Option<f64>>,
+}
+
+impl<'t, 'a> ChainGap<'t, 'a> {
+    fn new(tracks: &'t Marked<'a>, i: usize, a: usize, b: usize) -> Self {
         let w = window(a, b);
-        let around: Vec<usize> = (a.saturating_sub(w)..=a)
-            .chain(b..=(b + w).min(self.frames - 1))
-            .filter(|&f| self.seen(f, i))
+        let around = (a.saturating_sub(w)..=a)
+            .chain(b..=(b + w).min(tracks.frames - 1))
+            .filter(|&f| tracks.seen(f, i))
             .collect();
-        let forward = self.carry(i, a, b, &around);
-        let backward = self.carry(i, b, a, &around);
+        ChainGap {
+            tracks,
+            i,
+            a,
+            b,
+            around,
+            rank: HashMap::new(),
+            carried: HashMap::new(),
+        }
+    }
+
+    /// Frames `a + 1..b`: the carries from both borders blended linearly in time.
+    fn fill(mut self) -> Vec<[f64; 3]> {
+        let (a, b) = (self.a, self.b);
+        let forward = self.carry(a, b);
+        let backward = self.carry(b, a);
         (a + 1..b)
             .map(|k| {
                 let (p, q) = (forward[k - a - 1], backward[b - 1 - k]);
@@ -68,23 +98,24 @@ impl Marked<'_> {
             .collect()
     }
 
-    /// Track `i` carried from its observation at `from` towards `to` (exclusive), one
+    /// The track carried from its observation at `from` towards `to` (exclusive), one
     /// frame at a time: its position at each frame strictly between, nearest `from` first.
-    fn carry(&self, i: usize, from: usize, to: usize, around: &[usize]) -> Vec<[f64; 3]> {
+    fn carry(&mut self, from: usize, to: usize) -> Vec<[f64; 3]> {
+        let tracks = self.tracks;
         let step = |f: usize| if to > from { f + 1 } else { f - 1 };
         let mut carried = Vec::with_capacity(from.abs_diff(to).saturating_sub(1));
         // The donors and the frame they were taken up at, with the track's position there.
         let mut held: Option<([usize; RIGID_BODY_DONORS], usize, [f64; 3])> = None;
-        let (mut previous, mut position) = (from, self.at64(from, i));
+        let (mut previous, mut position) = (from, tracks.at64(from, self.i));
         let mut k = step(from);
         while k != to {
-            let still = held.filter(|(donors, _, _)| donors.iter().all(|&j| self.seen(k, j)));
+            let still = held.filter(|(donors, _, _)| donors.iter().all(|&j| tracks.seen(k, j)));
             let taken = still.or_else(|| {
-                self.hand_over(i, from, previous, k, position, around)
+                self.hand_over(from, previous, k, position)
                     .map(|donors| (donors, previous, position))
             });
             if let Some((donors, start, p)) = taken {
-                let at = |f: usize| donors.map(|j| self.at64(f, j));
+                let at = |f: usize| donors.map(|j| tracks.at64(f, j));
                 position = rigid_motion(&at(start), &at(k)).apply(p);
             }
             held = taken;
@@ -97,22 +128,23 @@ impl Marked<'_> {
     /// Three donors taken up at frame `from` (the track there at `p`) for frame `to`, in a
     /// carry that started at the track's observation at `border`: of the [`CHAIN_POOL`]
     /// tracks nearest to `p` seen at both frames, the triple of the most rigid that best
-    /// carries the track from `border` to its observations `around` (module docs); `None`
-    /// where fewer than three are seen at both frames.
+    /// carries the track from `border` to its observations around the gap (module docs);
+    /// `None` where fewer than three are seen at both frames.
     fn hand_over(
-        &self,
-        i: usize,
+        &mut self,
         border: usize,
         from: usize,
         to: usize,
         p: [f64; 3],
-        around: &[usize],
     ) -> Option<[usize; RIGID_BODY_DONORS]> {
-        let distance =
-            |x: [f64; 3], y: [f64; 3]| (0..3).map(|c| (x[c] - y[c]).powi(2)).sum::<f64>().sqrt();
-        let mut near: Vec<(f64, usize)> = (0..self.points)
-            .filter(|&j| j != i && self.seen(from, j) && self.seen(to, j))
-            .map(|j| (distance(self.at64(from, j), p), j))
+        let (tracks, i) = (self.tracks, self.i);
+        let mut near: Vec<(f64, usize)> = (0..tracks.points)
+            .filter(|&j| j != i && tracks.seen(from, j) && tracks.seen(to, j))
+            .map(|j| {
+                let q = tracks.at64(from, j);
+                let d = (0..3).map(|c| (q[c] - p[c]).powi(2)).sum::<f64>().sqrt();
+                (d, j)
+            })
             .filter(|(d, _)| d.is_finite())
             .collect();
         if near.len() < RIGID_BODY_DONORS {
@@ -120,47 +152,36 @@ impl Marked<'_> {
         }
         near.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
         near.truncate(CHAIN_POOL);
+        let around = &self.around;
         let mut ranked: Vec<(f64, usize)> = near
             .into_iter()
             .map(|(_, j)| {
-                let d: Vec<f64> = around
-                    .iter()
-                    .filter(|&&f| self.seen(f, j))
-                    .map(|&f| distance(self.at64(f, i), self.at64(f, j)))
-                    .collect();
-                let score = if d.len() < 3 {
-                    f64::INFINITY
-                } else {
-                    let mean = d.iter().sum::<f64>() / d.len() as f64;
-                    let spread =
-                        (d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / d.len() as f64).sqrt();
-                    spread + NEARNESS * mean
-                };
-                (score, j)
+                let rank = *self.rank.entry(j).or_insert_with(|| {
+                    tracks
+                        .distance_spread(i, j, around.iter().copied())
+                        .map_or(f64::INFINITY, |(spread, mean)| spread + NEARNESS * mean)
+                });
+                (rank, j)
             })
             .collect();
         ranked.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
         ranked.truncate(SEGMENT_CANDIDATES);
-        let m = ranked.len();
-        let mut best: Option<(f64, [usize; RIGID_BODY_DONORS])> = None;
-        for x in 0..m {
-            for y in x + 1..m {
-                for z in y + 1..m {
-                    let triple = [ranked[x].1, ranked[y].1, ranked[z].1];
-                    let judged = self.carried_from(i, triple, border, around);
-                    if let Some(e) = judged.filter(|&e| best.is_none_or(|(b, _)| e < b)) {
-                        best = Some((e, triple));
-                    }
-                }
-            }
-        }
-        Some(best.map_or(std::array::from_fn(|d| ranked[d].1), |(_, t)| t))
+        let carried = &mut self.carried;
+        let best = best_triple(&ranked, |triple| {
+            *carried
+                .entry((border, triple))
+                .or_insert_with(|| tracks.carried_from(i, triple, border, around))
+        });
+        Some(best.unwrap_or_else(|| std::array::from_fn(|d| ranked[d].1)))
     }
+}
 
+impl Marked<'_> {
     /// The mean distance from track `i`'s observations at the frames of `around` where
     /// `donors` are seen (at most [`SEGMENT_SAMPLES`](super::segment::SEGMENT_SAMPLES) of
     /// them, evenly spaced) to its position at `border` moved there with the donors' rigid
-    /// motion; `None` where the donors are unseen at `border` or at every such frame.
+    /// motion (the segment fill's judge); `None` where the donors are unseen at `border`
+    /// or at every such frame.
     fn carried_from(
         &self,
         i: usize,
@@ -179,23 +200,8 @@ impl Marked<'_> {
                 .filter(|&f| f != border && seen(f))
                 .collect(),
         );
-        if frames.is_empty() {
-            return None;
-        }
-        let at = |f: usize| donors.map(|j| self.at64(f, j));
-        let (start, p) = (at(border), self.at64(border, i));
-        let total: f64 = frames
-            .iter()
-            .map(|&f| {
-                let q = rigid_motion(&start, &at(f)).apply(p);
-                let truth = self.at64(f, i);
-                (0..3)
-                    .map(|c| (q[c] - truth[c]).powi(2))
-                    .sum::<f64>()
-                    .sqrt()
-            })
-            .sum();
-        Some(total / frames.len() as f64)
+        let (total, count) = self.carry_error(i, donors, border, &frames);
+        (count > 0).then(|| total / count as f64)
     }
 }
 

@@ -79,16 +79,9 @@ impl Marked<'_> {
         let mut ranked: Vec<(f64, usize)> = pool
             .into_iter()
             .map(|(near, j)| {
-                let d: Vec<f64> = (lo..=hi)
-                    .filter(|&f| self.seen(f, i) && self.seen(f, j))
-                    .map(|f| distance(f, j))
-                    .collect();
-                let spread = if d.len() < 3 {
-                    f64::INFINITY
-                } else {
-                    let mean = d.iter().sum::<f64>() / d.len() as f64;
-                    (d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / d.len() as f64).sqrt()
-                };
+                let spread = self
+                    .distance_spread(i, j, lo..=hi)
+                    .map_or(f64::INFINITY, |(spread, _)| spread);
                 (spread + NEARNESS * near, j)
             })
             .filter(|(score, _)| !score.is_nan())
@@ -97,26 +90,13 @@ impl Marked<'_> {
         ranked.truncate(SEGMENT_CANDIDATES);
         let before = sample((lo..a).filter(|&f| self.seen(f, i)).collect());
         let after = sample((b + 1..=hi).filter(|&f| self.seen(f, i)).collect());
-        let m = ranked.len();
-        let mut best: Option<(f64, [usize; 3])> = None;
-        for x in 0..m {
-            for y in x + 1..m {
-                for z in y + 1..m {
-                    let triple = [ranked[x].1, ranked[y].1, ranked[z].1];
-                    let (sa, na) = self.carry_error(i, triple, a, &before);
-                    let (sb, nb) = self.carry_error(i, triple, b, &after);
-                    if na + nb == 0 {
-                        continue;
-                    }
-                    let mean = (sa + sb) / (na + nb) as f64;
-                    if best.is_none_or(|(e, _)| mean < e) {
-                        best = Some((mean, triple));
-                    }
-                }
-            }
-        }
+        let best = best_triple(&ranked, |triple| {
+            let (sa, na) = self.carry_error(i, triple, a, &before);
+            let (sb, nb) = self.carry_error(i, triple, b, &after);
+            (na + nb > 0).then(|| (sa + sb) / (na + nb) as f64)
+        });
         Some(match best {
-            Some((_, triple)) => DonorGap {
+            Some(triple) => DonorGap {
                 donors: triple.to_vec(),
                 ..nearest
             },
@@ -124,10 +104,34 @@ impl Marked<'_> {
         })
     }
 
+    /// The standard deviation and the mean of track `j`'s distance to track `i` over the
+    /// `frames` where both are seen; `None` at fewer than three such frames.
+    pub(super) fn distance_spread(
+        &self,
+        i: usize,
+        j: usize,
+        frames: impl IntoIterator<Item = usize>,
+    ) -> Option<(f64, f64)> {
+        let d: Vec<f64> = frames
+            .into_iter()
+            .filter(|&f| self.seen(f, i) && self.seen(f, j))
+            .map(|f| {
+                let (p, q) = (self.at64(f, i), self.at64(f, j));
+                (0..3).map(|c| (p[c] - q[c]).powi(2)).sum::<f64>().sqrt()
+            })
+            .collect();
+        if d.len() < 3 {
+            return None;
+        }
+        let mean = d.iter().sum::<f64>() / d.len() as f64;
+        let variance = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / d.len() as f64;
+        Some((variance.sqrt(), mean))
+    }
+
     /// The summed distance from track `i`'s observations at `frames` to its position at
     /// frame `from` moved with `donors` (their rigid motion from `from` to that frame), and
     /// the number of frames summed: those where every donor is seen.
-    fn carry_error(
+    pub(super) fn carry_error(
         &self,
         i: usize,
         donors: [usize; 3],
@@ -149,6 +153,27 @@ impl Marked<'_> {
                 (sum + d, count + 1)
             })
     }
+}
+
+/// Of every triple of `ranked`'s tracks (in rank order), the one `judge` gives the least
+/// error (the first of a tie); `None` where it judges none.
+pub(super) fn best_triple(
+    ranked: &[(f64, usize)],
+    mut judge: impl FnMut([usize; 3]) -> Option<f64>,
+) -> Option<[usize; 3]> {
+    let m = ranked.len();
+    let mut best: Option<(f64, [usize; 3])> = None;
+    for x in 0..m {
+        for y in x + 1..m {
+            for z in y + 1..m {
+                let triple = [ranked[x].1, ranked[y].1, ranked[z].1];
+                if let Some(e) = judge(triple).filter(|&e| best.is_none_or(|(b, _)| e < b)) {
+                    best = Some((e, triple));
+                }
+            }
+        }
+    }
+    best.map(|(_, triple)| triple)
 }
 
 /// At most [`SEGMENT_SAMPLES`] of `frames`, evenly spaced.
