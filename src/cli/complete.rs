@@ -119,6 +119,22 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
             eprintln!("    gaps of {lengths}: the long gaps' weights ({count} validation entries)");
         }
     }
+    if !b.leans.is_empty() {
+        let mut toward: Vec<(&'static str, usize)> = Vec::new();
+        for lean in &b.leans {
+            let name = alone(&lean.toward);
+            match toward.iter_mut().find(|(n, _)| *n == name) {
+                Some((_, count)) => *count += 1,
+                None => toward.push((name, 1)),
+            }
+        }
+        let listed: Vec<String> = toward.iter().map(|(n, c)| format!("{n} {c}")).collect();
+        eprintln!(
+            "  {} tracks lean toward one filler, learned on their own validation spans: {}",
+            b.leans.len(),
+            listed.join(", ")
+        );
+    }
     if b.validated != [0, 0] {
         match b.field_validated {
             0 => eprintln!(

@@ -140,6 +140,10 @@ pub struct Blend {
     /// validated).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub field_validated: usize,
+    /// The tracks whose own validation spans moved part of their classic fillers' weight to
+    /// one filler, by track (empty: none, and in reports written before).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub leans: Vec<TrackLean>,
 }
 
 fn is_zero(v: &usize) -> bool {
@@ -254,7 +258,7 @@ fn combined(
 ) -> Vec<[f32; 3]> {
     let with_lengths = values.iter().zip(entries);
     with_lengths
-        .map(|(p, &(_, _, len))| blend.combine(len, p))
+        .map(|(p, &(_, i, len))| blend.combine(len, i, p))
         .collect()
 }
 
@@ -350,6 +354,7 @@ impl Blend {
             cross_fitted: [false, false],
             by_length: Vec::new(),
             field_validated: 0,
+            leans: Vec::new(),
         }
     }
 
@@ -358,7 +363,8 @@ impl Blend {
     fn in_use(&self) -> u32 {
         let classes = [self.short, self.long]
             .into_iter()
-            .chain(self.by_length.iter().map(|c| c.weights));
+            .chain(self.by_length.iter().map(|c| c.weights))
+            .chain(self.leans.iter().map(|l| l.toward));
         classes.fold(0, |bits, w| {
             Filler::ALL
                 .iter()
@@ -381,12 +387,23 @@ impl Blend {
         self.short == field_only
             && self.long == field_only
             && self.by_length.iter().all(|b| b.weights == field_only)
+            && self.leans.is_empty()
     }
 
-    /// The blend of one entry's filler values `p`, in a gap of `len` frames, by the
-    /// weights of its class.
-    pub(super) fn combine(&self, len: usize, p: &[[f32; 3]; M]) -> [f32; 3] {
-        let w = self.weights_for(len).0;
+    /// The weights for a gap of `len` frames of track `track`: its class's, with the
+    /// track's lean where it has one.
+    pub fn weights_at(&self, len: usize, track: usize) -> Weights {
+        let w = self.weights_for(len);
+        match self.leans.binary_search_by_key(&track, |l| l.track) {
+            Ok(at) => self.leans[at].apply(w),
+            Err(_) => *w,
+        }
+    }
+
+    /// The blend of one entry's filler values `p`, in a gap of `len` frames of track
+    /// `track`, by its weights ([`Blend::weights_at`]).
+    pub(super) fn combine(&self, len: usize, track: usize, p: &[[f32; 3]; M]) -> [f32; 3] {
+        let w = self.weights_at(len, track).0;
         std::array::from_fn(|c| {
             (0..M)
                 .filter(|&m| w[m] > 0.0)
@@ -397,7 +414,10 @@ impl Blend {
 }
 
 mod blind;
+mod lean;
 mod learn;
+
+pub use lean::TrackLean;
 
 #[cfg(test)]
 mod tests;

@@ -52,11 +52,12 @@ pub(super) fn blind_residuals(
                 // Stage 1's blend of the values, less the truth: its blend of the errors.
                 let three = Arc::new(Residual {
                     errors: [
-                        blend.combine(r.len, &r.errors),
+                        blend.combine(r.len, r.track, &r.errors),
                         r.errors[fixed],
                         r.errors[framewise],
                     ],
                     len: r.len,
+                    track: r.track,
                 });
                 for class in classes_of(r.len) {
                     classes[class].push(Arc::clone(&three));

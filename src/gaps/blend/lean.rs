@@ -1,0 +1,211 @@
+//! A track's own lean from its class's weights ([`TrackLean`]), learned on its own
+//! validation spans.
+
+use std::collections::BTreeMap;
+
+use super::learn::{CLASSES, Classes, Residual};
+use super::{Blend, LENGTH_CLASSES, M, Weights, classic_fillers, length_class};
+use crate::gaps::fillers::{Filler, PerFiller};
+use serde::{Deserialize, Serialize};
+
+/// A track's lean: in every class, this share of its classic fillers' weight moved to one
+/// filler. A motion-capture marker on soft tissue follows the pose better than its
+/// neighbours' rigid motion, one on the head the other way; one class's weights, learned
+/// on every marker, serve neither. Learned on the track's own validation spans and kept
+/// only where it beats the class's weights there cross-fitted (`learn.rs`).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct TrackLean {
+    /// The track.
+    pub track: usize,
+    /// The filler leaned to, with the share moved to it (the other fillers' zero).
+    pub toward: Weights,
+}
+
+impl TrackLean {
+    /// `w` leaned: the classic fillers' weights scaled by one less the share, the share of
+    /// their sum added to the filler leaned to; the field's fills' weights as they are.
+    pub fn apply(&self, w: &Weights) -> Weights {
+        let share: f64 = self.toward.0.iter().sum();
+        let classic: f64 = Filler::ALL
+            .iter()
+            .filter(|f| !f.is_field())
+            .map(|&f| w[f])
+            .sum();
+        PerFiller::from_fn(|f| {
+            if f.is_field() {
+                w[f]
+            } else {
+                (1.0 - share) * w[f] + classic * self.toward[f]
+            }
+        })
+    }
+}
+
+/// The shares of a track's classic weight that its lean may move to one filler.
+const LEAN_SHARES: [f64; 4] = [0.25, 0.5, 0.75, 1.0];
+
+/// Each track's lean ([`TrackLean`]): of every classic filler and [`LEAN_SHARES`], the
+/// one with the least cost on the track's own validation entries in `folds`, each judged
+/// by `blend`'s weights for its class leaned so; kept where it beats no lean cross-fitted
+/// (the lean chosen on the other draws judged on each draw in turn, over the draws that
+/// hold the track's entries, two at least). By track.
+pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean> {
+    let classic = classic_fillers();
+    let leans: Vec<TrackLean> = Filler::ALL
+        .into_iter()
+        .filter(|f| classic & f.bit() != 0)
+        .flat_map(|f| {
+            LEAN_SHARES.map(|share| TrackLean {
+                track: 0,
+                toward: PerFiller::from_fn(|g| if g == f { share } else { 0.0 }),
+            })
+        })
+        .collect();
+    // Each entry once, with its draw: the short gaps and each length class, not the
+    // pooled long gaps that repeat them.
+    let mut by_track: BTreeMap<usize, Vec<(usize, &Residual<M>)>> = BTreeMap::new();
+    for (d, fold) in folds.iter().enumerate() {
+        for class in std::iter::once(0).chain(2..CLASSES) {
+            for r in &fold[class] {
+                by_track.entry(r.track).or_default().push((d, r));
+            }
+        }
+    }
+    // Per class of gap length (0: the short gaps), its weights with no lean, then with
+    // each lean.
+    let leaned: Vec<Vec<Weights>> = (0..=LENGTH_CLASSES)
+        .map(|key| {
+            let w = match key {
+                0 => blend.short,
+                c => blend.by_length.get(c - 1).map_or(blend.long, |b| b.weights),
+            };
+            std::iter::once(w)
+                .chain(leans.iter().map(|l| l.apply(&w)))
+                .collect()
+        })
+        .collect();
+    let mut out = Vec::new();
+    for (track, entries) in by_track {
+        // cost[d][c]: draw d's cost with no lean (c = 0) or lean c − 1.
+        let mut cost = vec![vec![0f64; 1 + leans.len()]; folds.len()];
+        for &(d, r) in &entries {
+            let key = length_class(r.len).map_or(0, |c| c + 1);
+            for (c, w) in leaned[key].iter().enumerate() {
+                cost[d][c] += r.weight() * r.distance(&w.0);
+            }
+        }
+        let drawn: Vec<usize> = (0..folds.len())
+            .filter(|&d| entries.iter().any(|e| e.0 == d))
+            .collect();
+        if drawn.len() < 2 {
+            continue;
+        }
+        let total = |c: usize, without: Option<usize>| -> f64 {
+            drawn
+                .iter()
+                .filter(|&&d| Some(d) != without)
+                .map(|&d| cost[d][c])
+                .sum()
+        };
+        // Ties go to no lean, then to the earlier lean.
+        let best = |without: Option<usize>| {
+            (0..=leans.len())
+                .min_by(|&x, &y| {
+                    total(x, without)
+                        .total_cmp(&total(y, without))
+                        .then(x.cmp(&y))
+                })
+                .unwrap_or(0)
+        };
+        let crossed: f64 = drawn.iter().map(|&d| cost[d][best(Some(d))]).sum();
+        let chosen = best(None);
+        if chosen > 0 && crossed < total(0, None) {
+            out.push(TrackLean {
+                track,
+                ..leans[chosen - 1]
+            });
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::*;
+    use crate::gaps::blend::learn::empty_classes;
+
+    #[test]
+    fn a_lean_moves_a_share_of_the_classic_weight_and_keeps_the_field_s() {
+        let w = PerFiller::from_fn(|f| match f {
+            Filler::FieldFill => 0.2,
+            Filler::Spline => 0.5,
+            Filler::Chain => 0.3,
+            _ => 0.0,
+        });
+        let lean = TrackLean {
+            track: 4,
+            toward: PerFiller::from_fn(|f| if f == Filler::Gloersen { 0.5 } else { 0.0 }),
+        };
+        // The classic fillers hold 0.8: half of each goes, 0.4 comes to Gløersen's.
+        let got = lean.apply(&w);
+        let want = [
+            (Filler::FieldFill, 0.2),
+            (Filler::Spline, 0.25),
+            (Filler::Chain, 0.15),
+            (Filler::Gloersen, 0.4),
+        ];
+        for (f, v) in want {
+            assert!((got[f] - v).abs() < 1e-12, "{f:?}: {}", got[f]);
+        }
+        assert!((got.0.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    }
+
+    /// One validation entry of `track`, one frame long: the spline off by `spline` and
+    /// Gløersen's fill by `gloersen` along x, every other filler far off.
+    fn entry(track: usize, spline: f32, gloersen: f32) -> Arc<Residual<M>> {
+        Arc::new(Residual {
+            errors: std::array::from_fn(|m| match Filler::ALL[m] {
+                Filler::Spline => [spline, 0.0, 0.0],
+                Filler::Gloersen => [gloersen, 0.0, 0.0],
+                _ => [1e3, 0.0, 0.0],
+            }),
+            len: 1,
+            track,
+        })
+    }
+
+    #[test]
+    fn a_track_leans_where_its_own_spans_say_so_cross_fitted() {
+        // Every class on the spline. Track 0: the spline exact. Track 1: Gløersen's fill
+        // exact in every draw. Track 2: likewise, but in one draw only. Track 3: Gløersen's
+        // fill better in one draw by 3, worse in two by 1: over all three, leaning all the
+        // way costs 2 against 3, but each draw judged by the lean of the other two costs
+        // 3 + 1 + 1.
+        let blend = Blend::only(Filler::Spline);
+        let mut folds: Vec<Classes<M>> = (0..3).map(|_| empty_classes()).collect();
+        for (d, fold) in folds.iter_mut().enumerate() {
+            let short = &mut fold[0];
+            short.push(entry(0, 0.0, 1.0));
+            short.push(entry(1, 1.0, 0.0));
+            if d == 0 {
+                short.push(entry(2, 1.0, 0.0));
+                short.push(entry(3, 3.0, 0.0));
+            } else {
+                short.push(entry(3, 0.0, 1.0));
+            }
+        }
+        let leans = track_leans(&folds, &blend);
+        assert_eq!(leans.len(), 1, "{leans:?}");
+        assert_eq!(leans[0].track, 1);
+        assert_eq!(leans[0].toward[Filler::Gloersen], 1.0);
+        assert_eq!(leans[0].toward.0.iter().sum::<f64>(), 1.0);
+        // Applied: the track's weights are Gløersen's alone, the others' the spline's.
+        let mut blend = blend;
+        blend.leans = leans;
+        assert_eq!(blend.weights_at(1, 1)[Filler::Gloersen], 1.0);
+        assert_eq!(blend.weights_at(1, 3)[Filler::Spline], 1.0);
+        assert_ne!(blend.in_use() & Filler::Gloersen.bit(), 0);
+    }
+}
