@@ -130,7 +130,8 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
         }
         let listed: Vec<String> = toward.iter().map(|(n, c)| format!("{n} {c}")).collect();
         eprintln!(
-            "  {} tracks lean toward one filler, learned on their own validation spans: {}",
+            "  {} leans of a track's weight, for its short or its longer gaps, toward one \
+             filler, learned on its own validation spans: {}",
             b.leans.len(),
             listed.join(", ")
         );

@@ -394,7 +394,11 @@ impl Blend {
     /// track's lean where it has one.
     pub fn weights_at(&self, len: usize, track: usize) -> Weights {
         let w = self.weights_for(len);
-        match self.leans.binary_search_by_key(&track, |l| l.track) {
+        let key = (track, lean::class_key(len));
+        match self
+            .leans
+            .binary_search_by_key(&key, |l| (l.track, l.class))
+        {
             Ok(at) => self.leans[at].apply(w),
             Err(_) => *w,
         }

@@ -5,18 +5,23 @@ use std::collections::BTreeMap;
 
 use super::learn::{CLASSES, Classes, Residual};
 use super::{Blend, LENGTH_CLASSES, M, Weights, classic_fillers, length_class};
+use crate::gaps::SPLINE_CARRY_FRAMES;
 use crate::gaps::fillers::{Filler, PerFiller};
 use serde::{Deserialize, Serialize};
 
-/// A track's lean: in every class, this share of its classic fillers' weight moved to one
-/// filler. A motion-capture marker on soft tissue follows the pose better than its
-/// neighbours' rigid motion, one on the head the other way; one class's weights, learned
-/// on every marker, serve neither. Learned on the track's own validation spans and kept
-/// only where it beats the class's weights there cross-fitted (`learn.rs`).
+/// A track's lean, for its short gaps or for its longer ones: this share of its classic
+/// fillers' weight moved to one filler in each class of gap length. A motion-capture
+/// marker on soft tissue follows the pose better than its neighbours' rigid motion, one
+/// on the head the other way; one class's weights, learned on every marker, serve
+/// neither. Learned on the track's own validation spans and kept
+/// only where it clearly beats the class's weights there cross-fitted (`lean.rs`).
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 pub struct TrackLean {
     /// The track.
     pub track: usize,
+    /// The gaps it holds for: 0 for the short ones (at most
+    /// [`SPLINE_CARRY_FRAMES`] frames), 1 for the longer ones.
+    pub class: usize,
     /// The filler leaned to, with the share moved to it (the other fillers' zero).
     pub toward: Weights,
 }
@@ -41,14 +46,33 @@ impl TrackLean {
     }
 }
 
+/// The key of a gap of `len` frames in [`TrackLean::class`]: 0 for the short gaps (at
+/// most [`SPLINE_CARRY_FRAMES`] frames), 1 for the longer ones.
+pub(super) fn class_key(len: usize) -> usize {
+    usize::from(len > SPLINE_CARRY_FRAMES)
+}
+
+/// The key of a gap of `len` frames among the classes of gap length: 0 for the short
+/// gaps, `c + 1` for [`length_class`] `c`.
+pub(super) fn length_key(len: usize) -> usize {
+    length_class(len).map_or(0, |c| c + 1)
+}
+
+/// The draws that must hold a track's validation spans of a class for it to lean there
+/// (fewer give no measure of the gain's spread).
+const LEAN_DRAWS: usize = 3;
+
 /// The shares of a track's classic weight that its lean may move to one filler.
 const LEAN_SHARES: [f64; 4] = [0.25, 0.5, 0.75, 1.0];
 
-/// Each track's lean ([`TrackLean`]): of every classic filler and [`LEAN_SHARES`], the
-/// one with the least cost on the track's own validation entries in `folds`, each judged
-/// by `blend`'s weights for its class leaned so; kept where it beats no lean cross-fitted
-/// (the lean chosen on the other draws judged on each draw in turn, over the draws that
-/// hold the track's entries, two at least). By track.
+/// Each track's lean for its short gaps and for its longer ones ([`TrackLean`]): of every
+/// classic filler and [`LEAN_SHARES`], the one with the least cost on the track's own
+/// validation entries of those gaps in `folds`, each judged by `blend`'s weights for its
+/// class leaned so; kept where its gain cross-fitted (the lean chosen on the other draws,
+/// judged on each draw in turn) is above two standard errors, over the draws that hold
+/// such entries, [`LEAN_DRAWS`] at least. Short and long gaps lean apart: the fillers
+/// that suit a gap of a few frames (the spline) are not those of a second (the donors).
+/// By track, then class.
 pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean> {
     let classic = classic_fillers();
     let leans: Vec<TrackLean> = Filler::ALL
@@ -57,17 +81,21 @@ pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean>
         .flat_map(|f| {
             LEAN_SHARES.map(|share| TrackLean {
                 track: 0,
+                class: 0,
                 toward: PerFiller::from_fn(|g| if g == f { share } else { 0.0 }),
             })
         })
         .collect();
     // Each entry once, with its draw: the short gaps and each length class, not the
     // pooled long gaps that repeat them.
-    let mut by_track: BTreeMap<usize, Vec<(usize, &Residual<M>)>> = BTreeMap::new();
+    let mut by_track: BTreeMap<(usize, usize), Vec<(usize, &Residual<M>)>> = BTreeMap::new();
     for (d, fold) in folds.iter().enumerate() {
         for class in std::iter::once(0).chain(2..CLASSES) {
             for r in &fold[class] {
-                by_track.entry(r.track).or_default().push((d, r));
+                by_track
+                    .entry((r.track, class_key(r.len)))
+                    .or_default()
+                    .push((d, r));
             }
         }
     }
@@ -85,19 +113,18 @@ pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean>
         })
         .collect();
     let mut out = Vec::new();
-    for (track, entries) in by_track {
+    for ((track, class), entries) in by_track {
         // cost[d][c]: draw d's cost with no lean (c = 0) or lean c − 1.
         let mut cost = vec![vec![0f64; 1 + leans.len()]; folds.len()];
         for &(d, r) in &entries {
-            let key = length_class(r.len).map_or(0, |c| c + 1);
-            for (c, w) in leaned[key].iter().enumerate() {
+            for (c, w) in leaned[length_key(r.len)].iter().enumerate() {
                 cost[d][c] += r.weight() * r.distance(&w.0);
             }
         }
         let drawn: Vec<usize> = (0..folds.len())
             .filter(|&d| entries.iter().any(|e| e.0 == d))
             .collect();
-        if drawn.len() < 2 {
+        if drawn.len() < LEAN_DRAWS {
             continue;
         }
         let total = |c: usize, without: Option<usize>| -> f64 {
@@ -117,11 +144,21 @@ pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean>
                 })
                 .unwrap_or(0)
         };
-        let crossed: f64 = drawn.iter().map(|&d| cost[d][best(Some(d))]).sum();
         let chosen = best(None);
-        if chosen > 0 && crossed < total(0, None) {
+        // The gain of the lean chosen on the other draws, draw by draw: kept where its mean
+        // is above two standard errors, as stage 2 keeps the field's share.
+        let gains: Vec<f64> = drawn
+            .iter()
+            .map(|&d| cost[d][0] - cost[d][best(Some(d))])
+            .collect();
+        let n = gains.len() as f64;
+        let mean = gains.iter().sum::<f64>() / n;
+        let spread = (gains.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        let clear = mean > 2.0 * spread / n.sqrt();
+        if chosen > 0 && clear {
             out.push(TrackLean {
                 track,
+                class,
                 ..leans[chosen - 1]
             });
         }
@@ -146,6 +183,7 @@ mod tests {
         });
         let lean = TrackLean {
             track: 4,
+            class: 0,
             toward: PerFiller::from_fn(|f| if f == Filler::Gloersen { 0.5 } else { 0.0 }),
         };
         // The classic fillers hold 0.8: half of each goes, 0.4 comes to Gløersen's.
@@ -182,7 +220,8 @@ mod tests {
         // exact in every draw. Track 2: likewise, but in one draw only. Track 3: Gløersen's
         // fill better in one draw by 3, worse in two by 1: over all three, leaning all the
         // way costs 2 against 3, but each draw judged by the lean of the other two costs
-        // 3 + 1 + 1.
+        // 3 + 1 + 1, a gain of −2. Track 4: Gløersen's fill better in every draw, by 10,
+        // 0.1 and 0.1: a mean gain of 3.4 whose standard error is 3.3, not clear.
         let blend = Blend::only(Filler::Spline);
         let mut folds: Vec<Classes<M>> = (0..3).map(|_| empty_classes()).collect();
         for (d, fold) in folds.iter_mut().enumerate() {
@@ -192,19 +231,23 @@ mod tests {
             if d == 0 {
                 short.push(entry(2, 1.0, 0.0));
                 short.push(entry(3, 3.0, 0.0));
+                short.push(entry(4, 10.0, 0.0));
             } else {
                 short.push(entry(3, 0.0, 1.0));
+                short.push(entry(4, 0.1, 0.0));
             }
         }
         let leans = track_leans(&folds, &blend);
         assert_eq!(leans.len(), 1, "{leans:?}");
-        assert_eq!(leans[0].track, 1);
+        assert_eq!((leans[0].track, leans[0].class), (1, 0));
         assert_eq!(leans[0].toward[Filler::Gloersen], 1.0);
         assert_eq!(leans[0].toward.0.iter().sum::<f64>(), 1.0);
         // Applied: the track's weights are Gløersen's alone, the others' the spline's.
         let mut blend = blend;
         blend.leans = leans;
         assert_eq!(blend.weights_at(1, 1)[Filler::Gloersen], 1.0);
+        // Learned on its short spans, the lean leaves its long gaps as they were.
+        assert_eq!(blend.weights_at(100, 1)[Filler::Spline], 1.0);
         assert_eq!(blend.weights_at(1, 3)[Filler::Spline], 1.0);
         assert_ne!(blend.in_use() & Filler::Gloersen.bit(), 0);
     }
