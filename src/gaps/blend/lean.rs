@@ -112,13 +112,29 @@ pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean>
                 .collect()
         })
         .collect();
+    // Each with its fillers of non-zero weight alone: a minute of capture holds hundreds of
+    // thousands of validation entries, each judged with every lean.
+    let sparse: Vec<Vec<Vec<(usize, f64)>>> = leaned
+        .iter()
+        .map(|ws| {
+            ws.iter()
+                .map(|w| {
+                    (0..M)
+                        .filter(|&m| w.0[m] != 0.0)
+                        .map(|m| (m, w.0[m]))
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
     let mut out = Vec::new();
     for ((track, class), entries) in by_track {
         // cost[d][c]: draw d's cost with no lean (c = 0) or lean c − 1.
         let mut cost = vec![vec![0f64; 1 + leans.len()]; folds.len()];
         for &(d, r) in &entries {
-            for (c, w) in leaned[length_key(r.len)].iter().enumerate() {
-                cost[d][c] += r.weight() * r.distance(&w.0);
+            let weight = r.weight();
+            for (c, w) in sparse[length_key(r.len)].iter().enumerate() {
+                cost[d][c] += weight * distance(r, w);
             }
         }
         let drawn: Vec<usize> = (0..folds.len())
@@ -164,6 +180,20 @@ pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean>
         }
     }
     out
+}
+
+/// [`Residual::distance`] of the blend `w` given by its non-zero weights, in order: the
+/// same sums, without the terms that add nothing.
+fn distance(r: &Residual<M>, w: &[(usize, f64)]) -> f64 {
+    (0..3)
+        .map(|c| {
+            w.iter()
+                .map(|&(m, v)| v * r.errors[m][c] as f64)
+                .sum::<f64>()
+                .powi(2)
+        })
+        .sum::<f64>()
+        .sqrt()
 }
 
 #[cfg(test)]
