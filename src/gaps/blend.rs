@@ -375,9 +375,15 @@ impl Blend {
 
     /// The weights for a gap of `len` frames.
     pub fn weights_for(&self, len: usize) -> &Weights {
-        match length_class(len) {
-            None => &self.short,
-            Some(c) => self.by_length.get(c).map_or(&self.long, |b| &b.weights),
+        self.class_weights(span_class(len))
+    }
+
+    /// The weights of class `class` ([`span_class`]: 0 for the short gaps, `c + 1` for
+    /// length class `c`).
+    fn class_weights(&self, class: usize) -> &Weights {
+        match class {
+            0 => &self.short,
+            c => self.by_length.get(c - 1).map_or(&self.long, |b| &b.weights),
         }
     }
 

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 
 use super::learn::{CLASSES, Classes, Residual};
-use super::{Blend, LENGTH_CLASSES, M, Weights, classic_fillers, length_class};
+use super::{Blend, LENGTH_CLASSES, M, Weights, classic_fillers, span_class};
 use crate::gaps::SPLINE_CARRY_FRAMES;
 use crate::gaps::fillers::{Filler, PerFiller};
 use serde::{Deserialize, Serialize};
@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 /// marker on soft tissue follows the pose better than its neighbours' rigid motion, one
 /// on the head the other way; one class's weights, learned on every marker, serve
 /// neither. Learned on the track's own validation spans and kept
-/// only where it clearly beats the class's weights there cross-fitted (`lean.rs`).
+/// only where it clearly beats the class's weights there cross-fitted (`track_leans`).
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 pub struct TrackLean {
     /// The track.
@@ -50,12 +50,6 @@ impl TrackLean {
 /// most [`SPLINE_CARRY_FRAMES`] frames), 1 for the longer ones.
 pub(super) fn class_key(len: usize) -> usize {
     usize::from(len > SPLINE_CARRY_FRAMES)
-}
-
-/// The key of a gap of `len` frames among the classes of gap length: 0 for the short
-/// gaps, `c + 1` for [`length_class`] `c`.
-pub(super) fn length_key(len: usize) -> usize {
-    length_class(len).map_or(0, |c| c + 1)
 }
 
 /// The draws that must hold a track's validation spans of a class for it to lean there
@@ -99,31 +93,12 @@ pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean>
             }
         }
     }
-    // Per class of gap length (0: the short gaps), its weights with no lean, then with
-    // each lean.
+    // Per class of gap length ([`span_class`]), its weights with no lean, then with each.
     let leaned: Vec<Vec<Weights>> = (0..=LENGTH_CLASSES)
-        .map(|key| {
-            let w = match key {
-                0 => blend.short,
-                c => blend.by_length.get(c - 1).map_or(blend.long, |b| b.weights),
-            };
+        .map(|class| {
+            let w = *blend.class_weights(class);
             std::iter::once(w)
                 .chain(leans.iter().map(|l| l.apply(&w)))
-                .collect()
-        })
-        .collect();
-    // Each with its fillers of non-zero weight alone: a minute of capture holds hundreds of
-    // thousands of validation entries, each judged with every lean.
-    let sparse: Vec<Vec<Vec<(usize, f64)>>> = leaned
-        .iter()
-        .map(|ws| {
-            ws.iter()
-                .map(|w| {
-                    (0..M)
-                        .filter(|&m| w.0[m] != 0.0)
-                        .map(|m| (m, w.0[m]))
-                        .collect()
-                })
                 .collect()
         })
         .collect();
@@ -133,8 +108,8 @@ pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean>
         let mut cost = vec![vec![0f64; 1 + leans.len()]; folds.len()];
         for &(d, r) in &entries {
             let weight = r.weight();
-            for (c, w) in sparse[length_key(r.len)].iter().enumerate() {
-                cost[d][c] += weight * distance(r, w);
+            for (c, w) in leaned[span_class(r.len)].iter().enumerate() {
+                cost[d][c] += weight * r.distance(&w.0);
             }
         }
         let drawn: Vec<usize> = (0..folds.len())
@@ -180,20 +155,6 @@ pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean>
         }
     }
     out
-}
-
-/// [`Residual::distance`] of the blend `w` given by its non-zero weights, in order: the
-/// same sums, without the terms that add nothing.
-fn distance(r: &Residual<M>, w: &[(usize, f64)]) -> f64 {
-    (0..3)
-        .map(|c| {
-            w.iter()
-                .map(|&(m, v)| v * r.errors[m][c] as f64)
-                .sum::<f64>()
-                .powi(2)
-        })
-        .sum::<f64>()
-        .sqrt()
 }
 
 #[cfg(test)]

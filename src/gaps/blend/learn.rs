@@ -84,9 +84,12 @@ impl<const K: usize> Residual<K> {
 
     /// The distance of the blend `w` to the truth.
     pub(super) fn distance(&self, w: &[f64; K]) -> f64 {
+        // The candidates without weight add nothing: skipped, as most are in a blend and
+        // every lean judged on every entry of a minute of capture.
         (0..3)
             .map(|c| {
                 (0..K)
+                    .filter(|&m| w[m] != 0.0)
                     .map(|m| w[m] * self.errors[m][c] as f64)
                     .sum::<f64>()
                     .powi(2)
