@@ -57,10 +57,21 @@ MAX_HIDDEN = 0.2
 
 
 def rate_of(path):
+    """The frame rate in `path`'s header: read by the `c3d` package, or where it refuses the
+    file (it refuses a group's parameter named twice, as Vicon Nexus writes them), from the
+    header's own float of an Intel file."""
     import c3d
 
     with open(path, "rb") as f:
-        return float(c3d.Reader(f).header.frame_rate)
+        try:
+            return float(c3d.Reader(f).header.frame_rate)
+        except (KeyError, ValueError):
+            f.seek(0)
+            head = f.read(512)
+            f.seek(512 * (head[0] - 1) + 3)
+            if f.read(1) != bytes([84]):
+                raise
+            return float(np.frombuffer(head[20:24], "<f4")[0])
 
 
 def draw_sets(observed, rate, count, draws, rng):
