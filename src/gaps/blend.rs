@@ -405,7 +405,8 @@ impl Blend {
             .leans
             .binary_search_by_key(&key, |l| (l.track, l.class))
         {
-            Ok(at) => self.leans[at].apply(w),
+            Ok(at) if self.leans[at].reach.is_none_or(|r| len <= r) => self.leans[at].apply(w),
+            Ok(_) => *w,
             Err(_) => *w,
         }
     }

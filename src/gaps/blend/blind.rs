@@ -58,6 +58,7 @@ pub(super) fn blind_residuals(
                     ],
                     len: r.len,
                     track: r.track,
+                    depth: r.depth,
                 });
                 for class in classes_of(r.len) {
                     classes[class].push(Arc::clone(&three));

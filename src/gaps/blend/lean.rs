@@ -24,6 +24,10 @@ pub struct TrackLean {
     pub class: usize,
     /// The filler leaned to, with the share moved to it (the other fillers' zero).
     pub toward: Weights,
+    /// The longest gap it holds for, in frames: twice the depth of the deepest validation
+    /// entry that chose it (`None`: any, as in blends saved before).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reach: Option<usize>,
 }
 
 impl TrackLean {
@@ -77,6 +81,7 @@ pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean>
                 track: 0,
                 class: 0,
                 toward: PerFiller::from_fn(|g| if g == f { share } else { 0.0 }),
+                reach: None,
             })
         })
         .collect();
@@ -147,9 +152,15 @@ pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean>
         let spread = (gains.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
         let clear = mean > 2.0 * spread / n.sqrt();
         if chosen > 0 && clear {
+            // Judged only as deep into a gap as its validation entries reach (a span that
+            // ran into a real gap is judged near that gap's border), a lean holds for gaps
+            // no longer than that depth on both sides: deeper, the spline drifts off and
+            // the donors change.
+            let reach = 2 * entries.iter().map(|e| e.1.depth).max().unwrap_or(0);
             out.push(TrackLean {
                 track,
                 class,
+                reach: Some(reach),
                 ..leans[chosen - 1]
             });
         }
@@ -176,6 +187,7 @@ mod tests {
             track: 4,
             class: 0,
             toward: PerFiller::from_fn(|f| if f == Filler::Gloersen { 0.5 } else { 0.0 }),
+            reach: None,
         };
         // The classic fillers hold 0.8: half of each goes, 0.4 comes to Gløersen's.
         let got = lean.apply(&w);
@@ -194,14 +206,20 @@ mod tests {
     /// One validation entry of `track`, one frame long: the spline off by `spline` and
     /// Gløersen's fill by `gloersen` along x, every other filler far off.
     fn entry(track: usize, spline: f32, gloersen: f32) -> Arc<Residual<M>> {
+        entry_in(track, 1, spline, gloersen)
+    }
+
+    /// [`entry`], `depth` frames deep in a gap of twice that.
+    fn entry_in(track: usize, depth: usize, spline: f32, gloersen: f32) -> Arc<Residual<M>> {
         Arc::new(Residual {
             errors: std::array::from_fn(|m| match Filler::ALL[m] {
                 Filler::Spline => [spline, 0.0, 0.0],
                 Filler::Gloersen => [gloersen, 0.0, 0.0],
                 _ => [1e3, 0.0, 0.0],
             }),
-            len: 1,
+            len: 2 * depth - 1,
             track,
+            depth,
         })
     }
 
@@ -241,5 +259,27 @@ mod tests {
         assert_eq!(blend.weights_at(100, 1)[Filler::Spline], 1.0);
         assert_eq!(blend.weights_at(1, 3)[Filler::Spline], 1.0);
         assert_ne!(blend.in_use() & Filler::Gloersen.bit(), 0);
+    }
+
+    #[test]
+    fn a_lean_holds_only_as_deep_as_it_was_judged() {
+        // Every class on the linear fill. In each of three draws, track 0's spline is
+        // exact 3 frames deep in a gap, and track 1's Gløersen fill 5 frames deep.
+        let blend = Blend::only(Filler::Linear);
+        let folds: Vec<Classes<M>> = (0..3)
+            .map(|_| {
+                let mut fold = empty_classes();
+                fold[0].extend([entry_in(0, 3, 0.0, 1.0), entry_in(1, 5, 1.0, 0.0)]);
+                fold
+            })
+            .collect();
+        let mut blend = blend;
+        blend.leans = track_leans(&folds, &blend);
+        let reach: Vec<_> = blend.leans.iter().map(|l| (l.track, l.reach)).collect();
+        assert_eq!(reach, [(0, Some(6)), (1, Some(10))]);
+        assert_eq!(blend.weights_at(6, 0)[Filler::Spline], 1.0);
+        assert_eq!(blend.weights_at(7, 0)[Filler::Linear], 1.0);
+        assert_eq!(blend.weights_at(10, 1)[Filler::Gloersen], 1.0);
+        assert_eq!(blend.weights_at(11, 1)[Filler::Linear], 1.0);
     }
 }

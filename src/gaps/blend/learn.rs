@@ -69,6 +69,10 @@ pub(super) struct Residual<const K: usize> {
     pub(super) len: usize,
     /// The track whose entry it is.
     pub(super) track: usize,
+    /// The frames from it to the nearest observation the fillers saw: 1 beside one. A
+    /// validation span that runs into a real gap is judged at the gap's border, however
+    /// long the gap.
+    pub(super) depth: usize,
 }
 
 /// A draw's residuals per class: an entry counts in two (its length class and the pooled
@@ -374,7 +378,7 @@ fn span_lengths(hidden: &[(usize, usize)]) -> Vec<usize> {
 
 /// Every filler's error at `hidden` `(frame, track)`, entries observed in `tracks` that
 /// `sources` lacks, filled from the observations of `sources`, each with the length of
-/// its gap there: one per entry of `hidden`, in its order, `None` where the entry is no
+/// its gap there and its depth in it: one per entry of `hidden`, in its order, `None` where the entry is no
 /// gap there or a filler has no finite value.
 pub(super) fn residuals(
     sources: &Sources,
@@ -383,20 +387,20 @@ pub(super) fn residuals(
 ) -> Vec<Option<Arc<Residual<M>>>> {
     let (positions, n) = (sources.marked.positions, sources.marked.points);
     let index = GapIndex::new(&sources.marked);
-    let lengths: Vec<Option<usize>> = hidden.iter().map(|&(k, i)| index.len_at(k, i)).collect();
+    let gaps: Vec<Option<Range<usize>>> = hidden.iter().map(|&(k, i)| index.gap_at(k, i)).collect();
     let entries: Vec<(usize, usize, usize)> = hidden
         .iter()
-        .zip(&lengths)
-        .filter_map(|(&(k, i), len)| len.map(|len| (k, i, len)))
+        .zip(&gaps)
+        .filter_map(|(&(k, i), gap)| gap.as_ref().map(|g| (k, i, g.len())))
         .collect();
     let mut filled = candidates(sources, &entries, fillers)
         .into_iter()
         .zip(&entries);
     hidden
         .iter()
-        .zip(lengths)
-        .map(|(&(k, i), len)| {
-            len?;
+        .zip(gaps)
+        .map(|(&(k, i), gap)| {
+            let gap = gap?;
             let (p, &(_, _, len)) = filled.next()?;
             let e = 3 * (k * n + i);
             // A filler not computed errs by 0: it takes no weight where it was not asked.
@@ -415,6 +419,7 @@ pub(super) fn residuals(
                     errors,
                     len,
                     track: i,
+                    depth: (k - gap.start + 1).min(gap.end - k),
                 })
             })
         })

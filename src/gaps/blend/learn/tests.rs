@@ -12,6 +12,7 @@ fn residuals_of(a: &[f32], b: &[f32]) -> Vec<Residual<M>> {
             }),
             len: 1,
             track: 0,
+            depth: 1,
         })
         .collect()
 }
@@ -45,12 +46,12 @@ fn spans_are_each_track_s_runs_of_consecutive_frames() {
 
 #[test]
 fn residuals_keep_the_order_of_the_entries_asked_for() {
-    // Track 0 hidden at frames 3 and 4 of 10; the first entry asked for is observed,
+    // Track 0 hidden at frames 3 to 5 of 10; the first entry asked for is observed,
     // so no gap: its slot is `None` and the others stay where they were asked.
     let (t, n) = (10usize, 2usize);
     let positions: Vec<f32> = (0..3 * t * n).map(|v| (v as f32 * 0.3).sin()).collect();
     let mut left = vec![true; t * n];
-    (left[3 * n], left[4 * n]) = (false, false);
+    (left[3 * n], left[4 * n], left[5 * n]) = (false, false, false);
     let field = FieldPrediction::new(n, &positions, &positions[..3 * n], &left);
     let sources = Sources::new(Marked::new(t, n, &positions, &left), &field);
     let got = residuals(
@@ -63,8 +64,11 @@ fn residuals_keep_the_order_of_the_entries_asked_for() {
     assert!(
         got[1..]
             .iter()
-            .all(|r| r.as_ref().is_some_and(|r| r.len == 2))
+            .all(|r| r.as_ref().is_some_and(|r| r.len == 3))
     );
+    // Frame 3 is beside frame 2, frame 4 two frames from either side.
+    let depths: Vec<usize> = got[1..].iter().flatten().map(|r| r.depth).collect();
+    assert_eq!(depths, [1, 2]);
 }
 
 #[test]
@@ -77,6 +81,7 @@ fn a_distance_is_the_norm_of_the_blended_errors() {
         }),
         len: 2,
         track: 0,
+        depth: 1,
     };
     let mut w = [0.0; M];
     (w[0], w[1]) = (0.5, 0.5);
