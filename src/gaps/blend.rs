@@ -406,8 +406,7 @@ impl Blend {
             .binary_search_by_key(&key, |l| (l.track, l.class))
         {
             Ok(at) if self.leans[at].reach.is_none_or(|r| len <= r) => self.leans[at].apply(w),
-            Ok(_) => *w,
-            Err(_) => *w,
+            _ => *w,
         }
     }
 

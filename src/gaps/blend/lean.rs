@@ -265,7 +265,7 @@ mod tests {
     fn a_lean_holds_only_as_deep_as_it_was_judged() {
         // Every class on the linear fill. In each of three draws, track 0's spline is
         // exact 3 frames deep in a gap, and track 1's Gløersen fill 5 frames deep.
-        let blend = Blend::only(Filler::Linear);
+        let mut blend = Blend::only(Filler::Linear);
         let folds: Vec<Classes<M>> = (0..3)
             .map(|_| {
                 let mut fold = empty_classes();
@@ -273,7 +273,6 @@ mod tests {
                 fold
             })
             .collect();
-        let mut blend = blend;
         blend.leans = track_leans(&folds, &blend);
         let reach: Vec<_> = blend.leans.iter().map(|l| (l.track, l.reach)).collect();
         assert_eq!(reach, [(0, Some(6)), (1, Some(10))]);

@@ -378,8 +378,8 @@ fn span_lengths(hidden: &[(usize, usize)]) -> Vec<usize> {
 
 /// Every filler's error at `hidden` `(frame, track)`, entries observed in `tracks` that
 /// `sources` lacks, filled from the observations of `sources`, each with the length of
-/// its gap there and its depth in it: one per entry of `hidden`, in its order, `None` where the entry is no
-/// gap there or a filler has no finite value.
+/// its gap there and its depth in it: one per entry of `hidden`, in its order, `None`
+/// where the entry is no gap there or a filler has no finite value.
 pub(super) fn residuals(
     sources: &Sources,
     hidden: &[(usize, usize)],
