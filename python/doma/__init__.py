@@ -668,8 +668,9 @@ class Tracks:
     faces: Optional[np.ndarray]
     #: [T, N] float32 confidence weights with ``confidence=KEY``; else None.
     weights: Optional[np.ndarray]
-    #: [N] int64: the input's index of each track, from :meth:`Field.complete` when the
-    #: fit dropped tracks never observed; else None.
+    #: [N] int64: the input's index of each track: from :meth:`Field.complete` when the
+    #: fit dropped tracks never observed, from :func:`read_tracks` when it left out a C3D
+    #: file's model outputs; else None.
     kept: Optional[np.ndarray] = None
 
 
@@ -681,10 +682,16 @@ def read_tracks(
     count_hidden: bool = False,
     confidence: Optional[str] = None,
     visibility_threshold: Optional[float] = None,
+    model_outputs: bool = False,
 ) -> Tracks:
     """Reads ``.traj``, ``.anime``, ``.npy``, ``.npz`` (plain, PointOdyssey, TAPVid-3D,
     masked), ``.c3d`` (motion-capture markers in the file's units; a marker not measured
     in a frame is unobserved) or a folder of OBJ frames.
+
+    A C3D file's model outputs (the points that ``POINT:ANGLES``, ``FORCES``,
+    ``MOMENTS``, ``POWERS``, ... list, as Nexus stores joint angles and forces) are left
+    out, as ``doma fit`` leaves them, and ``kept`` holds the file's index of each marker
+    read; ``model_outputs=True`` reads every point.
 
     ``layout`` forces an ``.npz`` layout (default: detected from its keys); ``frame``
     (``world``/``camera``), ``count_hidden`` and ``confidence`` are those of ``doma fit``.
@@ -693,12 +700,19 @@ def read_tracks(
     value (a code such as 2 or -1, NaN) is refused, naming the entry.
     """
     choices = _lower_choices({"layout": layout, "frame": frame})
-    positions, (t, n), observed, faces, weights = _native.read_tracks(
-        os.fspath(path), choices["layout"], choices["frame"], bool(count_hidden), confidence, visibility_threshold
+    positions, (t, n), observed, faces, weights, kept = _native.read_tracks(
+        os.fspath(path),
+        choices["layout"],
+        choices["frame"],
+        bool(count_hidden),
+        confidence,
+        visibility_threshold,
+        bool(model_outputs),
     )
     return Tracks(
         tracks=np.frombuffer(positions, dtype=np.float32).reshape(t, n, 3),
         observed=np.frombuffer(observed, dtype=np.bool_).reshape(t, n),
         faces=None if faces is None else np.frombuffer(faces, dtype=np.uint32).reshape(-1, 3),
         weights=None if weights is None else np.frombuffer(weights, dtype=np.float32).reshape(t, n),
+        kept=None if kept is None else np.frombuffer(kept, dtype=np.int64),
     )

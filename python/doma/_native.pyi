@@ -59,7 +59,8 @@ def read_tracks(
     count_hidden: bool = False,
     confidence: Optional[str] = None,
     visibility_threshold: Optional[float] = None,
-) -> tuple[bytearray, tuple[int, int], bytearray, Optional[bytearray], Optional[bytearray]]: ...
+    model_outputs: bool = False,
+) -> tuple[bytearray, tuple[int, int], bytearray, Optional[bytearray], Optional[bytearray], Optional[bytearray]]: ...
 def fill_into(
     tracks: NDArray[np.float32], observed: NDArray[np.uint8], filler: str, out: NDArray[np.float32]
 ) -> None: ...

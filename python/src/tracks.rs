@@ -10,10 +10,12 @@ use crate::convert::Wrap;
 use crate::errors::{IntoPy, guarded};
 
 /// Reads a sequence file as `doma fit` reads it: `(tracks bytes, [T, N], observed bytes,
-/// faces bytes or None, weights bytes or None, layout)`.
+/// faces bytes or None, weights bytes or None, kept bytes or None)`; `kept` (`i64`, the
+/// file's index of each track) where a C3D file's model outputs were left out.
 #[pyfunction]
-#[pyo3(signature = (path, layout=None, frame=None, count_hidden=false, confidence=None, visibility_threshold=None))]
-#[allow(clippy::type_complexity)]
+#[pyo3(signature = (path, layout=None, frame=None, count_hidden=false, confidence=None, visibility_threshold=None, model_outputs=false))]
+// The keywords of `doma.read_tracks`, one argument each, as PyO3 takes them.
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
 pub fn read_tracks<'py>(
     py: Python<'py>,
     path: PathBuf,
@@ -22,10 +24,12 @@ pub fn read_tracks<'py>(
     count_hidden: bool,
     confidence: Option<String>,
     visibility_threshold: Option<f64>,
+    model_outputs: bool,
 ) -> PyResult<(
     Bound<'py, pyo3::types::PyByteArray>,
     (usize, usize),
     Bound<'py, pyo3::types::PyByteArray>,
+    Option<Bound<'py, pyo3::types::PyByteArray>>,
     Option<Bound<'py, pyo3::types::PyByteArray>>,
     Option<Bound<'py, pyo3::types::PyByteArray>>,
 )> {
@@ -37,9 +41,15 @@ pub fn read_tracks<'py>(
             confidence,
             visibility_threshold,
         };
-        let (tracks, faces) = py
-            .detach(|| doma::data::sequence::read_tracks(&path, &file))
+        let read = py
+            .detach(|| doma::data::sequence::read_points(&path, &file))
             .py()?;
+        let (mut tracks, faces) = (read.tracks, read.faces);
+        // A model's outputs left out, as `doma fit` leaves them (a C3D file has no faces).
+        let kept = read.markers.filter(|_| !model_outputs);
+        if let Some(markers) = &kept {
+            tracks = tracks.select_points(markers);
+        }
         // An entry the file does not observe holds no value: NaN, never a stand-in.
         let mut positions = tracks.positions().to_vec();
         for (e, &seen) in tracks.observed().iter().enumerate() {
@@ -56,6 +66,7 @@ pub fn read_tracks<'py>(
             to_bytearray(py, &observed),
             faces,
             weights,
+            kept.map(|k| to_bytearray(py, &k.iter().map(|&i| i as i64).collect::<Vec<_>>())),
         ))
     })
 }

@@ -11,6 +11,7 @@ import subprocess
 import warnings
 
 import c3d
+import doma
 import numpy as np
 import pytest
 
@@ -128,3 +129,45 @@ def test_a_file_of_more_than_65535_frames_completes_in_place(cli, tmp_path):
     assert np.abs(q[0, 1, gap] - (100 * np.sin(0.01 * k[gap] + 1) + 10)).max() < 10
     with open(out, "rb") as h:
         assert sum(1 for _ in c3d.Reader(h).read_frames()) == t
+
+
+def test_a_models_outputs_are_left_as_they_are_unless_asked_for(cli, tmp_path):
+    """Nexus stores joint angles, forces, moments and powers as points, listed by
+    POINT:ANGLES, FORCES, ...: a file written by ezc3d with one such point, a gap in it
+    and one in a marker. The fit leaves the angle out (it is not a position) and the
+    filled file holds it as the input does; `--model-outputs` fits and fills it too."""
+    ezc3d = pytest.importorskip("ezc3d")
+    t, n = 120, 7
+    k = np.arange(t)
+    points = np.ones((4, n, t))
+    for i in range(n):
+        points[0, i] = 100 * np.sin(0.05 * k + 0.3 * i) + 30 * i
+        points[1, i] = 80 * np.cos(0.04 * k) + 10 * i
+        points[2, i] = 900 + 5 * i + 3 * np.sin(0.1 * k)
+    residuals = np.ones((1, n, t))
+    for i, gap in [(1, slice(50, 60)), (6, slice(40, 70))]:
+        points[:3, i, gap] = np.nan
+        residuals[0, i, gap] = -1
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [100]
+    c["parameters"]["POINT"]["LABELS"]["value"] = tuple([f"M{i}" for i in range(n - 1)] + ["LKneeAngles"])
+    c["data"]["points"] = points
+    c["data"]["meta_points"] = {"residuals": residuals, "camera_masks": np.zeros((7, n, t), bool)}
+    c.add_parameter("POINT", "ANGLES", ["LKneeAngles"])
+    source = tmp_path / "angles.c3d"
+    c.write(str(source))
+    given = ezc3d.c3d(str(source))["data"]["points"]
+    markers, every = doma.read_tracks(source), doma.read_tracks(source, model_outputs=True)
+    assert markers.tracks.shape == (t, n - 1, 3) and list(markers.kept) == list(range(n - 1))
+    assert every.tracks.shape == (t, n, 3) and every.kept is None
+    for asked, filled in [([], 10), (["--model-outputs"], 40)]:
+        run, out = tmp_path / f"run{len(asked)}", tmp_path / f"filled{len(asked)}.c3d"
+        fit = subprocess.run([cli, "fit", source, "--iters", "1", "--quiet", "--out", run, *asked],
+                             check=True, capture_output=True, text=True)
+        assert ("left out the file's 1 model outputs" in fit.stderr) == (not asked)
+        done = subprocess.run([cli, "complete", run, "--out", out], check=True, capture_output=True, text=True)
+        assert int(re.search(r"(\d+) filled", done.stderr).group(1)) == filled
+        q = ezc3d.c3d(str(out))["data"]["points"]
+        assert np.isfinite(q[:3, 1, 50:60]).all()
+        assert np.isfinite(q[:3, 6, 40:70]).all() == bool(asked)
+        assert np.array_equal(q[:3, 6], given[:3, 6], equal_nan=True) == (not asked)

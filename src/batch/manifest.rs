@@ -18,7 +18,7 @@
 //! `backend`, `jacobian`, `iterations` (or `iters`), `h_weight` (a number or `"auto"`), `seed`, `mesh`, `frames` (`[start,
 //! end)`), `stride`, `test_fraction`, `checkpoint_every`, `points_per_step`,
 //! `frames_per_step`, `frames_per_iteration`, `init_scale`, `time_scale`, and for tracker output `layout`, `frame`, `count_hidden`,
-//! `reference_frame`, `drop_unobserved`, `holdout_observations`, `blind_validation`,
+//! `reference_frame`, `drop_unobserved`, `model_outputs`, `holdout_observations`, `blind_validation`,
 //! `confidence`,
 //! `robust` (`"huber:0.01"`, as `--robust` spells it; the older `data_penalty` object
 //! still reads), and `recipe` (`paper`, `fast`) and `until_converged` (a patience in

@@ -51,6 +51,13 @@ impl FitArgs {
                 p.weight, p.validation_epe_x1e4
             )
         })?;
+        let left_out = fit.sequence.model_outputs_left_out;
+        if left_out > 0 {
+            eprintln!(
+                "left out the file's {left_out} model outputs (the points that POINT:ANGLES, \
+                 FORCES, MOMENTS, POWERS, ... list): --model-outputs fits them"
+            );
+        }
         if let Some(choice) = &fit.config.weight_search {
             eprintln!("chose the L_H weight {:e}", choice.weight);
         }

@@ -95,6 +95,7 @@ mod tests {
             scale: -0.1,
             units: "mm".into(),
             labels: vec!["LASI".into(), "RASI".into()],
+            model_outputs: vec![None; 2],
             positions: vec![
                 1.0,
                 2.0,

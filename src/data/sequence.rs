@@ -37,9 +37,13 @@ pub struct Sequence {
     /// field has not seen the answer ([`LoadOptions::blind_validation`]), normalised like
     /// the trajectories.
     pub blind: Option<HeldOut>,
-    /// The input's indices of the tracks kept ([`LoadOptions::drop_unobserved`]); `None`:
+    /// The input's indices of the tracks kept ([`LoadOptions::drop_unobserved`], and a C3D
+    /// file's markers without its model outputs, [`LoadOptions::model_outputs`]); `None`:
     /// every track, in order.
     pub kept: Option<Vec<usize>>,
+    /// How many of a C3D file's points were left out as a model's outputs
+    /// ([`LoadOptions::model_outputs`]).
+    pub model_outputs_left_out: usize,
 }
 
 /// Observations hidden from a fit, and what they were.
@@ -78,6 +82,9 @@ pub struct LoadOptions {
     pub reference: Option<usize>,
     /// Go on without the tracks that are never observed (in the clip) rather than refuse.
     pub drop_unobserved: bool,
+    /// Fit a C3D file's model outputs ([`c3d::C3d::model_outputs`]) as markers; without
+    /// it they are left out, and [`Sequence::kept`] lists the markers.
+    pub model_outputs: bool,
     /// Hide this fraction of the observations, in spans, with this seed
     /// ([`hold_out_spans`]).
     pub hold_out: Option<HoldOut>,
@@ -120,7 +127,26 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
         path: data.to_path_buf(),
         reason,
     };
-    let (mut tracks, mut faces) = read_tracks(data, &options.file)?;
+    let PointsRead {
+        mut tracks,
+        mut faces,
+        markers,
+    } = read_points(data, &options.file)?;
+    // A model's outputs (joint angles, moments, ...) are not positions of the scene.
+    let mut kept = None;
+    let mut model_outputs_left_out = 0;
+    if let Some(markers) = markers.filter(|_| !options.model_outputs) {
+        if markers.is_empty() {
+            return Err(malformed(
+                "every point is a model's output (listed by POINT:ANGLES, FORCES, MOMENTS, \
+                 POWERS, ... or POINT:TYPE_GROUPS), none a marker; --model-outputs fits them"
+                    .into(),
+            ));
+        }
+        model_outputs_left_out = tracks.points() - markers.len();
+        tracks = tracks.select_points(&markers);
+        kept = Some(markers);
+    }
     let ext = extension(data);
     let sibling = data.with_extension("obj");
     let obj = options
@@ -152,11 +178,14 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
             .map_err(DomaError::InvalidData)?,
         None => tracks,
     };
-    let mut kept = None;
     if options.drop_unobserved && !tracks.never_observed().is_empty() {
         let keep = observed_somewhere(&tracks).map_err(malformed)?;
         (tracks, faces) = (tracks.select_points(&keep), renumber(faces, &keep));
-        kept = Some(keep);
+        // The input's indices, through the markers kept before.
+        kept = Some(match kept {
+            Some(markers) => keep.iter().map(|&i| markers[i]).collect(),
+            None => keep,
+        });
     }
     let held_out = match &options.hold_out {
         Some(h) => Some(hold_out(&mut tracks, h).map_err(malformed)?),
@@ -206,6 +235,7 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
         held_out,
         blind,
         kept,
+        model_outputs_left_out,
     })
 }
 
@@ -278,14 +308,37 @@ pub fn sequence_reads() -> usize {
 }
 
 /// Reads any supported sequence file (or OBJ folder) by its extension as tracks (a
-/// tracker's `.npz` with its mask, [`layout`]; a C3D file's markers with theirs,
-/// [`c3d`]; every other file complete), and the faces
+/// tracker's `.npz` with its mask, [`layout`]; a C3D file's points with theirs,
+/// [`c3d`], a model's outputs among them; every other file complete), and the faces
 /// where the format has them. A `file` other than the default applies to `.npz` alone.
 pub fn read_tracks(data: &Path, file: &TrackFile) -> Result<(Tracks, Option<Vec<[u32; 3]>>)> {
+    let read = read_points(data, file)?;
+    Ok((read.tracks, read.faces))
+}
+
+/// What [`read_points`] reads.
+#[derive(Clone, Debug)]
+pub struct PointsRead {
+    /// Every point of the file, as [`read_tracks`] reads them.
+    pub tracks: Tracks,
+    /// The triangles, where the format has them.
+    pub faces: Option<Vec<[u32; 3]>>,
+    /// A C3D file's markers, where some of its points are a model's outputs
+    /// ([`c3d::C3d::model_outputs`]); `None`: every point is a marker.
+    pub markers: Option<Vec<usize>>,
+}
+
+/// [`read_tracks`], and which points are markers rather than a model's outputs.
+pub fn read_points(data: &Path, file: &TrackFile) -> Result<PointsRead> {
     check_readable(data)?;
     READS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let plain = |tracks, faces| PointsRead {
+        tracks,
+        faces,
+        markers: None,
+    };
     if extension(data) == "npz" && !data.is_dir() {
-        return Ok((layout::read_npz_tracks(data, file)?, None));
+        return Ok(plain(layout::read_npz_tracks(data, file)?, None));
     }
     if !file.is_default() {
         return Err(DomaError::Usage(format!(
@@ -295,15 +348,26 @@ pub fn read_tracks(data: &Path, file: &TrackFile) -> Result<(Tracks, Option<Vec<
         )));
     }
     if extension(data) == "c3d" && !data.is_dir() {
-        return Ok((read_c3d_tracks(data)?, None));
+        let c = c3d::read_c3d(data)?;
+        let markers = c.markers();
+        let markers = (markers.len() < c.points).then_some(markers);
+        return Ok(PointsRead {
+            markers,
+            ..plain(c3d_markers_as_tracks(data, c)?, None)
+        });
     }
     let (t, faces) = read_any(data)?;
-    Ok((Tracks::complete(t), faces))
+    Ok(plain(Tracks::complete(t), faces))
 }
 
-/// A C3D file's markers as tracks ([`c3d::c3d_tracks`]), every defect naming the file.
+/// A C3D file's points as tracks ([`c3d::c3d_tracks`]), every defect naming the file.
 fn read_c3d_tracks(data: &Path) -> Result<Tracks> {
-    c3d::c3d_tracks(c3d::read_c3d(data)?).map_err(|reason| DomaError::Malformed {
+    c3d_markers_as_tracks(data, c3d::read_c3d(data)?)
+}
+
+/// [`c3d::c3d_tracks`] of `c`, read from `data`, every defect naming the file.
+fn c3d_markers_as_tracks(data: &Path, c: c3d::C3d) -> Result<Tracks> {
+    c3d::c3d_tracks(c).map_err(|reason| DomaError::Malformed {
         path: data.to_path_buf(),
         reason,
     })

@@ -107,6 +107,7 @@ pub fn eval_run_as(
                         None => Default::default(),
                     },
                     drop_unobserved: config.drop_unobserved,
+                    model_outputs: config.model_outputs,
                     // The field takes points at the run's reference frame, whichever
                     // frame the other file sees most.
                     reference: Some(own.trajectories.reference()),

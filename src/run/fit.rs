@@ -262,6 +262,7 @@ fn finish(
                 held_out: sequence.held_out.clone(),
                 blind: sequence.blind.clone(),
                 kept: sequence.kept.clone(),
+                model_outputs_left_out: sequence.model_outputs_left_out,
             };
             (Some(sequence), with)
         }

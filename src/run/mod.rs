@@ -96,6 +96,11 @@ pub struct RunConfig {
     /// Go on without the tracks that are never observed rather than refuse them.
     #[serde(default)]
     pub drop_unobserved: bool,
+    /// Fit a C3D file's model outputs (the points that `POINT:ANGLES`, `FORCES`, `MOMENTS`,
+    /// `POWERS`, ... list) as markers. False for a new fit; absent (true) in runs fitted
+    /// before they were told apart, which fitted every point.
+    #[serde(default = "fitted_every_point")]
+    pub model_outputs: bool,
     /// The fraction of the observations hidden from the fit, in spans of frames, to
     /// measure gap filling (seeded by the fit's seed).
     #[serde(default)]
@@ -164,6 +169,11 @@ pub(super) fn one_fit() -> usize {
     1
 }
 
+/// Runs fitted before model outputs were told apart fitted every point of a C3D file.
+fn fitted_every_point() -> bool {
+    true
+}
+
 fn is_one_fit(fits: &usize) -> bool {
     *fits == 1
 }
@@ -189,6 +199,7 @@ impl RunConfig {
             tracks: TrackFile::default(),
             reference_frame: None,
             drop_unobserved: false,
+            model_outputs: false,
             holdout_observations: None,
             holdout_span: None,
             blind_validation: true,
@@ -268,6 +279,7 @@ impl RunConfig {
                 file: self.tracks.clone(),
                 reference: self.reference_frame,
                 drop_unobserved: self.drop_unobserved,
+                model_outputs: self.model_outputs,
                 hold_out: self.holdout_observations.map(|fraction| HoldOut {
                     fraction,
                     spans: self.holdout_span.map_or(DEFAULT_SPANS, |[a, b]| a..=b),

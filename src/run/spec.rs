@@ -210,6 +210,13 @@ pub struct RunSpec {
     #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", help_heading = "Tracker files")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub drop_unobserved: Option<bool>,
+    /// Fit the points that a C3D file lists as a model's outputs (`POINT:ANGLES`, `FORCES`,
+    /// `MOMENTS`, `POWERS`, ..., as Nexus writes joint angles and forces) as if they were
+    /// markers (default false: they are left out of the fit, and a `.c3d` from `complete`
+    /// holds them as the input does).
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", help_heading = "Tracker files")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_outputs: Option<bool>,
     /// Hide this fraction of the observations from the fit, in spans inside each track's
     /// observations, and report the error of doma's fill on them beside the field alone and
     /// every filler (the field's fill, spline, linear, the neighbours' motion, iterative PCA,

@@ -521,6 +521,14 @@ fn a_c3d_clip_completes_into_the_input_file_with_only_the_fitted_gaps_filled() {
     let (t, n) = (v.truth.frames(), v.truth.points());
     let seen = v.observed();
     let input = dir.join("markers.c3d");
+    // Two gapped tracks are a model's outputs, as Nexus lists joint angles (one by a usual
+    // parameter, one by a parameter that TYPE_GROUPS names): never fitted, never filled.
+    let fitted: Vec<usize> = (1..t).step_by(2).collect();
+    let gapped: Vec<usize> = (0..n)
+        .filter(|&i| fitted.iter().any(|&k| !seen[k * n + i]))
+        .filter(|&i| fitted.iter().any(|&k| seen[k * n + i]))
+        .collect();
+    let (angle, muscle) = (gapped[0], gapped[1]);
     let markers = C3d {
         frames: t,
         points: n,
@@ -529,6 +537,13 @@ fn a_c3d_clip_completes_into_the_input_file_with_only_the_fitted_gaps_filled() {
         scale: -0.01,
         units: "mm".into(),
         labels: (0..n).map(|i| format!("M{i:03}")).collect(),
+        model_outputs: (0..n)
+            .map(|i| match i {
+                _ if i == angle => Some("ANGLES".into()),
+                _ if i == muscle => Some("MUSCLES".into()),
+                _ => None,
+            })
+            .collect(),
         positions: v.truth.positions().to_vec(),
         residuals: seen.iter().map(|&s| if s { 0.5 } else { -1.0 }).collect(),
         cameras: (0..t * n).map(|e| (e % 100) as u8).collect(),
@@ -545,6 +560,19 @@ fn a_c3d_clip_completes_into_the_input_file_with_only_the_fitted_gaps_filled() {
     let (back, given) = (read_c3d(&out).unwrap(), read_c3d(&input).unwrap());
     let kept = run.load_data(&run.load_config().unwrap()).unwrap().kept;
     let kept = kept.unwrap_or_else(|| (0..n).collect());
+    // The markers seen in a fitted frame, the model outputs left out.
+    let expected: Vec<usize> = (0..n)
+        .filter(|&i| i != angle && i != muscle)
+        .filter(|&i| fitted.iter().any(|&k| seen[k * n + i]))
+        .collect();
+    assert_eq!(kept, expected);
+    // A run fitted before model outputs were told apart fitted every point, and reads so.
+    let mut saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.config()).unwrap()).unwrap();
+    assert_eq!(saved["model_outputs"], false);
+    saved.as_object_mut().unwrap().remove("model_outputs");
+    let old: RunConfig = serde_json::from_value(saved).unwrap();
+    assert!(old.model_outputs);
     // The input file with only the fitted frames' gaps filled: every frame and marker,
     // its labels, rate and first frame.
     assert_eq!((back.frames, back.points), (t, n));
@@ -553,7 +581,7 @@ fn a_c3d_clip_completes_into_the_input_file_with_only_the_fitted_gaps_filled() {
         (10, 120.0, "mm")
     );
     assert_eq!(back.labels, markers.labels);
-    let fitted: Vec<usize> = (1..t).step_by(2).collect();
+    assert_eq!(back.model_outputs, markers.model_outputs);
     let mut filled = 0;
     for k in 0..t {
         for i in 0..n {

@@ -20,6 +20,7 @@ fn markers() -> C3d {
         scale: -0.05,
         units: "mm".into(),
         labels: vec!["LASI".into(), "RASI".into(), "SACR".into()],
+        model_outputs: vec![None; 3],
         positions: (0..36).map(|v| 100.0 + v as f32 * 3.5).collect(),
         residuals: vec![
             0.5, 1.0, -1.0, 0.5, 0.0, 0.25, -1.0, -1.0, 2.0, 0.5, 0.5, 0.5,

@@ -46,6 +46,11 @@ pub struct C3d {
     pub units: String,
     /// The point labels (`POINT:LABELS`, `LABELS2`, ...), trimmed; `""` where missing.
     pub labels: Vec<String>,
+    /// `[N]`: for a point that a model computed rather than a marker, the parameter of
+    /// `POINT` that lists its label (`ANGLES`, `FORCES`, `MOMENTS`, `POWERS`, `SCALARS`,
+    /// `REACTIONS`, or one that `POINT:TYPE_GROUPS` names, as Nexus writes joint angles,
+    /// forces, moments and powers as points); `None` for a marker.
+    pub model_outputs: Vec<Option<String>>,
     /// `[T, N, 3]` frame-major, as stored (whatever a point not measured holds).
     pub positions: Vec<f32>,
     /// `[T, N]`: the residual; negative where the point was not measured, 0 where it was
@@ -64,6 +69,13 @@ impl C3d {
             .iter()
             .zip(self.positions.chunks_exact(3))
             .map(|(&r, p)| r >= 0.0 && p.iter().any(|&v| v != 0.0))
+            .collect()
+    }
+
+    /// The points that are markers, not a model's outputs ([`C3d::model_outputs`]).
+    pub fn markers(&self) -> Vec<usize> {
+        (0..self.points)
+            .filter(|&i| self.model_outputs.get(i).is_none_or(Option::is_none))
             .collect()
     }
 }
@@ -132,6 +144,7 @@ mod tests {
             scale: -0.1,
             units: "mm".into(),
             labels: vec!["LASI".into(), "RASI".into()],
+            model_outputs: vec![None; 2],
             positions: (0..18).map(|v| v as f32 * 10.5 - 3.0).collect(),
             residuals: vec![0.5, -1.0, 0.0, 1.2, 25.5, 0.3],
             cameras: vec![3, 0, 0, 127, 1, 64],
@@ -266,10 +279,46 @@ mod tests {
             scale: -1.0,
             units: "m".into(),
             labels: (0..n).map(|i| format!("M{i}")).collect(),
+            model_outputs: (0..n)
+                .map(|i| (i % 7 == 3).then(|| ["ANGLES", "POWERS"][i % 2].to_string()))
+                .collect(),
             positions: vec![1.0; 3 * n],
             residuals: vec![1.0; n],
             cameras: vec![0; n],
         };
         assert_eq!(parse(&encode(&c).unwrap()).unwrap(), c);
+    }
+
+    #[test]
+    fn model_outputs_are_told_from_markers() {
+        let mut c = sample();
+        c.labels.push("LKneeAngles".into());
+        c.labels.push("LQuad".into());
+        c.points = 4;
+        c.positions = (0..36).map(|v| v as f32).collect();
+        c.residuals = vec![0.0; 12];
+        c.cameras = vec![0; 12];
+        c.model_outputs = vec![None, None, Some("ANGLES".into()), Some("MUSCLES".into())];
+        let bytes = encode(&c).unwrap();
+        let back = parse(&bytes).unwrap();
+        assert_eq!(back, c);
+        assert_eq!(back.markers(), vec![0, 1]);
+        // MUSCLES is not a usual list: readers find it through TYPE_GROUPS, which pairs it
+        // with its type. Without that entry it is a parameter like any other.
+        let at = bytes.windows(11).position(|w| w == b"TYPE_GROUPS").unwrap();
+        let mut plain = bytes.clone();
+        plain[at..at + 11].copy_from_slice(b"TYPE_GROUPX");
+        let back = parse(&plain).unwrap();
+        assert_eq!(back.model_outputs[3], None);
+        assert_eq!(back.model_outputs[2].as_deref(), Some("ANGLES"));
+        // A list named as one of the parameters doma writes is refused.
+        c.model_outputs[3] = Some("labels2".into());
+        assert!(
+            encode(&c)
+                .unwrap_err()
+                .contains("cannot list model outputs")
+        );
+        c.model_outputs.pop();
+        assert!(encode(&c).unwrap_err().contains("point kinds"));
     }
 }

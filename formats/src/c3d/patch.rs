@@ -174,6 +174,7 @@ mod tests {
             scale,
             units: "mm".into(),
             labels: vec!["A".into(), "B".into(), "C".into()],
+            model_outputs: vec![None; 3],
             positions: (0..36).map(|v| v as f32 * 2.5 - 20.0).collect(),
             residuals: vec![
                 0.5, -1.0, 1.0, 0.5, 0.5, 0.5, -1.0, 0.5, 0.5, 0.5, 0.5, -1.0,

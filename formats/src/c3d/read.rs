@@ -1,5 +1,7 @@
 //! Reading a C3D file: the header, the parameter section and the points.
 
+use std::collections::{HashMap, HashSet};
+
 use super::{C3d, Processor};
 use crate::source::Source;
 
@@ -65,13 +67,29 @@ impl<'a> Params<'a> {
 
     /// A character parameter as strings: `dims = [length, count]` (or `[length]`: one).
     fn strings(&self, group: &str, name: &str) -> Option<Vec<String>> {
-        let p = self.get(group, name)?;
-        if p.kind != -1 {
+        self.get(group, name).and_then(Param::strings)
+    }
+
+    /// The parameters of `group` (its first, where a file names a group twice).
+    fn of_group(&self, group: &str) -> impl Iterator<Item = &Param<'a>> {
+        let id = self
+            .groups
+            .iter()
+            .find(|(_, g)| g.eq_ignore_ascii_case(group))
+            .map(|g| g.0);
+        self.params.iter().filter(move |p| Some(p.group) == id)
+    }
+}
+
+impl Param<'_> {
+    /// A character parameter's strings, trimmed; `None` for a number.
+    fn strings(&self) -> Option<Vec<String>> {
+        if self.kind != -1 {
             return None;
         }
-        let len = p.dims.first().copied().unwrap_or(p.data.len()).max(1);
+        let len = self.dims.first().copied().unwrap_or(self.data.len()).max(1);
         Some(
-            p.data
+            self.data
                 .chunks(len)
                 .map(|s| {
                     String::from_utf8_lossy(s)
@@ -179,6 +197,7 @@ pub fn parse_from<S: Source + ?Sized>(src: &S) -> Result<C3d, String> {
         .and_then(|u| u.into_iter().next())
         .filter(|u| !u.is_empty())
         .unwrap_or_else(|| "mm".into());
+    let labels = labels(&params, layout.points);
     Ok(C3d {
         frames: layout.frames,
         points: layout.points,
@@ -186,7 +205,8 @@ pub fn parse_from<S: Source + ?Sized>(src: &S) -> Result<C3d, String> {
         rate: layout.rate,
         scale: layout.scale,
         units,
-        labels: labels(&params, layout.points),
+        model_outputs: model_outputs(&params, &labels),
+        labels,
         positions,
         residuals,
         cameras,
@@ -404,4 +424,43 @@ fn labels(params: &Params, points: usize) -> Vec<String> {
     }
     labels.resize(points, String::new());
     labels
+}
+
+/// The parameters of `POINT` that list a model's outputs by default, as Nexus and BTK
+/// name them.
+pub(super) const OUTPUT_PARAMS: [&str; 6] = [
+    "ANGLES",
+    "FORCES",
+    "MOMENTS",
+    "POWERS",
+    "SCALARS",
+    "REACTIONS",
+];
+
+/// For each point, the parameter of `POINT` that lists its label as a model's output:
+/// one of [`OUTPUT_PARAMS`], or one that `POINT:TYPE_GROUPS` names (its pairs of a
+/// parameter and a type, the parameter first); `None` for a marker.
+fn model_outputs(params: &Params, labels: &[String]) -> Vec<Option<String>> {
+    let mut names: HashSet<String> = OUTPUT_PARAMS.iter().map(|s| s.to_string()).collect();
+    if let Some(pairs) = params.strings("POINT", "TYPE_GROUPS") {
+        names.extend(pairs.iter().step_by(2).map(|n| n.to_ascii_uppercase()));
+    }
+    // Each listed label is looked up once: a hostile file's lists cost their length.
+    let mut points: HashMap<&str, Vec<usize>> = HashMap::new();
+    for (i, label) in labels.iter().enumerate().filter(|(_, l)| !l.is_empty()) {
+        points.entry(label.as_str()).or_default().push(i);
+    }
+    let mut outputs = vec![None; labels.len()];
+    for p in params.of_group("POINT") {
+        let name = p.name.to_ascii_uppercase();
+        if !names.contains(&name) {
+            continue;
+        }
+        for listed in p.strings().unwrap_or_default() {
+            for &i in points.get(listed.as_str()).into_iter().flatten() {
+                outputs[i].get_or_insert_with(|| name.clone());
+            }
+        }
+    }
+    outputs
 }

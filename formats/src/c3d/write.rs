@@ -1,6 +1,7 @@
 //! Writing a C3D file: an Intel float file of the points and their labels.
 
 use super::C3d;
+use super::read::OUTPUT_PARAMS;
 
 /// The most labels one `POINT:LABELS` parameter holds (a dimension is a byte).
 const LABELS_PER_PARAM: usize = 255;
@@ -67,7 +68,7 @@ impl Section {
 
 /// The bytes of `data` as a C3D file: Intel floats, the header and the `POINT` group
 /// (`USED`, `FRAMES`, `SCALE`, `RATE`, `DATA_START`, `UNITS`, `LABELS`, `LABELS2`, ...,
-/// and blank `DESCRIPTIONS` beside them),
+/// and blank `DESCRIPTIONS` beside them, and the parameters that list model outputs),
 /// `ANALOG:USED = 0` (at the points' rate), and `TRIAL:ACTUAL_START_FIELD`/`ACTUAL_END_FIELD` when a frame
 /// number passes 65535. A negative residual is written as `−1` (not measured); every other
 /// is rounded to the nearest multiple of `|scale|` up to 255 of them. Refuses what the
@@ -129,14 +130,48 @@ fn check(data: &C3d) -> Result<(usize, u32), String> {
         || data.residuals.len() != entries
         || data.cameras.len() != entries
         || data.labels.len() != n
+        || data.model_outputs.len() != n
     {
         return Err(format!(
-            "{} coordinates, {} residuals, {} camera masks and {} labels for {t} frames of {n} points",
+            "{} coordinates, {} residuals, {} camera masks, {} labels and {} point kinds for \
+             {t} frames of {n} points",
             data.positions.len(),
             data.residuals.len(),
             data.cameras.len(),
-            data.labels.len()
+            data.labels.len(),
+            data.model_outputs.len()
         ));
+    }
+    for (name, listed) in output_lists(data) {
+        if name.is_empty() || name.len() > 127 || !name.is_ascii() {
+            return Err(format!(
+                "the parameter {name:?} that lists model outputs is not 1 to 127 ASCII bytes"
+            ));
+        }
+        let own = [
+            "USED",
+            "FRAMES",
+            "SCALE",
+            "RATE",
+            "DATA_START",
+            "UNITS",
+            "TYPE_GROUPS",
+        ];
+        let upper = name.to_ascii_uppercase();
+        if own.contains(&upper.as_str())
+            || upper.starts_with("LABELS")
+            || upper.starts_with("DESCRIPTIONS")
+        {
+            return Err(format!(
+                "POINT:{name} cannot list model outputs: doma writes its own POINT:{name}"
+            ));
+        }
+        if listed.len() > LABELS_PER_PARAM {
+            return Err(format!(
+                "POINT:{name} would list {} model outputs, more than {LABELS_PER_PARAM}",
+                listed.len()
+            ));
+        }
     }
     if !(data.scale.is_finite() && data.scale != 0.0) {
         return Err(format!("the point scale is {}", data.scale));
@@ -156,6 +191,20 @@ fn check(data: &C3d) -> Result<(usize, u32), String> {
         .filter(|_| t <= u32::MAX as usize)
         .ok_or_else(|| format!("{t} frames from frame {} pass u32", data.first_frame))?;
     Ok((entries, last))
+}
+
+/// The parameters that list `data`'s model outputs ([`C3d::model_outputs`]), in the order
+/// of their first point, each with the labels it lists.
+fn output_lists(data: &C3d) -> Vec<(String, Vec<&str>)> {
+    let mut lists: Vec<(String, Vec<&str>)> = Vec::new();
+    for (label, name) in data.labels.iter().zip(&data.model_outputs) {
+        let Some(name) = name else { continue };
+        match lists.iter_mut().find(|(n, _)| n == name) {
+            Some((_, listed)) => listed.push(label),
+            None => lists.push((name.clone(), vec![label])),
+        }
+    }
+    lists
 }
 
 /// The parameter section of `data` (blocks of 512 bytes) and the block where the data
@@ -185,6 +234,19 @@ fn parameters(data: &C3d, scale: f32, last: u32) -> Result<(Vec<u8>, usize), Str
         // Readers expect a description beside each label; doma has none to give.
         let blank = vec![""; chunk.len()];
         s.strings(point, &name.replace("LABELS", "DESCRIPTIONS"), &blank);
+    }
+    let lists = output_lists(data);
+    for (name, listed) in &lists {
+        s.strings(point, name, listed);
+    }
+    // A parameter other than the usual ones is found by readers through TYPE_GROUPS.
+    let types: Vec<&str> = lists
+        .iter()
+        .filter(|(name, _)| !OUTPUT_PARAMS.contains(&name.to_ascii_uppercase().as_str()))
+        .flat_map(|(name, _)| [name.as_str(), name.as_str()])
+        .collect();
+    if !types.is_empty() {
+        s.strings(point, "TYPE_GROUPS", &types);
     }
     s.group(analog, "ANALOG");
     s.i16s(analog, "USED", &[0]);

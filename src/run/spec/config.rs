@@ -219,6 +219,7 @@ impl RunSpec {
         };
         config.reference_frame = self.reference_frame;
         config.drop_unobserved = self.drop_unobserved.unwrap_or(false);
+        config.model_outputs = self.model_outputs.unwrap_or(false);
         config.holdout_observations = self.holdout_observations;
         config.holdout_span = self.holdout_span;
         config.blind_validation = self.blind_validation.unwrap_or(true);
