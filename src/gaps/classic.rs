@@ -5,8 +5,9 @@
 //! et al. 2018). Each returns a copy of the positions (or values at given entries) with
 //! the gaps filled from the observed entries alone.
 
-use super::eigen::{column_gram, symmetric_eigen_householder};
+use super::eigen::symmetric_eigen_householder;
 use super::fillers::Marked;
+use super::linalg::column_gram;
 use super::linalg::{natural_second_derivatives, spline_at};
 use super::spans::gaps;
 
@@ -233,25 +234,33 @@ fn low_rank_projection(x: &[f64], t: usize, d: usize, energy: f64, at: &[usize])
     }
     let g = column_gram(x.chunks(d).map(centred), d);
     let (vectors, kept) = principal(g, d, energy);
-    let kept: Vec<Vec<f64>> = kept
-        .iter()
-        .map(|&o| (0..d).map(|a| vectors[a * d + o]).collect())
+    // The kept components side by side, `[d, K]`: a row's coordinates on all of them are
+    // summed at once, each over the columns in order.
+    let width = kept.len();
+    let side: Vec<f64> = (0..d)
+        .flat_map(|a| kept.iter().map(|&o| vectors[a * d + o]).collect::<Vec<_>>())
         .collect();
     // C v vᵀ at the entries asked, row by row: each row's coordinates p = C[k] · v once.
     let mut out = Vec::with_capacity(at.len());
+    let (mut row, mut p) = (vec![0f64; d], vec![0f64; width]);
     let mut i = 0;
     while i < at.len() {
         let k = at[i] / d;
-        let row = centred(&x[k * d..(k + 1) * d]);
-        let p: Vec<f64> = kept
-            .iter()
-            .map(|v| (0..d).map(|j| row[j] * v[j]).sum())
-            .collect();
+        for ((c, v), m) in row.iter_mut().zip(&x[k * d..(k + 1) * d]).zip(&mean) {
+            *c = v - m;
+        }
+        // From −0, as `Iterator::sum` adds.
+        p.fill(-0.0);
+        for (&r, loadings) in row.iter().zip(side.chunks_exact(width.max(1))) {
+            for (pu, &v) in p.iter_mut().zip(loadings) {
+                *pu += r * v;
+            }
+        }
         while i < at.len() && at[i] / d == k {
             let j = at[i] % d;
             let mut o = 0f64;
-            for (pv, v) in p.iter().zip(&kept) {
-                o += pv * v[j];
+            for (pv, v) in p.iter().zip(&side[j * width..(j + 1) * width]) {
+                o += pv * v;
             }
             out.push(o + mean[j]);
             i += 1;

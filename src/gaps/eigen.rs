@@ -7,27 +7,7 @@
 
 use std::ops::Range;
 
-/// `Xᵀ X` (`[d, d]`, row-major) of the rows of `x` (each `d` long), summed row by row so
-/// that a matrix far larger than a cache is read in order; each entry sums over the rows
-/// in their order.
-pub fn column_gram<R: AsRef<[f64]>>(rows: impl IntoIterator<Item = R>, d: usize) -> Vec<f64> {
-    let mut g = vec![0f64; d * d];
-    for row in rows {
-        let row = row.as_ref();
-        for a in 0..d {
-            let ra = row[a];
-            for (entry, &rb) in g[a * d + a..(a + 1) * d].iter_mut().zip(&row[a..]) {
-                *entry += ra * rb;
-            }
-        }
-    }
-    for a in 0..d {
-        for b in 0..a {
-            g[a * d + b] = g[b * d + a];
-        }
-    }
-    g
-}
+use super::linalg::column_gram;
 
 /// The eigenvalues and eigenvectors (columns of the returned `[n, n]`) of the symmetric
 /// `a` (`[n, n]`, row-major), by cyclic Jacobi rotations, until the off-diagonal squares
@@ -90,17 +70,23 @@ pub fn symmetric_eigen_to(mut a: Vec<f64>, n: usize, tolerance: f64) -> (Vec<f64
 /// implicit QL iteration (EISPACK's `tred2` and `tql2`): about `10 n³` operations where
 /// cyclic Jacobi rotations take `6 n³` per sweep, for the many eigenproblems of
 /// Gløersen's fill (two per gapped marker).
+///
+/// The working matrix is held transposed: every `O(n³)` loop of `tred2` and `tql2` walks
+/// down a column, which is then a contiguous row, several times faster than strided
+/// reads. The arithmetic, and so every bit of the result, is the textbook order's.
 pub fn symmetric_eigen_householder(a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>) {
     if n == 0 {
         return (Vec::new(), Vec::new());
     }
-    let mut v = a;
-    let at = |i: usize, j: usize| i * n + j;
+    // `w[j * n + k]` holds the textbook's `V[k][j]`.
+    let mut w = transpose(&a, n);
+    drop(a);
+    let at = |i: usize, j: usize| j * n + i;
     let mut d = vec![0f64; n];
     let mut e = vec![0f64; n];
     // Householder reduction to tridiagonal form.
     for j in 0..n {
-        d[j] = v[at(n - 1, j)];
+        d[j] = w[at(n - 1, j)];
     }
     for i in (1..n).rev() {
         let scale: f64 = d[..i].iter().map(|x| x.abs()).sum();
@@ -108,9 +94,9 @@ pub fn symmetric_eigen_householder(a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>
         if scale == 0.0 {
             e[i] = d[i - 1];
             for j in 0..i {
-                d[j] = v[at(i - 1, j)];
-                v[at(i, j)] = 0.0;
-                v[at(j, i)] = 0.0;
+                d[j] = w[at(i - 1, j)];
+                w[at(i, j)] = 0.0;
+                w[at(j, i)] = 0.0;
             }
         } else {
             for k in 0..i {
@@ -125,11 +111,13 @@ pub fn symmetric_eigen_householder(a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>
             e[..i].fill(0.0);
             for j in 0..i {
                 let f = d[j];
-                v[at(j, i)] = f;
-                let mut g = e[j] + v[at(j, j)] * f;
-                for k in j + 1..i {
-                    g += v[at(k, j)] * d[k];
-                    e[k] += v[at(k, j)] * f;
+                w[at(j, i)] = f;
+                let mut g = e[j] + w[at(j, j)] * f;
+                // V[j+1..i][j], a column: row j of `w`.
+                let column = &w[j * n + j + 1..j * n + i];
+                for ((&x, &dk), ek) in column.iter().zip(&d[j + 1..i]).zip(&mut e[j + 1..i]) {
+                    g += x * dk;
+                    *ek += x * f;
                 }
                 e[j] = g;
             }
@@ -144,40 +132,45 @@ pub fn symmetric_eigen_householder(a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>
             }
             for j in 0..i {
                 let (f, g) = (d[j], e[j]);
-                for k in j..i {
-                    v[at(k, j)] -= f * e[k] + g * d[k];
+                let column = &mut w[j * n + j..j * n + i];
+                for ((x, &ek), &dk) in column.iter_mut().zip(&e[j..i]).zip(&d[j..i]) {
+                    *x -= f * ek + g * dk;
                 }
-                d[j] = v[at(i - 1, j)];
-                v[at(i, j)] = 0.0;
+                d[j] = w[at(i - 1, j)];
+                w[at(i, j)] = 0.0;
             }
         }
         d[i] = h;
     }
     // Accumulate the transformations.
     for i in 0..n - 1 {
-        v[at(n - 1, i)] = v[at(i, i)];
-        v[at(i, i)] = 1.0;
+        w[at(n - 1, i)] = w[at(i, i)];
+        w[at(i, i)] = 1.0;
         let h = d[i + 1];
         if h != 0.0 {
             for k in 0..=i {
-                d[k] = v[at(k, i + 1)] / h;
+                d[k] = w[at(k, i + 1)] / h;
             }
+            // Columns 0..=i of V are rows of `w` before row i + 1.
+            let (before, from) = w.split_at_mut((i + 1) * n);
+            let next = &from[..=i];
             for j in 0..=i {
-                let g: f64 = (0..=i).map(|k| v[at(k, i + 1)] * v[at(k, j)]).sum();
-                for k in 0..=i {
-                    v[at(k, j)] -= g * d[k];
+                let column = &mut before[j * n..j * n + i + 1];
+                let g: f64 = next.iter().zip(column.iter()).map(|(a, b)| a * b).sum();
+                for (x, &dk) in column.iter_mut().zip(&d[..=i]) {
+                    *x -= g * dk;
                 }
             }
         }
         for k in 0..=i {
-            v[at(k, i + 1)] = 0.0;
+            w[at(k, i + 1)] = 0.0;
         }
     }
     for j in 0..n {
-        d[j] = v[at(n - 1, j)];
-        v[at(n - 1, j)] = 0.0;
+        d[j] = w[at(n - 1, j)];
+        w[at(n - 1, j)] = 0.0;
     }
-    v[at(n - 1, n - 1)] = 1.0;
+    w[at(n - 1, n - 1)] = 1.0;
     e[0] = 0.0;
     // Implicit QL on the tridiagonal (d, e).
     for i in 1..n {
@@ -221,10 +214,12 @@ pub fn symmetric_eigen_householder(a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>
                     c = p / r;
                     p = c * d[i] - s * g;
                     d[i + 1] = h + s * (c * g + s * d[i]);
-                    for k in 0..n {
-                        let h = v[at(k, i + 1)];
-                        v[at(k, i + 1)] = s * v[at(k, i)] + c * h;
-                        v[at(k, i)] = c * v[at(k, i)] - s * h;
+                    // Columns i and i + 1 of V, rotated: rows i and i + 1 of `w`.
+                    let (left, right) = w[i * n..(i + 2) * n].split_at_mut(n);
+                    for (vi, vi1) in left.iter_mut().zip(right.iter_mut()) {
+                        let h = *vi1;
+                        *vi1 = s * *vi + c * h;
+                        *vi = c * *vi - s * h;
                     }
                 }
                 p = -s * s2 * c3 * el1 * e[l] / dl1;
@@ -238,7 +233,18 @@ pub fn symmetric_eigen_householder(a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>
         d[l] += f;
         e[l] = 0.0;
     }
-    (d, v)
+    (d, transpose(&w, n))
+}
+
+/// The transpose of the `[n, n]` row-major `a`.
+fn transpose(a: &[f64], n: usize) -> Vec<f64> {
+    let mut t = vec![0f64; n * n];
+    for r in 0..n {
+        for c in 0..n {
+            t[c * n + r] = a[r * n + c];
+        }
+    }
+    t
 }
 
 /// A principal component analysis: the singular values of a matrix, largest first, and

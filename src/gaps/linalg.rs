@@ -1,9 +1,86 @@
-//! The small solvers of gap filling: the natural cubic spline's tridiagonal system and
-//! the least squares on the simplex that weighs a blend (the eigenproblems are in
-//! `eigen.rs`). Plain `f64` arithmetic on slices and fixed-size arrays, no tensors.
+//! The small solvers of gap filling: the natural cubic spline's tridiagonal system, the
+//! least squares on the simplex that weighs a blend, and the Gram matrix of a PCA (the
+//! eigenproblems are in `eigen.rs`). Plain `f64` arithmetic on slices and fixed-size
+//! arrays, no tensors.
 
 // Index loops over small matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
+
+/// The rows [`column_gram`] holds at once: enough that four rows of the Gram matrix are
+/// read from memory once for many rows of `x`, few enough that those rows stay in cache.
+const GRAM_BLOCK: usize = 32;
+
+/// `Xᵀ X` (`[d, d]`, row-major) of the rows of `x` (each `d` long). Each entry sums over
+/// the rows in their order; the rows are taken [`GRAM_BLOCK`] at a time and four rows of
+/// the result are updated together, so that a matrix far larger than a cache is read once
+/// per block rather than once per row of `x`.
+pub fn column_gram<R: AsRef<[f64]>>(rows: impl IntoIterator<Item = R>, d: usize) -> Vec<f64> {
+    let mut g = vec![0f64; d * d];
+    let mut rows = rows.into_iter();
+    let mut block: Vec<R> = Vec::with_capacity(GRAM_BLOCK);
+    loop {
+        block.clear();
+        block.extend(rows.by_ref().take(GRAM_BLOCK));
+        if block.is_empty() {
+            break;
+        }
+        gram_block(&mut g, &block, d);
+    }
+    for a in 0..d {
+        for b in 0..a {
+            g[a * d + b] = g[b * d + a];
+        }
+    }
+    g
+}
+
+/// Adds the upper triangle of `Xᵀ X` over the rows of `block` to `g`.
+fn gram_block<R: AsRef<[f64]>>(g: &mut [f64], block: &[R], d: usize) {
+    let mut a = 0;
+    while a + 4 <= d {
+        let (g0, rest) = g[a * d..(a + 4) * d].split_at_mut(d);
+        let (g1, rest) = rest.split_at_mut(d);
+        let (g2, g3) = rest.split_at_mut(d);
+        for row in block {
+            let x = &row.as_ref()[..d];
+            let (x0, x1, x2, x3) = (x[a], x[a + 1], x[a + 2], x[a + 3]);
+            // The triangle's corner, then the four rows side by side.
+            g0[a] += x0 * x0;
+            g0[a + 1] += x0 * x1;
+            g0[a + 2] += x0 * x2;
+            g0[a + 3] += x0 * x3;
+            g1[a + 1] += x1 * x1;
+            g1[a + 2] += x1 * x2;
+            g1[a + 3] += x1 * x3;
+            g2[a + 2] += x2 * x2;
+            g2[a + 3] += x2 * x3;
+            g3[a + 3] += x3 * x3;
+            let tail = a + 4..d;
+            let rows = g0[tail.clone()]
+                .iter_mut()
+                .zip(&mut g1[tail.clone()])
+                .zip(&mut g2[tail.clone()])
+                .zip(&mut g3[tail.clone()]);
+            for ((((e0, e1), e2), e3), &xb) in rows.zip(&x[tail]) {
+                *e0 += x0 * xb;
+                *e1 += x1 * xb;
+                *e2 += x2 * xb;
+                *e3 += x3 * xb;
+            }
+        }
+        a += 4;
+    }
+    for a in a..d {
+        let ga = &mut g[a * d + a..(a + 1) * d];
+        for row in block {
+            let x = row.as_ref();
+            let xa = x[a];
+            for (entry, &xb) in ga.iter_mut().zip(&x[a..d]) {
+                *entry += xa * xb;
+            }
+        }
+    }
+}
 
 /// The second derivatives of the natural cubic spline through `(x, y)` (0 at both ends),
 /// by the tridiagonal (Thomas) solve.
@@ -119,6 +196,27 @@ fn solve(mut a: Vec<Vec<f64>>) -> Option<Vec<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every entry is the sum over the rows in their order, to the bit, whatever the
+    /// column count (four rows of the result at a time, and the rest) and the row count
+    /// (blocks of rows, and a last partial one).
+    #[test]
+    fn the_gram_matrix_sums_each_entry_over_the_rows_in_order() {
+        for d in [1usize, 3, 4, 5, 8, 11] {
+            for rows in [1usize, GRAM_BLOCK - 1, GRAM_BLOCK, 2 * GRAM_BLOCK + 5] {
+                let x: Vec<f64> = (0..rows * d)
+                    .map(|v| ((v * 7919 + 13) % 101) as f64 / 7.0 - 6.5)
+                    .collect();
+                let g = column_gram(x.chunks(d).map(<[f64]>::to_vec), d);
+                for a in 0..d {
+                    for b in 0..d {
+                        let want = (0..rows).fold(0.0, |s, r| s + x[r * d + a] * x[r * d + b]);
+                        assert_eq!(g[a * d + b].to_bits(), want.to_bits(), "{d} {rows} {a} {b}");
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn natural_spline_values_match_a_hand_solved_case() {
