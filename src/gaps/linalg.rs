@@ -11,7 +11,7 @@
 const GRAM_BLOCK: usize = 32;
 
 /// `Xᵀ X` (`[d, d]`, row-major) of the rows of `x` (each `d` long). Each entry sums over
-/// the rows in their order; the rows are taken [`GRAM_BLOCK`] at a time and four rows of
+/// the rows in their order; the rows are taken 32 at a time and four rows of
 /// the result are updated together, so that a matrix far larger than a cache is read once
 /// per block rather than once per row of `x`.
 pub fn column_gram<R: AsRef<[f64]>>(rows: impl IntoIterator<Item = R>, d: usize) -> Vec<f64> {
