@@ -353,7 +353,7 @@ pub fn read_points(data: &Path, file: &TrackFile) -> Result<PointsRead> {
         let markers = (markers.len() < c.points).then_some(markers);
         return Ok(PointsRead {
             markers,
-            ..plain(c3d_markers_as_tracks(data, c)?, None)
+            ..plain(c3d_as_tracks(data, c)?, None)
         });
     }
     let (t, faces) = read_any(data)?;
@@ -362,11 +362,11 @@ pub fn read_points(data: &Path, file: &TrackFile) -> Result<PointsRead> {
 
 /// A C3D file's points as tracks ([`c3d::c3d_tracks`]), every defect naming the file.
 fn read_c3d_tracks(data: &Path) -> Result<Tracks> {
-    c3d_markers_as_tracks(data, c3d::read_c3d(data)?)
+    c3d_as_tracks(data, c3d::read_c3d(data)?)
 }
 
 /// [`c3d::c3d_tracks`] of `c`, read from `data`, every defect naming the file.
-fn c3d_markers_as_tracks(data: &Path, c: c3d::C3d) -> Result<Tracks> {
+fn c3d_as_tracks(data: &Path, c: c3d::C3d) -> Result<Tracks> {
     c3d::c3d_tracks(c).map_err(|reason| DomaError::Malformed {
         path: data.to_path_buf(),
         reason,

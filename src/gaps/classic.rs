@@ -7,8 +7,7 @@
 
 use super::eigen::symmetric_eigen_householder;
 use super::fillers::Marked;
-use super::linalg::column_gram;
-use super::linalg::{natural_second_derivatives, spline_at};
+use super::linalg::{column_gram, natural_second_derivatives, spline_at};
 use super::spans::gaps;
 
 impl Marked<'_> {
@@ -237,8 +236,9 @@ fn low_rank_projection(x: &[f64], t: usize, d: usize, energy: f64, at: &[usize])
     // The kept components side by side, `[d, K]`: a row's coordinates on all of them are
     // summed at once, each over the columns in order.
     let width = kept.len();
+    let vectors = &vectors;
     let side: Vec<f64> = (0..d)
-        .flat_map(|a| kept.iter().map(|&o| vectors[a * d + o]).collect::<Vec<_>>())
+        .flat_map(|a| kept.iter().map(move |&o| vectors[a * d + o]))
         .collect();
     // C v vᵀ at the entries asked, row by row: each row's coordinates p = C[k] · v once.
     let mut out = Vec::with_capacity(at.len());
