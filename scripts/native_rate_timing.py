@@ -18,7 +18,7 @@ canonical positions of the markers that its reference frame misses.
 
 With --method FILLER `doma complete` fills with that filler alone (`field_fill`, `segment`,
 `kalman`, ...) instead of doma's fill, --fits K fits K fields (`doma fit --fits K`; default
-doma fit's, two), and --only picks some of the four recordings (`--only 5s,60s`).
+doma fit's, one), and --only picks some of the four recordings (`--only 5s,60s`).
 
     python scripts/native_rate_timing.py [DOMA_BINARY] [--c3d] [--unseen] [--method FILLER] [--fits K]
         [--only 5s,60s,120s,240s]
@@ -174,7 +174,7 @@ def main():
     p.add_argument("--unseen", action="store_true",
                    help="marker 0 hidden for the first half and marker 1 for the second, so that no frame sees every marker")
     p.add_argument("--method", help="fill with this filler alone (doma complete --method)")
-    p.add_argument("--fits", type=int, help="doma fit --fits K (default: doma fit's, 2 on tracks with gaps)")
+    p.add_argument("--fits", type=int, help="doma fit --fits K (default: doma fit's, 1)")
     p.add_argument("--only", default="5s,60s,120s,240s", help="the recordings to run, of 5s,60s,120s,240s")
     args = p.parse_args()
     only = set(args.only.split(","))
