@@ -5,7 +5,7 @@
 //! et al. 2018). Each returns a copy of the positions (or values at given entries) with
 //! the gaps filled from the observed entries alone.
 
-use super::eigen::symmetric_eigen_householder;
+use super::eigen::Eigensystem;
 use super::fillers::Marked;
 use super::linalg::{column_gram, natural_second_derivatives, spline_at};
 use super::spans::gaps;
@@ -232,13 +232,13 @@ fn low_rank_projection(x: &[f64], t: usize, d: usize, energy: f64, at: &[usize])
         );
     }
     let g = column_gram(x.chunks(d).map(centred), d);
-    let (vectors, kept) = principal(g, d, energy);
+    let kept = principal(g, d, energy);
     // The kept components side by side, `[d, K]`: a row's coordinates on all of them are
     // summed at once, each over the columns in order.
     let width = kept.len();
-    let vectors = &vectors;
+    let kept = &kept;
     let side: Vec<f64> = (0..d)
-        .flat_map(|a| kept.iter().map(move |&o| vectors[a * d + o]))
+        .flat_map(|a| kept.iter().map(move |v| v[a]))
         .collect();
     // C v vᵀ at the entries asked, row by row: each row's coordinates p = C[k] · v once.
     let mut out = Vec::with_capacity(at.len());
@@ -269,10 +269,12 @@ fn low_rank_projection(x: &[f64], t: usize, d: usize, energy: f64, at: &[usize])
     out
 }
 
-/// The eigenvectors (columns of `[n, n]`) of the Gram matrix `g` and, largest first, the
-/// indices of those that hold `energy` of its trace.
-fn principal(g: Vec<f64>, n: usize, energy: f64) -> (Vec<f64>, Vec<usize>) {
-    let (values, vectors) = symmetric_eigen_householder(g, n);
+/// The eigenvectors of the Gram matrix `g` (`[n, n]`) that hold `energy` of its trace,
+/// largest first: only those are found ([`Eigensystem`]), a few of hundreds on a marker
+/// set, where every round of the iterative PCA would otherwise pay for all of them.
+fn principal(g: Vec<f64>, n: usize, energy: f64) -> Vec<Vec<f64>> {
+    let system = Eigensystem::new(g, n);
+    let values = &system.values;
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
     let total: f64 = values.iter().map(|v| v.max(0.0)).sum();
@@ -285,7 +287,7 @@ fn principal(g: Vec<f64>, n: usize, energy: f64) -> (Vec<f64>, Vec<usize>) {
         held += values[o].max(0.0);
         kept.push(o);
     }
-    (vectors, kept)
+    system.vectors(&kept)
 }
 
 /// [`low_rank_projection`] of a wide matrix, centred (`c`, `[t, d]` with `t <= d`), from its
@@ -306,10 +308,8 @@ fn projection_by_frames(
             g[b * t + a] = v;
         }
     }
-    let (vectors, kept) = principal(g, t, energy);
     let mut out = vec![0f64; t * d];
-    for &o in &kept {
-        let v: Vec<f64> = (0..t).map(|a| vectors[a * t + o]).collect();
+    for v in principal(g, t, energy) {
         let mut row = vec![0f64; d];
         for (k, &vk) in v.iter().enumerate() {
             for j in 0..d {

@@ -1,6 +1,7 @@
 //! The symmetric eigenproblem (Jacobi rotations; Householder and QL) and the principal
-//! components of a PCA, for the low-rank fill, the Kalman smoother and Gløersen's fill.
-//! Plain `f64` arithmetic on slices, no tensors.
+//! components of a PCA, for the low-rank fill, the Kalman smoother and Gløersen's fill
+//! (which finds only the leading ones, [`principal_spectrum`]). Plain `f64` arithmetic on
+//! slices, no tensors.
 
 // Index loops over small matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
@@ -82,8 +83,57 @@ pub fn symmetric_eigen_householder(a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>
     let mut w = transpose(&a, n);
     drop(a);
     let at = |i: usize, j: usize| j * n + i;
-    let mut d = vec![0f64; n];
-    let mut e = vec![0f64; n];
+    let (mut d, mut e) = (vec![0f64; n], vec![0f64; n]);
+    tridiagonalize(&mut w, n, &mut d, &mut e);
+    // Accumulate the transformations.
+    for i in 0..n - 1 {
+        w[at(n - 1, i)] = w[at(i, i)];
+        w[at(i, i)] = 1.0;
+        let h = d[i + 1];
+        if h != 0.0 {
+            for k in 0..=i {
+                d[k] = w[at(k, i + 1)] / h;
+            }
+            // Columns 0..=i of V are rows of `w` before row i + 1.
+            let (before, from) = w.split_at_mut((i + 1) * n);
+            let next = &from[..=i];
+            for j in 0..=i {
+                let column = &mut before[j * n..j * n + i + 1];
+                let g: f64 = next.iter().zip(column.iter()).map(|(a, b)| a * b).sum();
+                for (x, &dk) in column.iter_mut().zip(&d[..=i]) {
+                    *x -= g * dk;
+                }
+            }
+        }
+        for k in 0..=i {
+            w[at(k, i + 1)] = 0.0;
+        }
+    }
+    for j in 0..n {
+        d[j] = w[at(n - 1, j)];
+        w[at(n - 1, j)] = 0.0;
+    }
+    w[at(n - 1, n - 1)] = 1.0;
+    e[0] = 0.0;
+    implicit_ql(&mut d, &mut e, |i, c, s| {
+        // Columns i and i + 1 of V, rotated: rows i and i + 1 of `w`.
+        let (left, right) = w[i * n..(i + 2) * n].split_at_mut(n);
+        for (vi, vi1) in left.iter_mut().zip(right.iter_mut()) {
+            let h = *vi1;
+            *vi1 = s * *vi + c * h;
+            *vi = c * *vi - s * h;
+        }
+    });
+    (d, transpose(&w, n))
+}
+
+/// `tred2`'s Householder reduction of the symmetric matrix held (transposed) in `w` to
+/// tridiagonal form, in place: afterwards `w[j * n + j]` is the tridiagonal's `j`-th
+/// diagonal entry, `e[i]` (`i ≥ 1`) its entry below the diagonal in row `i`, and row `i`
+/// of `w` up to `i` holds the Householder vector `u` that reduced row `i`, `d[i]` its
+/// `h = uᵀu / 2` (0: none).
+pub(crate) fn tridiagonalize(w: &mut [f64], n: usize, d: &mut [f64], e: &mut [f64]) {
+    let at = |i: usize, j: usize| j * n + i;
     // Householder reduction to tridiagonal form.
     for j in 0..n {
         d[j] = w[at(n - 1, j)];
@@ -142,37 +192,14 @@ pub fn symmetric_eigen_householder(a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>
         }
         d[i] = h;
     }
-    // Accumulate the transformations.
-    for i in 0..n - 1 {
-        w[at(n - 1, i)] = w[at(i, i)];
-        w[at(i, i)] = 1.0;
-        let h = d[i + 1];
-        if h != 0.0 {
-            for k in 0..=i {
-                d[k] = w[at(k, i + 1)] / h;
-            }
-            // Columns 0..=i of V are rows of `w` before row i + 1.
-            let (before, from) = w.split_at_mut((i + 1) * n);
-            let next = &from[..=i];
-            for j in 0..=i {
-                let column = &mut before[j * n..j * n + i + 1];
-                let g: f64 = next.iter().zip(column.iter()).map(|(a, b)| a * b).sum();
-                for (x, &dk) in column.iter_mut().zip(&d[..=i]) {
-                    *x -= g * dk;
-                }
-            }
-        }
-        for k in 0..=i {
-            w[at(k, i + 1)] = 0.0;
-        }
-    }
-    for j in 0..n {
-        d[j] = w[at(n - 1, j)];
-        w[at(n - 1, j)] = 0.0;
-    }
-    w[at(n - 1, n - 1)] = 1.0;
-    e[0] = 0.0;
-    // Implicit QL on the tridiagonal (d, e).
+}
+
+/// `tql2`'s implicit QL iteration on the tridiagonal of diagonal `d` and subdiagonal
+/// `e[1..]` (as [`tridiagonalize`] leaves it, `e[0] = 0`): `d` becomes the eigenvalues.
+/// Each plane rotation of rows `i` and `i + 1` of the eigenvector matrix is handed to
+/// `rotate(i, c, s)`; the eigenvalues do not depend on what it does.
+pub(crate) fn implicit_ql(d: &mut [f64], e: &mut [f64], mut rotate: impl FnMut(usize, f64, f64)) {
+    let n = d.len();
     for i in 1..n {
         e[i - 1] = e[i];
     }
@@ -214,13 +241,7 @@ pub fn symmetric_eigen_householder(a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>
                     c = p / r;
                     p = c * d[i] - s * g;
                     d[i + 1] = h + s * (c * g + s * d[i]);
-                    // Columns i and i + 1 of V, rotated: rows i and i + 1 of `w`.
-                    let (left, right) = w[i * n..(i + 2) * n].split_at_mut(n);
-                    for (vi, vi1) in left.iter_mut().zip(right.iter_mut()) {
-                        let h = *vi1;
-                        *vi1 = s * *vi + c * h;
-                        *vi = c * *vi - s * h;
-                    }
+                    rotate(i, c, s);
                 }
                 p = -s * s2 * c3 * el1 * e[l] / dl1;
                 e[l] = s * p;
@@ -233,7 +254,6 @@ pub fn symmetric_eigen_householder(a: Vec<f64>, n: usize) -> (Vec<f64>, Vec<f64>
         d[l] += f;
         e[l] = 0.0;
     }
-    (d, transpose(&w, n))
 }
 
 /// The transpose of the `[n, n]` row-major `a`.
@@ -269,45 +289,23 @@ pub fn principal_components(
 ) -> Components {
     let zeroed = zeroed.unwrap_or(0..0);
     let scale = (rows - 1) as f64;
-    let (n, values, vectors) = if rows >= cols {
-        let mut gram = column_gram(x.chunks(cols), cols);
-        for c in zeroed.clone() {
-            for o in 0..cols {
-                gram[c * cols + o] = 0.0;
-                gram[o * cols + c] = 0.0;
-            }
-        }
-        let (values, vectors) = symmetric_eigen_householder(gram, cols);
-        (cols, values, vectors)
+    let (n, gram) = gram_of(x, rows, cols, &zeroed);
+    let (values, vectors) = symmetric_eigen_householder(gram, n);
+    let vectors = if rows >= cols {
+        vectors
     } else {
-        let kept = |c: &usize| !zeroed.contains(c);
-        let mut gram = vec![0f64; rows * rows];
-        for a in 0..rows {
-            for b in 0..=a {
-                let (ra, rb) = (&x[a * cols..(a + 1) * cols], &x[b * cols..(b + 1) * cols]);
-                let dot: f64 = (0..cols).filter(kept).map(|c| ra[c] * rb[c]).sum();
-                gram[a * rows + b] = dot;
-                gram[b * rows + a] = dot;
-            }
-        }
-        let (values, u) = symmetric_eigen_householder(gram, rows);
         // Column o of the result: Xᵀ u_o, normalised (0 for a null direction).
-        let mut vectors = vec![0f64; cols * rows];
+        let mut wide = vec![0f64; cols * rows];
         for o in 0..rows {
-            let v: Vec<f64> = (0..cols)
-                .map(|c| match kept(&c) {
-                    true => (0..rows).map(|r| x[r * cols + c] * u[r * rows + o]).sum(),
-                    false => 0.0,
-                })
-                .collect();
-            let norm = v.iter().map(|a| a * a).sum::<f64>().sqrt();
-            if norm > 0.0 {
-                for c in 0..cols {
-                    vectors[c * rows + o] = v[c] / norm;
-                }
+            let u: Vec<f64> = (0..rows).map(|r| vectors[r * rows + o]).collect();
+            for (c, v) in wide_vector(x, rows, cols, &zeroed, &u)
+                .into_iter()
+                .enumerate()
+            {
+                wide[c * rows + o] = v;
             }
         }
-        (rows, values, vectors)
+        wide
     };
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
@@ -323,6 +321,55 @@ pub fn principal_components(
             .collect(),
     }
 }
+
+/// The Gram matrix whose eigenvectors give `x`'s components (`rows × cols`, the columns
+/// `zeroed` set to 0), and its size: `Xᵀ X` (`cols`), or for fewer rows than columns the
+/// smaller `X Xᵀ` (`rows`).
+fn gram_of(x: &[f64], rows: usize, cols: usize, zeroed: &Range<usize>) -> (usize, Vec<f64>) {
+    if rows >= cols {
+        let mut gram = column_gram(x.chunks(cols), cols);
+        for c in zeroed.clone() {
+            for o in 0..cols {
+                gram[c * cols + o] = 0.0;
+                gram[o * cols + c] = 0.0;
+            }
+        }
+        (cols, gram)
+    } else {
+        let kept = |c: &usize| !zeroed.contains(c);
+        let mut gram = vec![0f64; rows * rows];
+        for a in 0..rows {
+            for b in 0..=a {
+                let (ra, rb) = (&x[a * cols..(a + 1) * cols], &x[b * cols..(b + 1) * cols]);
+                let dot: f64 = (0..cols).filter(kept).map(|c| ra[c] * rb[c]).sum();
+                gram[a * rows + b] = dot;
+                gram[b * rows + a] = dot;
+            }
+        }
+        (rows, gram)
+    }
+}
+
+/// The right singular vector `Xᵀ u / ‖Xᵀ u‖` of `x` (`rows × cols`, fewer rows than
+/// columns, the columns `zeroed` set to 0) from the eigenvector `u` of `X Xᵀ` (0 for a
+/// null direction).
+fn wide_vector(x: &[f64], rows: usize, cols: usize, zeroed: &Range<usize>, u: &[f64]) -> Vec<f64> {
+    let v: Vec<f64> = (0..cols)
+        .map(|c| match zeroed.contains(&c) {
+            false => (0..rows).map(|r| x[r * cols + c] * u[r]).sum(),
+            true => 0.0,
+        })
+        .collect();
+    let norm = v.iter().map(|a| a * a).sum::<f64>().sqrt();
+    match norm > 0.0 {
+        true => v.into_iter().map(|a| a / norm).collect(),
+        false => vec![0.0; cols],
+    }
+}
+
+mod spectrum;
+
+pub use spectrum::{Eigensystem, Spectrum, principal_spectrum};
 
 #[cfg(test)]
 mod tests {

@@ -25,7 +25,7 @@
 // Index loops over small matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
-use super::eigen::{Components, principal_components};
+use super::eigen::principal_spectrum;
 use super::fillers::Marked;
 
 /// `σ` of the distance weights, in millimetres (the MATLAB's `WeightScale`).
@@ -135,11 +135,13 @@ impl Marked<'_> {
                 .map(|(k, c)| (value(k, c) - mean[c]) / deviation[c] * weight[c])
                 .collect();
             let gapped = 3 * p..3 * p + 3;
-            let whole = principal_components(&scaled, full.len(), cols, None);
-            let without = principal_components(&scaled, full.len(), cols, Some(gapped));
-            let kept_components = reaching(&whole).max(reaching(&without));
-            let v = &whole.vectors[..kept_components];
-            let v0 = aligned(&without, v);
+            // Only the components kept are found: on hundreds of columns the whole
+            // eigenvector matrix would be most of the fill's cost.
+            let whole = principal_spectrum(&scaled, full.len(), cols, None);
+            let without = principal_spectrum(&scaled, full.len(), cols, Some(gapped));
+            let kept_components = reaching(&whole.singular).max(reaching(&without.singular));
+            let v = &whole.vectors(kept_components);
+            let v0 = aligned(&without.vectors(kept_components), v);
             // Step 4: B = V₀ T V_gᵀ (`[cols, 3]`), with T = Vᵀ V₀ and V_g the gapped
             // marker's rows of V, so that a frame's fill is its row of M₀ times B. T's
             // first index meets V₀'s components, as the published product has it.
@@ -206,26 +208,26 @@ impl Marked<'_> {
     }
 }
 
-/// How many components reach [`GLOERSEN_MIN_CUMULATIVE`] of the singular values' sum.
-fn reaching(c: &Components) -> usize {
-    let total: f64 = c.singular.iter().sum();
+/// How many of the `singular` values (largest first) reach [`GLOERSEN_MIN_CUMULATIVE`] of
+/// their sum.
+fn reaching(singular: &[f64]) -> usize {
+    let total: f64 = singular.iter().sum();
     let mut held = 0f64;
-    c.singular
+    singular
         .iter()
         .position(|s| {
             held += s;
             held >= GLOERSEN_MIN_CUMULATIVE * total
         })
-        .map_or(c.singular.len(), |i| i + 1)
+        .map_or(singular.len(), |i| i + 1)
 }
 
-/// The first `reference.len()` vectors of `c`, each signed to point along its counterpart
-/// in `reference`. The published product `V₀ (Vᵀ V₀) Vᵀ` changes when one vector of `V₀`
-/// alone changes sign (not when a vector and its counterpart both do), so its value rests
+/// `vectors`, each signed to point along its counterpart in `reference`. The published
+/// product `V₀ (Vᵀ V₀) Vᵀ` changes when one vector of `V₀` alone changes sign (not when a vector and its counterpart both do), so its value rests
 /// on the SVD's signs, which LAPACK leaves to its algorithm (numpy's move this fill by up
 /// to 0.18 mm on the shipped knee recording); doma fixes them.
-fn aligned(c: &Components, reference: &[Vec<f64>]) -> Vec<Vec<f64>> {
-    c.vectors
+fn aligned(vectors: &[Vec<f64>], reference: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    vectors
         .iter()
         .zip(reference)
         .map(|(v, r)| {
@@ -298,14 +300,16 @@ mod tests {
     fn components_keep_99_percent_of_the_singular_values() {
         // A diagonal matrix of 3 rows, Gram matrix g: singular values √(g / 2) = 10, 0.09, 0.01
         // (sum 10.1, 99 % 9.999): the first alone holds 10 ≥ 9.999.
-        let c = principal_components(&diagonal([200.0, 0.0162, 0.0002]), 3, 3, None);
-        assert_eq!(reaching(&c), 1);
+        let x = diagonal([200.0, 0.0162, 0.0002]);
+        let c = principal_spectrum(&x, 3, 3, None);
+        assert_eq!(reaching(&c.singular), 1);
         // 0.5, 0.4, 0.1 (sum 1): 0.9 < 0.99 ≤ 1.0, so all three.
-        let c = principal_components(&diagonal([0.5, 0.32, 0.02]), 3, 3, None);
+        let x = diagonal([0.5, 0.32, 0.02]);
+        let c = principal_spectrum(&x, 3, 3, None);
         for (got, want) in c.singular.iter().zip([0.5, 0.4, 0.1]) {
             assert!((got - want).abs() < 1e-12, "{:?}", c.singular);
         }
-        assert_eq!(reaching(&c), 3);
+        assert_eq!(reaching(&c.singular), 3);
     }
 
     /// `diag(√g)`, whose Gram matrix is `diag(g)`.
