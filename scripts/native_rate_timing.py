@@ -16,12 +16,17 @@ as a lab's trial is. With --unseen no frame sees every marker (marker 0 is hidde
 first half, marker 1 for the second), as in many real captures: the fit then learns the
 canonical positions of the markers that its reference frame misses.
 
+With --subjects K the recording holds K people side by side, 3 m apart, each the same 60
+markers from another moment of the source (60·K markers, the events K times as many), as a
+capture of several people or of a dense marker set is: what `doma complete` costs against
+the marker count.
+
 With --method FILLER `doma complete` fills with that filler alone (`field_fill`, `segment`,
 `kalman`, ...) instead of doma's fill, --fits K fits K fields (`doma fit --fits K`; default
 doma fit's, one), and --only picks some of the four recordings (`--only 5s,60s`).
 
     python scripts/native_rate_timing.py [DOMA_BINARY] [--c3d] [--unseen] [--method FILLER] [--fits K]
-        [--only 5s,60s,120s,240s]
+        [--subjects K] [--only 5s,60s,120s,240s]
 
 Needs numpy and the doma binary (default $CARGO_TARGET_DIR/release/doma); /usr/bin/time
 for the peak memory; the `c3d` package for --c3d.
@@ -44,6 +49,8 @@ MARKERS = 60
 GAP_S = 0.5
 ANALOG_CHANNELS = 38
 ANALOG_PER_FRAME = 10
+SUBJECT_OFFSET = 307  # frames: another moment of the motion for each subject
+SUBJECT_SPACING_MM = 3000.0
 
 
 def source_tracks():
@@ -175,15 +182,24 @@ def main():
                    help="marker 0 hidden for the first half and marker 1 for the second, so that no frame sees every marker")
     p.add_argument("--method", help="fill with this filler alone (doma complete --method)")
     p.add_argument("--fits", type=int, help="doma fit --fits K (default: doma fit's, 1)")
+    p.add_argument("--subjects", type=int, default=1, help="K people side by side, 60 markers each")
     p.add_argument("--only", default="5s,60s,120s,240s", help="the recordings to run, of 5s,60s,120s,240s")
     args = p.parse_args()
+    if args.subjects < 1:
+        raise SystemExit(f"--subjects {args.subjects}: at least 1")
     only = set(args.only.split(","))
     if not only <= {"5s", "60s", "120s", "240s"}:
         raise SystemExit(f"--only {args.only}: not among 5s,60s,120s,240s")
     tracks, observed = source_tracks()
     tracks, observed = tracks[:, :MARKERS], observed[:, :MARKERS]
-    whole_t = ping_pong(tracks, 4 * FRAMES).astype(np.float64)
-    whole_o = ping_pong(observed, 4 * FRAMES)
+    # Subject s starts SUBJECT_OFFSET·s frames into the source's motion, SUBJECT_SPACING_MM·s
+    # along y from the first.
+    whole_t = np.concatenate(
+        [ping_pong(tracks, 4 * FRAMES + s * SUBJECT_OFFSET)[s * SUBJECT_OFFSET :] + s * np.array([0.0, SUBJECT_SPACING_MM, 0.0])
+         for s in range(args.subjects)], axis=1).astype(np.float64)
+    whole_o = np.concatenate(
+        [ping_pong(observed, 4 * FRAMES + s * SUBJECT_OFFSET)[s * SUBJECT_OFFSET :] for s in range(args.subjects)], axis=1)
+    markers = MARKERS * args.subjects
     with tempfile.TemporaryDirectory() as tmp:
         work = pathlib.Path(tmp)
         at = lambda name, frames, events: case(
@@ -196,11 +212,11 @@ def main():
             ("120s", "120 s", "double", 2 * FRAMES, 480),
             ("240s", "240 s", "quad", 4 * FRAMES, 960),
         ]
-        rows = [(label, at(name, frames, events)) for key, label, name, frames, events in plan if key in only]
+        rows = [(label, at(name, frames, events * args.subjects)) for key, label, name, frames, events in plan if key in only]
     print("| recording | frames × markers | fit (s) | fit peak (MB) | complete (s) | complete peak (MB) | data (MB) | file (MB) | 0.5 s gaps, 3 markers | error (mm) |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for name, r in rows:
-        print(f"| {name} | {r['frames']} × {MARKERS} | {r['fit_s']:.0f} | {r['fit_mb']:.0f} | {r['complete_s']:.0f} | "
+        print(f"| {name} | {r['frames']} × {markers} | {r['fit_s']:.0f} | {r['fit_mb']:.0f} | {r['complete_s']:.0f} | "
               f"{r['complete_mb']:.0f} | {r['data_mb']:.1f} | {r['file_mb']:.1f} | {r['events']} | {r['error_mm']:.2f} |")
     ran = dict(rows)
     if "60 s" in ran and "240 s" in ran:
