@@ -60,8 +60,9 @@ impl Eigensystem {
     }
 
     /// The unit eigenvectors of `values[o]` for each `o` of `which` (distinct), in that
-    /// order: `O(n²)` each. Those of eigenvalues in one cluster ([`CLUSTER`]) are made
-    /// orthogonal to each other; the sign of each is its algorithm's.
+    /// order: `O(n²)` each. Those of eigenvalues in one cluster (closer than 10⁻³ of the
+    /// matrix's norm) are made orthogonal to each other; the sign of each is its
+    /// algorithm's.
     pub fn vectors(&self, which: &[usize]) -> Vec<Vec<f64>> {
         let n = self.n;
         let norm = (0..n)
