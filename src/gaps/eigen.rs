@@ -288,7 +288,6 @@ pub fn principal_components(
     zeroed: Option<Range<usize>>,
 ) -> Components {
     let zeroed = zeroed.unwrap_or(0..0);
-    let scale = (rows - 1) as f64;
     let (n, gram) = gram_of(x, rows, cols, &zeroed);
     let (values, vectors) = symmetric_eigen_householder(gram, n);
     let vectors = if rows >= cols {
@@ -307,19 +306,29 @@ pub fn principal_components(
         }
         wide
     };
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
-    order.truncate(rows.min(cols));
+    let (order, singular) = singular_values(&values, rows, cols);
     Components {
-        singular: order
-            .iter()
-            .map(|&o| (values[o].max(0.0) / scale).sqrt())
-            .collect(),
+        singular,
         vectors: order
             .iter()
             .map(|&o| (0..cols).map(|c| vectors[c * n + o]).collect())
             .collect(),
     }
+}
+
+/// The `min(rows, cols)` largest of a Gram matrix's eigenvalues `values` (of a `rows ×
+/// cols` matrix): their indices, largest first, and the singular values `√(λ / (rows − 1))`
+/// they give (numpy's and MATLAB's economy SVD of `X / √(rows − 1)`).
+fn singular_values(values: &[f64], rows: usize, cols: usize) -> (Vec<usize>, Vec<f64>) {
+    let scale = (rows - 1) as f64;
+    let mut order: Vec<usize> = (0..values.len()).collect();
+    order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
+    order.truncate(rows.min(cols));
+    let singular = order
+        .iter()
+        .map(|&o| (values[o].max(0.0) / scale).sqrt())
+        .collect();
+    (order, singular)
 }
 
 /// The Gram matrix whose eigenvectors give `x`'s components (`rows × cols`, the columns

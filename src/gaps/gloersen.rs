@@ -223,9 +223,10 @@ fn reaching(singular: &[f64]) -> usize {
 }
 
 /// `vectors`, each signed to point along its counterpart in `reference`. The published
-/// product `V₀ (Vᵀ V₀) Vᵀ` changes when one vector of `V₀` alone changes sign (not when a vector and its counterpart both do), so its value rests
-/// on the SVD's signs, which LAPACK leaves to its algorithm (numpy's move this fill by up
-/// to 0.18 mm on the shipped knee recording); doma fixes them.
+/// product `V₀ (Vᵀ V₀) Vᵀ` changes when one vector of `V₀` alone changes sign (not when a
+/// vector and its counterpart both do), so its value rests on the SVD's signs, which
+/// LAPACK leaves to its algorithm (numpy's move this fill by up to 0.18 mm on the shipped
+/// knee recording); doma fixes them.
 fn aligned(vectors: &[Vec<f64>], reference: &[Vec<f64>]) -> Vec<Vec<f64>> {
     vectors
         .iter()

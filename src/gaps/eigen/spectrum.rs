@@ -7,7 +7,7 @@
 
 use std::ops::Range;
 
-use super::{gram_of, implicit_ql, transpose, tridiagonalize, wide_vector};
+use super::{gram_of, implicit_ql, singular_values, transpose, tridiagonalize, wide_vector};
 
 /// The eigenvalues of a symmetric matrix, and the eigenvector of any of them on demand.
 pub struct Eigensystem {
@@ -39,9 +39,7 @@ impl Eigensystem {
         let mut reflectors = transpose(&a, n);
         drop(a);
         let (mut halves, mut e) = (vec![0f64; n], vec![0f64; n]);
-        if n > 0 {
-            tridiagonalize(&mut reflectors, n, &mut halves, &mut e);
-        }
+        tridiagonalize(&mut reflectors, n, &mut halves, &mut e);
         let diagonal: Vec<f64> = (0..n).map(|j| reflectors[j * n + j]).collect();
         let below = e.iter().skip(1).copied().collect();
         let mut values = diagonal.clone();
@@ -252,14 +250,7 @@ pub fn principal_spectrum(
     let zeroed = zeroed.unwrap_or(0..0);
     let (n, gram) = gram_of(x, rows, cols, &zeroed);
     let system = Eigensystem::new(gram, n);
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&a, &b| system.values[b].total_cmp(&system.values[a]));
-    order.truncate(rows.min(cols));
-    let scale = (rows - 1) as f64;
-    let singular = order
-        .iter()
-        .map(|&o| (system.values[o].max(0.0) / scale).sqrt())
-        .collect();
+    let (order, singular) = singular_values(&system.values, rows, cols);
     Spectrum {
         x,
         rows,
