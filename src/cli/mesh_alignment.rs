@@ -61,7 +61,7 @@ impl MeshAlignmentArgs {
             .with_target_samples(self.target_samples as usize)
             .with_jacobian(self.jacobian)
             .with_seed(self.common.seed);
-        Ok(MeshAlignmentJob {
+        let job = MeshAlignmentJob {
             sequence: self.sequence.load(2)?,
             keypoints: self.keypoints as usize,
             models: self.models.model.clone(),
@@ -74,7 +74,21 @@ impl MeshAlignmentArgs {
             samples: self.samples as usize,
             backend: self.common.backend,
             quiet: self.common.quiet,
-        })
+        };
+        // A model too large is refused naming the flags that sized it.
+        for &model in &job.models {
+            job.model(model, job.sequence.trajectories.frames())
+                .validate()
+                .map_err(|e| {
+                    crate::DomaError::Usage(format!(
+                        "--hidden {} --n-hidden {}: {}",
+                        self.hidden,
+                        self.n_hidden,
+                        e.to_string().trim_start_matches("invalid configuration: ")
+                    ))
+                })?;
+        }
+        Ok(job)
     }
 }
 

@@ -56,7 +56,7 @@ impl SyntheticArgs {
             Regularizer::E => self.weights.e_weight == Weight::Auto,
             Regularizer::None => false,
         };
-        Ok(SyntheticJob {
+        let job = SyntheticJob {
             motions: self.motion.items.clone(),
             variants: self.variant.items.clone(),
             reg: self.reg,
@@ -74,7 +74,18 @@ impl SyntheticArgs {
             } else {
                 None
             },
-        })
+        };
+        // A model too large is refused naming the flag that sized it.
+        for &variant in &job.variants {
+            job.fit_config(variant).model.validate().map_err(|e| {
+                crate::DomaError::Usage(format!(
+                    "--hidden {}: {}",
+                    self.hidden,
+                    e.to_string().trim_start_matches("invalid configuration: ")
+                ))
+            })?;
+        }
+        Ok(job)
     }
 }
 

@@ -54,21 +54,10 @@ pub fn write_c3d_patched(
 }
 
 /// The markers as tracks: an entry is observed where the file holds a point
-/// ([`C3d::present`]). A measured point that is not finite is refused, naming its frame
-/// and marker. Takes the markers, so that their positions are not copied.
+/// ([`C3d::present`]: a NaN coordinate, as some writers store a missing point, is not
+/// one). Takes the markers, so that their positions are not copied.
 pub fn c3d_tracks(c: C3d) -> std::result::Result<Tracks, String> {
     let present = c.present();
-    if let Some(e) = (0..present.len())
-        .find(|&e| present[e] && c.positions[3 * e..3 * e + 3].iter().any(|v| !v.is_finite()))
-    {
-        return Err(format!(
-            "marker {} ({:?}) of frame {} is measured but not finite ({:?})",
-            e % c.points,
-            c.labels[e % c.points],
-            e / c.points,
-            &c.positions[3 * e..3 * e + 3]
-        ));
-    }
     Tracks::new(c.frames, c.points, c.positions, present)
 }
 
@@ -86,7 +75,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_measured_nan_names_the_marker() {
+    fn nan_coordinates_and_the_origin_are_not_observed() {
         let c = C3d {
             frames: 2,
             points: 2,
@@ -110,15 +99,13 @@ mod tests {
                 1.0,
                 1.0,
             ],
-            residuals: vec![1.0, 1.0, 1.0, 1.0],
+            residuals: vec![1.0, 1.0, f32::NAN, 1.0],
             cameras: vec![0; 4],
+            notes: Vec::new(),
         };
-        let e = c3d_tracks(c.clone()).unwrap_err();
-        assert!(e.contains("frame 1") && e.contains("\"RASI\""), "{e}");
-        // The origin counts as not measured, whatever its residual.
-        let mut ok = c.clone();
-        ok.residuals[3] = -1.0;
-        let t = c3d_tracks(ok).unwrap();
+        // The origin and a NaN coordinate are not points; a NaN residual over finite
+        // coordinates is.
+        let t = c3d_tracks(c).unwrap();
         assert_eq!(t.observed(), &[true, false, true, false]);
     }
 }

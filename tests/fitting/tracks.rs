@@ -547,6 +547,7 @@ fn a_c3d_clip_completes_into_the_input_file_with_only_the_fitted_gaps_filled() {
         positions: v.truth.positions().to_vec(),
         residuals: seen.iter().map(|&s| if s { 0.5 } else { -1.0 }).collect(),
         cameras: (0..t * n).map(|e| (e % 100) as u8).collect(),
+        notes: Vec::new(),
     };
     write_c3d(&input, &markers).unwrap();
     let run = RunDir::new(dir.join("run"));

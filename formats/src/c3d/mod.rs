@@ -21,6 +21,8 @@
 //! format and keeps every other byte (groups, parameters, analog samples, events). Every count is checked against the file's length before anything is
 //! allocated.
 
+#[cfg(test)]
+mod conventions;
 mod patch;
 mod read;
 mod write;
@@ -54,21 +56,36 @@ pub struct C3d {
     /// `[T, N, 3]` frame-major, as stored (whatever a point not measured holds).
     pub positions: Vec<f32>,
     /// `[T, N]`: the residual; negative where the point was not measured, 0 where it was
-    /// computed rather than measured.
+    /// computed rather than measured, NaN where a float file's residual word is NaN (a
+    /// point whose coordinates are there, of unknown residual). −0.0 where a float file's
+    /// residual word is −0.0, which doma writes for a point its fill computed: every reader
+    /// takes it for residual 0 (computed), and it stays told apart from a measured point of
+    /// residual 0, which many systems write for every point.
     pub residuals: Vec<f32>,
     /// `[T, N]`: the mask of the cameras that saw the point (7 bits).
     pub cameras: Vec<u8>,
+    /// What the reader decided where the file was not plain, one sentence each: a frame
+    /// count read by the file's length, a header that disagrees with the parameters, points
+    /// stored as NaN. Not written by [`encode`].
+    pub notes: Vec<String>,
 }
 
 impl C3d {
-    /// `[T, N]`: the entries that hold a point, by the two conventions of capture
-    /// software: a residual `≥ 0` and not the origin `(0, 0, 0)`, which some systems write
-    /// for a point they did not see.
+    /// `[T, N]`: the entries that hold a point, by the conventions of capture software:
+    /// a residual that is not negative, finite coordinates (a NaN coordinate is how some
+    /// writers, kineticstoolkit's among them, store a missing point) and not the origin
+    /// `(0, 0, 0)`, which some systems write for a point they did not see. A NaN residual
+    /// with finite coordinates is a point (as ezc3d reads it): a fill never writes over
+    /// coordinates a file holds.
     pub fn present(&self) -> Vec<bool> {
         self.residuals
             .iter()
             .zip(self.positions.chunks_exact(3))
-            .map(|(&r, p)| r >= 0.0 && p.iter().any(|&v| v != 0.0))
+            .map(|(&r, p)| {
+                (r >= 0.0 || r.is_nan())
+                    && p.iter().all(|v| v.is_finite())
+                    && p.iter().any(|&v| v != 0.0)
+            })
             .collect()
     }
 
@@ -148,6 +165,7 @@ mod tests {
             positions: (0..18).map(|v| v as f32 * 10.5 - 3.0).collect(),
             residuals: vec![0.5, -1.0, 0.0, 1.2, 25.5, 0.3],
             cameras: vec![3, 0, 0, 127, 1, 64],
+            notes: Vec::new(),
         }
     }
 
@@ -285,6 +303,7 @@ mod tests {
             positions: vec![1.0; 3 * n],
             residuals: vec![1.0; n],
             cameras: vec![0; n],
+            notes: Vec::new(),
         };
         assert_eq!(parse(&encode(&c).unwrap()).unwrap(), c);
     }

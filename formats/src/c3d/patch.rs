@@ -5,7 +5,7 @@
 use std::io::{self, Write};
 
 use super::Processor;
-use super::read::{Layout, head, parameters};
+use super::read::{Layout, head, parameters, tail};
 use crate::source::Source;
 
 /// One point to write over a file's.
@@ -18,7 +18,8 @@ pub struct PointEdit {
     /// `x, y, z` in the file's units.
     pub position: [f32; 3],
     /// The residual (in the file's units): negative for a point not measured, 0 for one
-    /// computed rather than measured.
+    /// computed rather than measured, −0.0 for one that a fill computed (written as −0.0
+    /// in a float file, 0 in an integer one).
     pub residual: f32,
     /// The mask of the cameras that saw it (7 bits).
     pub cameras: u8,
@@ -81,7 +82,7 @@ impl PointWords {
 /// the bytes they go to (two edits of one point in the order given), in the file's
 /// processor format (Intel, DEC or MIPS) and number format (floats, or `i16` multiples of
 /// the scale). The residual word is encoded as the reader decodes it: `−1` for not
-/// measured, else the residual in units of `|scale|` (rounded, at most 255) with the camera
+/// measured, NaN (a float file) or 0 (an integer one) for a NaN residual, else the residual in units of `|scale|` (rounded, at most 255) with the camera
 /// mask above it. Refuses an edit outside the file's frames or points, a position that is
 /// not finite, and a position that an integer file cannot hold (past ±32767 × the scale).
 /// Reads the file's header and parameters alone.
@@ -91,7 +92,7 @@ pub fn patch_words<S: Source + ?Sized>(
 ) -> Result<Vec<PointWords>, String> {
     let head = head(src)?;
     let (processor, params) = parameters(&head)?;
-    let layout = Layout::of(&head, src.size(), processor, &params)?;
+    let layout = Layout::of(&head, &tail(src)?, src.size(), processor, &params)?;
     let mut words = edits
         .iter()
         .map(|e| point_words(e, processor, &layout))
@@ -121,7 +122,11 @@ fn point_words(
             edit.point, edit.frame
         ));
     }
-    let w: i32 = if edit.residual.is_nan() || edit.residual < 0.0 {
+    // A NaN residual is a point of unknown residual (`C3d::present`): NaN in a float
+    // word, residual 0 in an integer one, which has no NaN.
+    let w: i32 = if edit.residual.is_nan() {
+        (edit.cameras as i32 & 0x7f) << 8
+    } else if edit.residual < 0.0 {
         -1
     } else {
         let byte = (edit.residual / magnitude).round().clamp(0.0, 255.0) as i32;
@@ -134,7 +139,15 @@ fn point_words(
             edit.position[0],
             edit.position[1],
             edit.position[2],
-            w as f32,
+            if edit.residual.is_nan() {
+                f32::NAN
+            } else if edit.residual == 0.0 && edit.residual.is_sign_negative() {
+                // A fill's mark: readers see residual 0 (computed); −0.0 tells it from a
+                // measured point of residual 0 ([`super::C3d::residuals`]).
+                -0.0
+            } else {
+                w as f32
+            },
         ];
         for (c, v) in values.into_iter().enumerate() {
             words[4 * c..4 * c + 4].copy_from_slice(&processor.put_f32(v));
@@ -180,6 +193,7 @@ mod tests {
                 0.5, -1.0, 1.0, 0.5, 0.5, 0.5, -1.0, 0.5, 0.5, 0.5, 0.5, -1.0,
             ],
             cameras: vec![3, 0, 1, 3, 3, 3, 0, 3, 3, 3, 3, 0],
+            notes: Vec::new(),
         }
     }
 

@@ -7,14 +7,14 @@ use super::read::OUTPUT_PARAMS;
 const LABELS_PER_PARAM: usize = 255;
 
 /// A parameter section under construction (Intel byte order).
-struct Section {
-    bytes: Vec<u8>,
+pub(super) struct Section {
+    pub(super) bytes: Vec<u8>,
     /// Where the last entry's offset field is, to zero it at the end.
-    last_offset: Option<usize>,
+    pub(super) last_offset: Option<usize>,
 }
 
 impl Section {
-    fn entry(&mut self, id: i8, name: &str, body: &[u8]) {
+    pub(super) fn entry(&mut self, id: i8, name: &str, body: &[u8]) {
         self.bytes.push(name.len() as u8);
         self.bytes.push(id as u8);
         self.bytes.extend_from_slice(name.as_bytes());
@@ -25,7 +25,7 @@ impl Section {
         self.bytes.push(0); // no description
     }
 
-    fn group(&mut self, id: i8, name: &str) {
+    pub(super) fn group(&mut self, id: i8, name: &str) {
         self.bytes.push(name.len() as u8);
         self.bytes.push((-id) as u8);
         self.bytes.extend_from_slice(name.as_bytes());
@@ -34,14 +34,14 @@ impl Section {
         self.bytes.push(0);
     }
 
-    fn param(&mut self, id: i8, name: &str, kind: i8, dims: &[usize], data: &[u8]) {
+    pub(super) fn param(&mut self, id: i8, name: &str, kind: i8, dims: &[usize], data: &[u8]) {
         let mut body = vec![kind as u8, dims.len() as u8];
         body.extend(dims.iter().map(|&d| d as u8));
         body.extend_from_slice(data);
         self.entry(id, name, &body);
     }
 
-    fn i16s(&mut self, id: i8, name: &str, values: &[u16]) {
+    pub(super) fn i16s(&mut self, id: i8, name: &str, values: &[u16]) {
         let data: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
         let dims: &[usize] = if values.len() == 1 {
             &[]
@@ -51,11 +51,11 @@ impl Section {
         self.param(id, name, 2, dims, &data);
     }
 
-    fn f32(&mut self, id: i8, name: &str, value: f32) {
+    pub(super) fn f32(&mut self, id: i8, name: &str, value: f32) {
         self.param(id, name, 4, &[], &value.to_le_bytes());
     }
 
-    fn strings(&mut self, id: i8, name: &str, values: &[&str]) {
+    pub(super) fn strings(&mut self, id: i8, name: &str, values: &[&str]) {
         let len = values.iter().map(|s| s.len()).max().unwrap_or(0).max(1);
         let mut data = Vec::with_capacity(len * values.len());
         for s in values {
@@ -69,9 +69,10 @@ impl Section {
 /// The bytes of `data` as a C3D file: Intel floats, the header and the `POINT` group
 /// (`USED`, `FRAMES`, `SCALE`, `RATE`, `DATA_START`, `UNITS`, `LABELS`, `LABELS2`, ...,
 /// and blank `DESCRIPTIONS` beside them, and the parameters that list model outputs),
-/// `ANALOG:USED = 0` (at the points' rate), and `TRIAL:ACTUAL_START_FIELD`/`ACTUAL_END_FIELD` when a frame
-/// number passes 65535. A negative residual is written as `−1` (not measured); every other
-/// is rounded to the nearest multiple of `|scale|` up to 255 of them. Refuses what the
+/// `ANALOG:USED = 0` (at the points' rate), `TRIAL:ACTUAL_START_FIELD`/`ACTUAL_END_FIELD` when a frame
+/// number passes 65535, and `POINT:LONG_FRAMES` and the `TRIAL` range when the frame count
+/// reaches it (exactly: at most 2²⁴ frames are written). A negative residual is written as `−1` (not measured), NaN as NaN (a point
+/// of unknown residual, [`C3d::present`]); every other is rounded to the nearest multiple of `|scale|` up to 255 of them. Refuses what the
 /// format cannot hold: more than 65535 points, a label or unit over 255 bytes, a frame
 /// number past `u32`, a scale that is zero or not finite.
 pub fn encode(data: &C3d) -> Result<Vec<u8>, String> {
@@ -101,7 +102,12 @@ pub fn encode(data: &C3d) -> Result<Vec<u8>, String> {
             out.extend_from_slice(&data.positions[3 * e + c].to_le_bytes());
         }
         let r = data.residuals[e];
-        let w = if r.is_nan() || r < 0.0 {
+        // A NaN residual is a point of unknown residual, as the reader reads it.
+        let w = if r.is_nan() {
+            f32::NAN
+        } else if r == 0.0 && r.is_sign_negative() {
+            -0.0
+        } else if r < 0.0 {
             -1.0f32
         } else {
             let byte = (r / magnitude).round().clamp(0.0, 255.0) as u32;
@@ -125,6 +131,10 @@ fn check(data: &C3d) -> Result<(usize, u32), String> {
     }
     if n > u16::MAX as usize {
         return Err(format!("{n} points: a C3D file holds at most 65535"));
+    }
+    // POINT:LONG_FRAMES is a float: past 2^24 it no longer states the count exactly.
+    if t > 1 << 24 {
+        return Err(format!("{t} frames: doma writes at most 16777216"));
     }
     if data.positions.len() != 3 * entries
         || data.residuals.len() != entries
@@ -151,6 +161,7 @@ fn check(data: &C3d) -> Result<(usize, u32), String> {
         let own = [
             "USED",
             "FRAMES",
+            "LONG_FRAMES",
             "SCALE",
             "RATE",
             "DATA_START",
@@ -219,6 +230,11 @@ fn parameters(data: &C3d, scale: f32, last: u32) -> Result<(Vec<u8>, usize), Str
     s.group(point, "POINT");
     s.i16s(point, "USED", &[n as u16]);
     s.i16s(point, "FRAMES", &[t.min(u16::MAX as usize) as u16]);
+    // A longer count goes where Visual3D and the `c3d` package read it (and where Vicon's
+    // software does, the TRIAL range below): c3d.org's "Reading the frame count".
+    if t >= u16::MAX as usize {
+        s.f32(point, "LONG_FRAMES", t as f32);
+    }
     s.f32(point, "SCALE", scale);
     s.f32(point, "RATE", data.rate);
     let data_start_at = s.bytes.len() + "DATA_START".len() + 2 + 2 + 2;
@@ -251,7 +267,7 @@ fn parameters(data: &C3d, scale: f32, last: u32) -> Result<(Vec<u8>, usize), Str
     s.group(analog, "ANALOG");
     s.i16s(analog, "USED", &[0]);
     s.f32(analog, "RATE", data.rate);
-    if last > u16::MAX as u32 {
+    if last > u16::MAX as u32 || t >= u16::MAX as usize {
         let words = |f: u32| [(f & 0xffff) as u16, (f >> 16) as u16];
         s.group(trial, "TRIAL");
         s.i16s(trial, "ACTUAL_START_FIELD", &words(data.first_frame));
