@@ -1,7 +1,7 @@
 //! The file formats of doma as pure functions over bytes and text: `.traj` ([`traj`]),
 //! DeformingThings4D `.anime` ([`anime`]), NumPy `.npy` ([`npy`]) and `.npz` ([`npz`]),
 //! OBJ meshes ([`obj`]), any OBJ with its materials for display ([`textured`]), and C3D
-//! motion-capture files ([`c3d`]). The `.npz` and C3D readers take their bytes from memory
+//! ([`c3d`]) and OpenSim's TRC ([`trc`]) motion-capture files. The `.npz` and C3D readers take their bytes from memory
 //! or from the file a piece at a time ([`source`]).
 //!
 //! This crate has no Burn dependency, so that the readers can be fuzzed (`fuzz/` in the
@@ -19,6 +19,7 @@ pub mod obj;
 pub mod source;
 pub mod textured;
 pub mod traj;
+pub mod trc;
 
 /// Checked point positions: `frames × points` points, `[T, N, 3]` frame-major.
 #[derive(Clone, Debug, PartialEq)]

@@ -48,6 +48,7 @@ __all__ = [
     "Tracks",
     "VARIANTS",
     "fill",
+    "fill_file",
     "fit",
     "load",
     "read_tracks",
@@ -492,36 +493,139 @@ def _mask(observed: Any, positions: np.ndarray, time_axis: Optional[int]) -> np.
     return np.ascontiguousarray(mask_array).view(np.uint8)
 
 
-def fill(tracks: Any, observed: Any, method: str = "rigid_body", *, time_axis: Optional[int] = None) -> np.ndarray:
-    """Fills the gaps of ``tracks`` ([T, N, 3]) that ``observed`` ([T, N] bool) leaves by
-    one of the classic fillers, without a fit: the fillers that :meth:`Field.complete`'s
-    blend weighs and that ``--holdout-observations`` reports.
+def _gap_spans(observed: np.ndarray) -> list[tuple[int, int, int, bool]]:
+    """Each gap of each track of ``observed`` ([T, N] bool): (track, first, end, interior),
+    ``end`` excluded; interior where the track is observed on both sides."""
+    spans = []
+    t = observed.shape[0]
+    for i in range(observed.shape[1]):
+        seen = observed[:, i]
+        if not seen.any():
+            continue
+        edges = np.flatnonzero(np.diff(np.concatenate(([1], seen.astype(np.int8), [1]))))
+        for a, b in zip(edges[::2], edges[1::2]):
+            spans.append((i, int(a), int(b), a > 0 and b < t))
+    return spans
 
-    Methods (:data:`FILLERS`): ``rigid_body`` (Vicon Nexus's: the three nearest markers
-    seen through the gap moved as a rigid body, from both borders), ``pattern`` (Nexus's:
-    one donor's motion), ``spline`` (natural cubic), ``linear``, ``neighbours`` (the mean
-    motion of the 4 nearest), ``iterative_pca``, ``kalman`` (Burke & Lasenby's
+
+def _max_gap_frames(max_gap: Union[None, int, str], rate: Optional[float]) -> Optional[int]:
+    """``max_gap`` in frames: an int, ``"N"`` frames, or ``"Xs"`` seconds at ``rate``."""
+    if max_gap is None:
+        return None
+    if isinstance(max_gap, (int, np.integer)) and not isinstance(max_gap, bool) and max_gap >= 0:
+        return int(max_gap)
+    text = str(max_gap).strip()
+    try:
+        if text.endswith("s"):
+            seconds = float(text[:-1])
+            if rate is None:
+                raise ValueError(
+                    f"max_gap={max_gap!r} is in seconds, and the tracks have no rate: pass "
+                    "rate=, or Tracks read from a .c3d or .trc"
+                )
+            if seconds >= 0 and np.isfinite(seconds):
+                return int(np.floor(seconds * rate))
+        elif int(text) >= 0:
+            return int(text)
+    except ValueError as e:
+        if "rate" in str(e):
+            raise
+    raise ValueError(f"max_gap={max_gap!r} is not a gap length: N frames, or 'Xs' seconds (e.g. '0.5s')")
+
+
+def fill(
+    tracks: Any,
+    observed: Any = None,
+    method: str = "chain",
+    *,
+    max_gap: Union[None, int, str] = None,
+    extrapolate: bool = False,
+    rate: Optional[float] = None,
+    time_axis: Optional[int] = None,
+) -> np.ndarray:
+    """Fills the gaps of ``tracks`` ([T, N, 3]) that ``observed`` ([T, N] bool) leaves by
+    one of the classic fillers, without a fit, with ``doma fill --no-fit``'s defaults: the
+    gaps with observations on both sides, of any length unless ``max_gap`` (frames, or
+    ``"0.5s"`` at ``rate`` frames per second), and nothing before a track's first
+    observation or after its last unless ``extrapolate``. ``tracks`` may be the
+    :class:`Tracks` that :func:`read_tracks` returns (its mask and rate are used).
+
+    Methods (:data:`FILLERS`): ``chain`` (the default, doma's: the rigid-body fill with its
+    donors passed on to others where they are lost, the best fit-free fill on the
+    recordings of docs/results.md), ``rigid_body`` (Vicon Nexus's: the three nearest
+    markers seen through the gap moved as a rigid body, from both borders), ``pattern``
+    (Nexus's: one donor's motion), ``spline`` (natural cubic), ``linear``, ``neighbours``
+    (the mean motion of the 4 nearest), ``iterative_pca``, ``kalman`` (Burke & Lasenby's
     low-dimensional Kalman smoother, as pyCGM2 runs it), ``gloersen`` (Gløersen &
     Federolf's PCA fill, strategy R2 of their ``PredictMissingMarkers``), ``segment``
     (doma's: the rigid-body fill from the three donors that best carry the marker through
-    its own observations around the gap), ``chain`` (doma's: the rigid-body fill with its
-    donors passed on to others where they are lost, for gaps that no three markers are
-    seen through). Where a gap is not interior or has too few donors, ``rigid_body``,
-    ``segment`` and ``pattern`` give the linear fill (``chain`` where it is not interior);
-    where no two frames see every marker, so does ``kalman``; where every marker has a
-    gap, so does ``gloersen``.
+    its own observations around the gap). Where a gap is not interior or has too few
+    donors, ``rigid_body``, ``segment`` and ``pattern`` give the linear fill (``chain``
+    where it is not interior); where no two frames see every marker, so does ``kalman``;
+    where every marker has a gap, so does ``gloersen``.
 
-    Returns a new [T, N, 3] float32 array: the observed entries as given, every unobserved
-    entry of a track observed somewhere filled, a track never observed as given.
+    Returns a new [T, N, 3] float32 array: the observed entries as given, the gaps asked
+    for filled, every other unobserved entry NaN.
     """
+    if isinstance(tracks, Tracks):
+        if observed is None:
+            observed = tracks.observed
+        rate = tracks.rate if rate is None else rate
+        tracks = tracks.tracks
+    if observed is None:
+        raise ValueError("observed: give the [T, N] mask (or Tracks from read_tracks)")
     positions = _time_major(_checked_array(tracks, "tracks", (None, None, 3)), time_axis)
     positions = np.ascontiguousarray(positions, dtype=np.float32)
     mask = _mask(observed, positions, time_axis)
     if not isinstance(method, str) or method.lower() not in FILLERS:
         raise ValueError(f"method {method!r} is not one of {', '.join(FILLERS)}")
+    longest = _max_gap_frames(max_gap, rate)
     out = np.empty_like(positions)
     _native.fill_into(positions, mask, method.lower(), out)
+    seen = mask.view(np.bool_)
+    for i, a, b, interior in _gap_spans(seen):
+        if (not interior and not extrapolate) or (interior and longest is not None and b - a > longest):
+            out[a:b, i] = np.nan
+    never = ~seen.any(axis=0)
+    out[:, never] = np.nan
     return out
+
+
+def fill_file(
+    path: PathLike,
+    out: PathLike,
+    *,
+    fit: bool = True,
+    max_gap: Union[None, int, str] = None,
+    extrapolate: bool = False,
+    method: Optional[str] = None,
+    overwrite: bool = False,
+) -> dict:
+    """Fills the gaps of the recording at ``path`` (.c3d, .trc, or any format
+    :func:`read_tracks` reads) into ``out``, as ``doma fill`` does: fitted and completed in
+    one go (``fit=False``: the chain fill alone, or ``method``), written in the format of
+    ``out``'s extension (a ``.c3d`` is the C3D input with only its gaps written; ``.trc``;
+    ``.npz``), and the table of filled gaps written beside it (``NAME.gaps.csv``).
+
+    ``max_gap`` (frames, or ``"0.5s"``) and ``extrapolate`` as :func:`fill`'s. An existing
+    ``out`` is refused (``FileExistsError``) unless ``overwrite``.
+
+    Returns the report: ``markers``, ``frames``, ``filled``, ``extrapolated``,
+    ``unfilled`` (entries), ``left_long`` (gaps longer than ``max_gap`` left),
+    ``filled_by``, ``gaps`` (per filled gap: ``marker``, ``first_frame``, ``last_frame``,
+    ``start_s``, ``end_s``, ``length_frames``, ``length_s``, ``past_ends``, ``filled_by``)
+    and ``csv`` (the table's path).
+    """
+    text = _native.fill_file(
+        os.fspath(path),
+        os.fspath(out),
+        bool(fit),
+        None if max_gap is None else str(max_gap),
+        bool(extrapolate),
+        None if method is None else str(method).lower(),
+        bool(overwrite),
+    )
+    return json.loads(text)
 
 
 def fit(
@@ -672,6 +776,12 @@ class Tracks:
     #: fit dropped tracks never observed, from :func:`read_tracks` when it left out a C3D
     #: file's model outputs; else None.
     kept: Optional[np.ndarray] = None
+    #: The marker names, one per track, of a .c3d or .trc file; else None.
+    labels: Optional[tuple[str, ...]] = None
+    #: Frames per second of a .c3d or .trc file; else None.
+    rate: Optional[float] = None
+    #: The units of the coordinates of a .c3d or .trc file ("mm", "m", ...); else None.
+    units: Optional[str] = None
 
 
 def read_tracks(
@@ -685,8 +795,11 @@ def read_tracks(
     model_outputs: bool = False,
 ) -> Tracks:
     """Reads ``.traj``, ``.anime``, ``.npy``, ``.npz`` (plain, PointOdyssey, TAPVid-3D,
-    masked), ``.c3d`` (motion-capture markers in the file's units; a marker not measured
-    in a frame is unobserved) or a folder of OBJ frames.
+    masked), ``.c3d`` or ``.trc`` (motion-capture markers in the file's units, with their
+    ``labels``, ``rate`` and ``units``; a marker not measured in a frame is unobserved) or
+    a folder of OBJ frames. Where the reader decided something about the file (a frame
+    count read by its length, NaN coordinates read as missing), it says so once as a
+    ``UserWarning``.
 
     A C3D file's model outputs (the points that ``POINT:ANGLES``, ``FORCES``,
     ``MOMENTS``, ``POWERS``, ... list, as Nexus stores joint angles and forces) are left
@@ -700,7 +813,7 @@ def read_tracks(
     value (a code such as 2 or -1, NaN) is refused, naming the entry.
     """
     choices = _lower_choices({"layout": layout, "frame": frame})
-    positions, (t, n), observed, faces, weights, kept = _native.read_tracks(
+    positions, (t, n), observed, faces, weights, kept, named = _native.read_tracks(
         os.fspath(path),
         choices["layout"],
         choices["frame"],
@@ -715,4 +828,7 @@ def read_tracks(
         faces=None if faces is None else np.frombuffer(faces, dtype=np.uint32).reshape(-1, 3),
         weights=None if weights is None else np.frombuffer(weights, dtype=np.float32).reshape(t, n),
         kept=None if kept is None else np.frombuffer(kept, dtype=np.int64),
+        labels=None if named is None else tuple(named[0]),
+        rate=None if named is None else float(named[1]),
+        units=None if named is None else named[2],
     )

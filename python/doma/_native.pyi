@@ -60,9 +60,26 @@ def read_tracks(
     confidence: Optional[str] = None,
     visibility_threshold: Optional[float] = None,
     model_outputs: bool = False,
-) -> tuple[bytearray, tuple[int, int], bytearray, Optional[bytearray], Optional[bytearray], Optional[bytearray]]: ...
+) -> tuple[
+    bytearray,
+    tuple[int, int],
+    bytearray,
+    Optional[bytearray],
+    Optional[bytearray],
+    Optional[bytearray],
+    Optional[tuple[list[str], float, str]],
+]: ...
 def fill_into(
     tracks: NDArray[np.float32], observed: NDArray[np.uint8], filler: str, out: NDArray[np.float32]
 ) -> None: ...
+def fill_file(
+    path: str,
+    out: str,
+    fit: bool = True,
+    max_gap: Optional[str] = None,
+    extrapolate: bool = False,
+    method: Optional[str] = None,
+    overwrite: bool = False,
+) -> str: ...
 def sequence_reads() -> int: ...
 def main(argv: list[str]) -> int: ...

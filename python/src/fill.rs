@@ -78,3 +78,76 @@ pub fn fill_into(
         .py()
     })
 }
+
+/// Fills the gaps of the recording at `path` into `out` (its format by its extension), as
+/// `doma fill` does for one file, and writes the table of filled gaps beside it; returns
+/// the report as JSON: `input`, `output`, `markers`, `frames`, `filled`, `extrapolated`,
+/// `unfilled`, `left_long`, `filled_by`, `gaps` (one row per filled gap) and `csv`.
+#[pyfunction]
+#[pyo3(signature = (path, out, fit=true, max_gap=None, extrapolate=false, method=None, overwrite=false))]
+// The keywords of `doma.fill_file`, one argument each, as PyO3 takes them.
+#[allow(clippy::too_many_arguments)]
+pub fn fill_file(
+    py: Python<'_>,
+    path: std::path::PathBuf,
+    out: std::path::PathBuf,
+    fit: bool,
+    max_gap: Option<String>,
+    extrapolate: bool,
+    method: Option<String>,
+    overwrite: bool,
+) -> PyResult<String> {
+    use doma::run::{FillPolicy, MaxGap, RecordingFill};
+    guarded("fill_file", Some(&path), || {
+        let max_gap = max_gap
+            .map(|m| m.parse::<MaxGap>())
+            .transpose()
+            .map_err(|e| PyValueError::new_err(format!("max_gap: {e}")))?;
+        let method = method
+            .map(|m| Filler::parse(&m))
+            .transpose()
+            .map_err(|e| PyValueError::new_err(format!("method: {e}")))?;
+        if out.exists() && !overwrite {
+            return Err(pyo3::exceptions::PyFileExistsError::new_err(format!(
+                "{} exists: overwrite=True writes over it",
+                out.display()
+            )));
+        }
+        let how = RecordingFill {
+            fit,
+            policy: FillPolicy {
+                max_gap,
+                extrapolate,
+                method,
+            },
+            ..Default::default()
+        };
+        let device = doma::backend::BackendKind::Flex.device().py()?;
+        let (done, raised) = crate::interrupt::run_interruptible(py, |flag| {
+            doma::run::fill_recording(&path, &out, &how, &device, flag).and_then(|c| {
+                let rows = doma::run::gap_rows(&path, &c)?;
+                let csv = doma::run::gaps_csv_path(&out);
+                doma::io::write_atomic(&csv, doma::run::gaps_csv(&rows).as_bytes())?;
+                Ok((c, rows, csv))
+            })
+        });
+        if let Some(e) = raised {
+            return Err(e);
+        }
+        let (c, rows, csv) = done.py()?;
+        let report = serde_json::json!({
+            "input": path,
+            "output": out,
+            "markers": c.tracks,
+            "frames": c.frames,
+            "filled": c.filled,
+            "extrapolated": c.extrapolated,
+            "unfilled": c.unfilled,
+            "left_long": c.left_long,
+            "filled_by": doma::run::filled_by(&c),
+            "gaps": rows,
+            "csv": csv,
+        });
+        Ok(report.to_string())
+    })
+}

@@ -33,6 +33,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit::load, m)?)?;
     m.add_function(wrap_pyfunction!(tracks::read_tracks, m)?)?;
     m.add_function(wrap_pyfunction!(fill::fill_into, m)?)?;
+    m.add_function(wrap_pyfunction!(fill::fill_file, m)?)?;
     m.add_function(wrap_pyfunction!(tracks::sequence_reads, m)?)?;
     m.add_function(wrap_pyfunction!(command::main, m)?)?;
     m.add_class::<field::Field>()?;

@@ -10,8 +10,9 @@ use crate::convert::Wrap;
 use crate::errors::{IntoPy, guarded};
 
 /// Reads a sequence file as `doma fit` reads it: `(tracks bytes, [T, N], observed bytes,
-/// faces bytes or None, weights bytes or None, kept bytes or None)`; `kept` (`i64`, the
-/// file's index of each track) where a C3D file's model outputs were left out.
+/// faces bytes or None, weights bytes or None, kept bytes or None, (labels, rate, units)
+/// or None)`; `kept` (`i64`, the file's index of each track) where a C3D file's model
+/// outputs were left out; the labels those of the tracks read.
 #[pyfunction]
 #[pyo3(signature = (path, layout=None, frame=None, count_hidden=false, confidence=None, visibility_threshold=None, model_outputs=false))]
 // The keywords of `doma.read_tracks`, one argument each, as PyO3 takes them.
@@ -32,6 +33,7 @@ pub fn read_tracks<'py>(
     Option<Bound<'py, pyo3::types::PyByteArray>>,
     Option<Bound<'py, pyo3::types::PyByteArray>>,
     Option<Bound<'py, pyo3::types::PyByteArray>>,
+    Option<(Vec<String>, f64, String)>,
 )> {
     guarded("read_tracks", Some(&path), || {
         let file = TrackFile {
@@ -44,9 +46,32 @@ pub fn read_tracks<'py>(
         let read = py
             .detach(|| doma::data::sequence::read_points(&path, &file))
             .py()?;
+        // What the reader decided where the file was not plain, said once, as a warning.
+        for note in &read.notes {
+            let message =
+                std::ffi::CString::new(format!("{}: {note}", path.display())).unwrap_or_default();
+            PyErr::warn(
+                py,
+                &py.get_type::<pyo3::exceptions::PyUserWarning>(),
+                &message,
+                1,
+            )?;
+        }
         let (mut tracks, faces) = (read.tracks, read.faces);
+        let named = match (read.labels, read.rate, read.units) {
+            (Some(labels), Some(rate), Some(units)) => Some((labels, rate, units)),
+            _ => None,
+        };
         // A model's outputs left out, as `doma fit` leaves them (a C3D file has no faces).
         let kept = read.markers.filter(|_| !model_outputs);
+        let named = named.map(|(labels, rate, units)| match &kept {
+            Some(markers) => (
+                markers.iter().map(|&i| labels[i].clone()).collect(),
+                rate,
+                units,
+            ),
+            None => (labels, rate, units),
+        });
         if let Some(markers) = &kept {
             tracks = tracks.select_points(markers);
         }
@@ -67,6 +92,7 @@ pub fn read_tracks<'py>(
             faces,
             weights,
             kept.map(|k| to_bytearray(py, &k.iter().map(|&i| i as i64).collect::<Vec<_>>())),
+            named,
         ))
     })
 }

@@ -162,7 +162,7 @@ def test_a_models_outputs_are_left_as_they_are_unless_asked_for(cli, tmp_path):
     assert every.tracks.shape == (t, n, 3) and every.kept is None
     for asked, filled in [([], 10), (["--model-outputs"], 40)]:
         run, out = tmp_path / f"run{len(asked)}", tmp_path / f"filled{len(asked)}.c3d"
-        fit = subprocess.run([cli, "fit", source, "--iters", "1", "--quiet", "--out", run, *asked],
+        fit = subprocess.run([cli, "fit", source, "--iters", "1", "--out", run, *asked],
                              check=True, capture_output=True, text=True)
         assert ("left out the file's 1 model outputs" in fit.stderr) == (not asked)
         done = subprocess.run([cli, "complete", run, "--out", out], check=True, capture_output=True, text=True)

@@ -90,7 +90,7 @@ def test_kalman_fill_of_tracks_in_metres_runs_in_millimetres(pycgm2_smooth):
     the same tracks in millimetres."""
     tracks, observed = hidden([40])
     metres = (tracks / 1000).astype(np.float32)
-    ours = doma.fill(metres, observed, "kalman")
+    ours = doma.fill(metres, observed, "kalman", extrapolate=True)
     theirs = reference(pycgm2_smooth, metres, observed, scale=1000.0) / 1000.0
     gap = ~observed
     np.testing.assert_array_max_ulp(ours[gap], theirs[gap].astype(np.float32), maxulp=1)

@@ -28,9 +28,12 @@ pub struct FitArgs {
     /// are the run's own).
     #[arg(long, conflicts_with = "RunSpec")]
     pub resume: Option<PathBuf>,
-    /// No progress bar.
+    /// Print errors only (no progress bar, no notes, no summary).
     #[arg(long)]
     pub quiet: bool,
+    /// Also write the fit's report (the run's report.json) here as JSON; `-` prints it.
+    #[arg(long, value_name = "PATH")]
+    pub json: Option<PathBuf>,
 }
 
 impl FitArgs {
@@ -45,12 +48,21 @@ impl FitArgs {
     /// The new fit, its data read once (after the weight search, with `--h-weight auto`).
     fn prepare(&self) -> Result<NewFit> {
         let search = self.search.search()?;
+        let quiet = self.quiet;
         let fit = self.spec().prepare(&search, |p| {
-            eprintln!(
-                "weight {:e}: validation EPE {:.2}e-4",
-                p.weight, p.validation_epe_x1e4
-            )
+            if !quiet {
+                eprintln!(
+                    "weight {:e}: validation EPE {:.2}e-4",
+                    p.weight, p.validation_epe_x1e4
+                )
+            }
         })?;
+        if quiet {
+            return Ok(fit);
+        }
+        for note in &fit.sequence.notes {
+            eprintln!("{}: {note}", fit.config.data.display());
+        }
         let left_out = fit.sequence.model_outputs_left_out;
         if left_out > 0 {
             eprintln!(
@@ -95,10 +107,22 @@ pub fn run(args: &FitArgs) -> Result<()> {
     let device = backend.device()?;
     match fit_run(&run, new, &device, interrupt, None, !args.quiet)? {
         FitOutcome::Finished(report) => {
-            let text = serde_json::to_string_pretty(&report)
-                .map_err(|e| crate::DomaError::InvalidData(e.to_string()))?;
-            println!("{text}");
-            eprintln!("wrote {}", run.dir.display());
+            if let Some(path) = &args.json {
+                let text = serde_json::to_string_pretty(&report)
+                    .map_err(|e| crate::DomaError::InvalidData(e.to_string()))?;
+                if path.as_os_str() == "-" {
+                    println!("{text}");
+                } else {
+                    crate::io::write_atomic(path, format!("{text}\n").as_bytes())?;
+                }
+            }
+            if !args.quiet {
+                eprintln!(
+                    "wrote {} (its report: {})",
+                    run.dir.display(),
+                    run.dir.join("report.json").display()
+                );
+            }
             Ok(())
         }
         FitOutcome::Interrupted { iterations_done } => {

@@ -8,6 +8,7 @@ pub mod bench;
 pub mod complete;
 pub mod eval;
 pub mod export;
+pub mod fill;
 pub mod fit;
 pub mod fluid;
 pub mod image2d;
@@ -60,6 +61,8 @@ pub enum Command {
     Eval(eval::EvalArgs),
     /// Write every track of a fitted run at every frame, gaps filled by the field.
     Complete(complete::CompleteArgs),
+    /// Fill the gaps of recordings (files or folders of .c3d and .trc) in one go.
+    Fill(fill::FillArgs),
     /// Warp a canonical mesh through a fitted run and write an OBJ sequence.
     Warp(warp::WarpArgs),
     /// Export a fitted run's motion as an animated binary glTF (.glb).
@@ -88,6 +91,7 @@ impl Command {
             Command::Warp(a) => warp::run(&a),
             Command::Export(a) => export::run(&a),
             Command::Complete(a) => complete::run(&a),
+            Command::Fill(a) => fill::run(&a),
             Command::View(a) => view::run(&a),
             Command::Info(a) => info::run(&a),
             Command::Plot(a) => plot::run(&a),

@@ -11,6 +11,7 @@ pub mod textured;
 pub mod tracker;
 pub mod tracks;
 pub mod traj;
+pub mod trc;
 
 use burn::tensor::{Device, Tensor, TensorData};
 

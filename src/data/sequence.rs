@@ -12,7 +12,7 @@ use rand_chacha::ChaCha8Rng;
 use super::layout::TrackFile;
 use super::mesh::read_obj;
 use super::tracks::Tracks;
-use super::{Trajectories, anime, c3d, layout, npy, traj};
+use super::{Trajectories, anime, c3d, layout, npy, traj, trc};
 use crate::gaps::blend::blind_spans;
 use crate::gaps::spans::hold_out_spans;
 use crate::{DomaError, Result};
@@ -44,6 +44,9 @@ pub struct Sequence {
     /// How many of a C3D file's points were left out as a model's outputs
     /// ([`LoadOptions::model_outputs`]).
     pub model_outputs_left_out: usize,
+    /// What the reader decided where the file was not plain ([`c3d::C3d::notes`]), to be
+    /// said once to the user.
+    pub notes: Vec<String>,
 }
 
 /// Observations hidden from a fit, and what they were.
@@ -131,6 +134,8 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
         mut tracks,
         mut faces,
         markers,
+        notes,
+        ..
     } = read_points(data, &options.file)?;
     // A model's outputs (joint angles, moments, ...) are not positions of the scene.
     let mut kept = None;
@@ -236,6 +241,7 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
         blind,
         kept,
         model_outputs_left_out,
+        notes,
     })
 }
 
@@ -326,6 +332,15 @@ pub struct PointsRead {
     /// A C3D file's markers, where some of its points are a model's outputs
     /// ([`c3d::C3d::model_outputs`]); `None`: every point is a marker.
     pub markers: Option<Vec<usize>>,
+    /// What the reader decided where the file was not plain ([`c3d::C3d::notes`]).
+    pub notes: Vec<String>,
+    /// A motion-capture file's marker names (every point's, before any is left out), frame
+    /// rate and units; `None` for formats without them.
+    pub labels: Option<Vec<String>>,
+    /// See `labels`.
+    pub rate: Option<f64>,
+    /// See `labels`.
+    pub units: Option<String>,
 }
 
 /// [`read_tracks`], and which points are markers rather than a model's outputs.
@@ -336,6 +351,10 @@ pub fn read_points(data: &Path, file: &TrackFile) -> Result<PointsRead> {
         tracks,
         faces,
         markers: None,
+        notes: Vec::new(),
+        labels: None,
+        rate: None,
+        units: None,
     };
     if extension(data) == "npz" && !data.is_dir() {
         return Ok(plain(layout::read_npz_tracks(data, file)?, None));
@@ -351,9 +370,29 @@ pub fn read_points(data: &Path, file: &TrackFile) -> Result<PointsRead> {
         let c = c3d::read_c3d(data)?;
         let markers = c.markers();
         let markers = (markers.len() < c.points).then_some(markers);
+        let notes = c.notes.clone();
+        let (labels, rate, units) = (c.labels.clone(), c.rate as f64, c.units.clone());
         return Ok(PointsRead {
             markers,
+            notes,
+            labels: Some(labels),
+            rate: Some(rate),
+            units: Some(units),
             ..plain(c3d_as_tracks(data, c)?, None)
+        });
+    }
+    if extension(data) == "trc" && !data.is_dir() {
+        let trc = trc::read_trc(data)?;
+        let (labels, rate, units) = (trc.labels.clone(), trc.rate, trc.units.clone());
+        let tracks = trc::trc_tracks(trc).map_err(|reason| DomaError::Malformed {
+            path: data.to_path_buf(),
+            reason,
+        })?;
+        return Ok(PointsRead {
+            labels: Some(labels),
+            rate: Some(rate),
+            units: Some(units),
+            ..plain(tracks, None)
         });
     }
     let (t, faces) = read_any(data)?;
@@ -363,6 +402,14 @@ pub fn read_points(data: &Path, file: &TrackFile) -> Result<PointsRead> {
 /// A C3D file's points as tracks ([`c3d::c3d_tracks`]), every defect naming the file.
 fn read_c3d_tracks(data: &Path) -> Result<Tracks> {
     c3d_as_tracks(data, c3d::read_c3d(data)?)
+}
+
+/// A `.trc` file's markers as tracks ([`trc::trc_tracks`]), every defect naming the file.
+fn read_trc_tracks(data: &Path) -> Result<Tracks> {
+    trc::trc_tracks(trc::read_trc(data)?).map_err(|reason| DomaError::Malformed {
+        path: data.to_path_buf(),
+        reason,
+    })
 }
 
 /// [`c3d::c3d_tracks`] of `c`, read from `data`, every defect naming the file.
@@ -389,8 +436,12 @@ pub fn read_any(data: &Path) -> Result<(Trajectories, Option<Vec<[u32; 3]>>)> {
         }
         "npy" => (npy::read_npy_trajectories(data)?, None),
         "npz" => (npy::read_npz_trajectories(data, None)?, None),
-        "c3d" => {
-            let tracks = read_c3d_tracks(data)?;
+        ext @ ("c3d" | "trc") => {
+            let tracks = if ext == "c3d" {
+                read_c3d_tracks(data)?
+            } else {
+                read_trc_tracks(data)?
+            };
             if tracks.observed_count() != tracks.frames() * tracks.points() {
                 return Err(DomaError::Malformed {
                     path: data.to_path_buf(),
@@ -405,7 +456,7 @@ pub fn read_any(data: &Path) -> Result<(Trajectories, Option<Vec<[u32; 3]>>)> {
             return Err(DomaError::Malformed {
                 path: data.to_path_buf(),
                 reason:
-                    "unknown format: expected .traj, .anime, .npy, .npz, .c3d or a folder of .obj frames"
+                    "unknown format: expected .traj, .anime, .npy, .npz, .c3d, .trc or a folder of .obj frames"
                         .into(),
             });
         }

@@ -263,6 +263,7 @@ fn finish(
                 blind: sequence.blind.clone(),
                 kept: sequence.kept.clone(),
                 model_outputs_left_out: sequence.model_outputs_left_out,
+                notes: sequence.notes.clone(),
             };
             (Some(sequence), with)
         }

@@ -27,14 +27,15 @@ mod gap_report;
 mod info;
 mod lock;
 mod plot;
+mod recording;
 mod resume;
 mod spec;
 mod warp;
 
 pub use claim::Claim;
 pub use complete::{
-    CompletedTracks, Completion, FillPolicy, MaxGap, complete_run, complete_run_with,
-    complete_tracks,
+    CompletedTracks, Completion, FillPolicy, FilledGap, MaxGap, OutputKind, complete_run,
+    complete_run_with, complete_tracks, complete_without_fit, output_kind_for,
 };
 pub use eval::{eval_run, eval_run_as, evaluate, field_at_frames, field_everywhere};
 pub use fit::{FitOutcome, fit_run, fit_run_locked};
@@ -43,6 +44,10 @@ pub use gap_report::{GapErrors, GapReport, gap_report};
 pub use info::{RunInfo, info};
 pub use lock::RunLock;
 pub use plot::plot_run;
+pub use recording::{
+    GapRow, RecordingFill, fill_recording, filled_by, gap_rows, gaps_csv, gaps_csv_path,
+    names_and_rate,
+};
 pub use spec::{
     GAP_FILLING_FRAMES_PER_ITERATION, GAP_FILLING_H_WEIGHT, GAP_FILLING_ITERATIONS, ModelChoice,
     NewFit, RunSpec, fraction,

@@ -34,6 +34,16 @@ fn bad_flags_are_refused_with_a_message() {
         (vec!["synthetic", "--h-weight", "-0.1"], "non-negative"),
         (vec!["synthetic", "--h-weight", "nan"], "non-negative"),
         (vec!["synthetic", "--hidden", "0"], "--hidden"),
+        // A model too large names the flag that sized it, not the model's own count.
+        (vec!["synthetic", "--hidden", "100000"], "--hidden 100000"),
+        (
+            vec!["mesh-alignment", "--n-hidden", "1000000000", "--iters", "1"],
+            "--n-hidden 1000000000",
+        ),
+        (
+            vec!["fill", "no-such-trial.c3d", "--out", "x.trc"],
+            "no-such-trial.c3d",
+        ),
         (vec!["frobnicate"], "frobnicate"),
         (vec!["bench", "--steps", "0"], "--steps"),
         (vec!["bench", "--points", "0"], "--points"),

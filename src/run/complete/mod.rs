@@ -12,11 +12,12 @@ use super::{RunConfig, RunDir, field_at_frames};
 use crate::data::c3d::{c3d_tracks, read_c3d, write_c3d_patched};
 use crate::data::layout::Layout;
 use crate::data::mesh::as_points;
-use crate::data::sequence::{Sequence, read_tracks};
+use crate::data::sequence::{Sequence, read_points, read_tracks};
 use crate::data::tracks::Tracks;
+use crate::data::trc::{Trc, read_trc, trc_of, trc_tracks, write_trc};
 use crate::gaps::blend::{Blend, blended_fill_at, fill_with};
 use crate::gaps::window::window_frames;
-use crate::gaps::{FieldPrediction, Marked};
+use crate::gaps::{FieldPrediction, Filler, Marked};
 use crate::{DomaError, Result};
 use doma_formats::c3d::PointEdit;
 
@@ -47,6 +48,44 @@ pub struct Completion {
     pub fits: usize,
     /// The weights of the fill ([`crate::gaps::blend`]).
     pub blend: Blend,
+    /// Each run of filled entries of one track, in track then frame order.
+    pub gaps: Vec<FilledGap>,
+    /// Gaps with observations on both sides left unfilled: longer than
+    /// [`FillPolicy::max_gap`].
+    pub left_long: usize,
+}
+
+/// A run of consecutive filled frames of one track ([`Completion::gaps`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FilledGap {
+    /// The input's index of the track (its point in a C3D file, its marker in a `.trc`).
+    pub track: usize,
+    /// The input's first and last frame filled (0-based, inclusive).
+    pub frames: [usize; 2],
+    /// Before the track's first observation or after its last.
+    pub extrapolated: bool,
+}
+
+/// The filled entries of `fill` as runs of consecutive frames of one track.
+fn filled_gaps(fill: &RunFill, past_ends: &impl Fn(usize, usize) -> bool) -> Vec<FilledGap> {
+    let mut by_track: Vec<(usize, usize)> = fill.entries.iter().map(|&(k, i)| (i, k)).collect();
+    by_track.sort_unstable();
+    let input_track = |i: usize| fill.kept.as_ref().map_or(i, |kept| kept[i]);
+    let mut gaps: Vec<FilledGap> = Vec::new();
+    let mut last: Option<(usize, usize)> = None;
+    for (i, k) in by_track {
+        let frame = fill.source_frames[k];
+        match (last, gaps.last_mut()) {
+            (Some((li, lk)), Some(g)) if li == i && lk + 1 == k => g.frames[1] = frame,
+            _ => gaps.push(FilledGap {
+                track: input_track(i),
+                frames: [frame, frame],
+                extrapolated: past_ends(k, i),
+            }),
+        }
+        last = Some((i, k));
+    }
+    gaps
 }
 
 /// Writes every track of the run in `run` at every frame of its clip into `out`, in the
@@ -87,24 +126,129 @@ pub fn complete_run_with(
     policy: FillPolicy,
     device: &Device,
 ) -> Result<Completion> {
-    let to_c3d = out
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("c3d"));
-    if to_c3d && layout.is_some() {
-        return Err(DomaError::Usage(
-            "--layout names the keys of a .npz; a .c3d output has none".into(),
-        ));
-    }
     let config = run.load_config()?;
-    crate::io::check_output(out, Some(&run.dir), &[&config.data])?;
-    if to_c3d && !is_c3d(&config.data) {
+    let kind = checked_output(out, layout, &config, Some(&run.dir))?;
+    let fill = fill_run(run, &config, policy, device)?;
+    write_completion(out, kind, layout, &config, fill)
+}
+
+/// The recording `data` completed into `out` without a fit: the gaps that `policy` asks
+/// for filled by its filler alone (by default [`Filler::Chain`], the best fill that needs
+/// no field on the recordings of docs/results.md), written as [`complete_run_with`]
+/// writes a fitted run's. A C3D file's model outputs are left as they are, as a fit
+/// leaves them. An entry the filler cannot fill (no marker to carry it) is left unfilled.
+pub fn complete_without_fit(
+    data: &Path,
+    out: &Path,
+    layout: Option<Layout>,
+    policy: FillPolicy,
+) -> Result<Completion> {
+    let filler = policy.method.unwrap_or(Filler::Chain);
+    if filler.is_field() {
         return Err(DomaError::Usage(format!(
-            "a .c3d output is the C3D input with its gaps filled, and this run fitted {}: \
-             write a .npz",
-            config.data.display()
+            "--method {}: the field's fills need a fit (leave out --no-fit)",
+            filler.name()
         )));
     }
-    let fill = fill_run(run, &config, policy, device)?;
+    let config = crate::run::RunSpec {
+        data: Some(data.to_path_buf()),
+        ..Default::default()
+    }
+    .run_config()?;
+    let kind = checked_output(out, layout, &config, None)?;
+    let read = read_points(data, &config.tracks)?;
+    let kept = read.markers;
+    let (t, n) = (
+        read.tracks.frames(),
+        kept.as_ref().map_or(read.tracks.points(), Vec::len),
+    );
+    drop(read.tracks);
+    let (input, _, rate) = read_input(&config, kept.as_deref(), t, n)?;
+    let (positions, seen) = input.into_parts();
+    let tracks = Marked::new(t, n, &positions, &seen);
+    let source_frames: Vec<usize> = (0..t).collect();
+    let somewhere: Vec<bool> = (0..n).map(|i| (0..t).any(|k| seen[k * n + i])).collect();
+    let (entries, left_long) = chosen(&tracks, &source_frames, policy, rate.map(f64::from), data)?;
+    let entries: Vec<(usize, usize)> = entries.into_iter().filter(|&(_, i)| somewhere[i]).collect();
+    let values = filler.fill_observed(&tracks, &entries).unwrap_or_default();
+    let (entries, values): (Vec<_>, Vec<_>) = entries
+        .into_iter()
+        .zip(values)
+        .filter(|(_, v)| v.iter().all(|c| c.is_finite()))
+        .unzip();
+    drop(positions);
+    let fill = RunFill {
+        frames: t,
+        points: n,
+        seen,
+        entries,
+        values,
+        kept,
+        source_frames,
+        blend: Blend::only(filler),
+        left_long,
+    };
+    write_completion(out, kind, layout, &config, fill)
+}
+
+/// The format of `out` and whether the run of `config` can be written there, checked
+/// before anything is computed: a known extension, a `.c3d` from a C3D input, a `.trc`
+/// from an input with marker names and a rate, no output over an input or the run.
+fn checked_output(
+    out: &Path,
+    layout: Option<Layout>,
+    config: &RunConfig,
+    run: Option<&Path>,
+) -> Result<OutputKind> {
+    let kind = OutputKind::of(out);
+    if layout.is_some() && kind.is_some_and(|k| k != OutputKind::Npz) {
+        return Err(DomaError::Usage(format!(
+            "--layout names the keys of a .npz; {} has none",
+            out.display()
+        )));
+    }
+    crate::io::check_output(out, run, &[&config.data])?;
+    output_kind_for(&config.data, out)
+}
+
+/// The format that `out`'s extension names for a completion of the recording `data`;
+/// refuses any other extension, a `.c3d` from an input that is not one (it is the input
+/// with its gaps written), and a `.trc` from an input without marker names and a rate.
+pub fn output_kind_for(data: &Path, out: &Path) -> Result<OutputKind> {
+    let Some(kind) = OutputKind::of(out) else {
+        return Err(DomaError::Usage(format!(
+            "{}: the output's extension says its format: .c3d, .trc or .npz",
+            out.display()
+        )));
+    };
+    if kind == OutputKind::Trc && !(is_c3d(data) || is_trc(data)) {
+        return Err(DomaError::Usage(format!(
+            "{}: a .trc output needs marker names and a frame rate, and {} has neither: \
+             give a .c3d or .trc input, or write a .npz",
+            out.display(),
+            data.display()
+        )));
+    }
+    if kind == OutputKind::C3d && !is_c3d(data) {
+        return Err(DomaError::Usage(format!(
+            "{}: a .c3d output is the C3D input with its gaps filled, and the input is {}: \
+             write a .trc or a .npz",
+            out.display(),
+            data.display()
+        )));
+    }
+    Ok(kind)
+}
+
+/// Writes `fill` of the recording of `config` to `out` in the format `kind`.
+fn write_completion(
+    out: &Path,
+    kind: OutputKind,
+    layout: Option<Layout>,
+    config: &RunConfig,
+    fill: RunFill,
+) -> Result<Completion> {
+    let to_c3d = kind == OutputKind::C3d;
     let (t, n) = (fill.frames, fill.points);
     let past_ends = fill.past_ends();
     let extrapolated = fill
@@ -122,6 +266,8 @@ pub fn complete_run_with(
         unfilled: t * n - observed - fill.entries.len(),
         fits: config.fits,
         blend: fill.blend.clone(),
+        gaps: filled_gaps(&fill, &past_ends),
+        left_long: fill.left_long,
     };
     if to_c3d {
         // The input file itself, with only the filled entries written: every group,
@@ -137,14 +283,18 @@ pub fn complete_run_with(
                 frame: fill.source_frames[k],
                 point: source_point(i),
                 position,
-                residual: 0.0,
+                // Computed, and by a fill: −0.0 in a float file (`C3d::residuals`).
+                residual: -0.0,
                 cameras: 0,
             })
             .collect();
         drop(fill);
         write_c3d_patched(out, &config.data, &edits)?;
+    } else if kind == OutputKind::Trc {
+        let tracks = fill.tracks(config)?;
+        write_trc(out, &trc_output(out, config, &fill, tracks)?)?;
     } else {
-        let tracks = fill.tracks(&config)?;
+        let tracks = fill.tracks(config)?;
         // PointOdyssey's `valids`: every entry that holds a point.
         let valid = (layout == Some(Layout::PointOdyssey)).then(|| {
             let mut valid = fill.seen.clone();
@@ -209,6 +359,97 @@ fn is_c3d(path: &Path) -> bool {
         .is_some_and(|e| e.eq_ignore_ascii_case("c3d"))
 }
 
+fn is_trc(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("trc"))
+}
+
+/// The formats a completion writes, by the output's extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputKind {
+    /// `.npz`: the tracks and their masks.
+    Npz,
+    /// `.c3d`: the C3D input with its gaps written.
+    C3d,
+    /// `.trc`: OpenSim's marker file.
+    Trc,
+}
+
+impl OutputKind {
+    /// The format `path`'s extension names; `None` for any other.
+    pub fn of(path: &Path) -> Option<OutputKind> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        match ext.as_str() {
+            "npz" => Some(OutputKind::Npz),
+            "c3d" => Some(OutputKind::C3d),
+            "trc" => Some(OutputKind::Trc),
+            _ => None,
+        }
+    }
+}
+
+/// The `.trc` of a completed recording: a `.trc` input's header kept (its rates, units and
+/// original frame range), or a `.c3d` input's labels, rate, units and frame numbers; the
+/// rows of the fitted clip's frames, unfilled entries empty.
+fn trc_output(out: &Path, config: &RunConfig, fill: &RunFill, tracks: Vec<f32>) -> Result<Trc> {
+    let name = out
+        .file_name()
+        .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+    let kept = |labels: Vec<String>| match &fill.kept {
+        Some(kept) => kept.iter().map(|&i| labels[i].clone()).collect(),
+        None => labels,
+    };
+    // Markers without a name (a C3D may have them) are named by their index.
+    let named = |labels: Vec<String>| -> Vec<String> {
+        labels
+            .into_iter()
+            .enumerate()
+            .map(|(i, l)| {
+                if l.trim().is_empty() {
+                    format!("M{i}")
+                } else {
+                    l
+                }
+            })
+            .collect()
+    };
+    if is_trc(&config.data) {
+        let input = read_trc(&config.data)?;
+        let rows = |v: &[u64]| -> Vec<u64> { fill.source_frames.iter().map(|&k| v[k]).collect() };
+        let times = fill.source_frames.iter().map(|&k| input.times[k]).collect();
+        return Ok(Trc {
+            name,
+            labels: kept(input.labels.clone()),
+            frame_numbers: rows(&input.frame_numbers),
+            times,
+            positions: tracks,
+            ..input
+        });
+    }
+    let c3d = read_c3d(&config.data)?;
+    let rate = c3d.rate as f64;
+    let mut trc = trc_of(
+        &name,
+        named(kept(c3d.labels)),
+        rate,
+        &c3d.units,
+        c3d.first_frame as u64,
+        tracks,
+    );
+    trc.frame_numbers = fill
+        .source_frames
+        .iter()
+        .map(|&k| c3d.first_frame as u64 + k as u64)
+        .collect();
+    trc.times = fill
+        .source_frames
+        .iter()
+        .map(|&k| k as f64 / rate)
+        .collect();
+    trc.orig_frames = c3d.frames as u64;
+    Ok(trc)
+}
+
 /// The fill of a run's chosen entries ([`fill_run`]), before it is written anywhere.
 struct RunFill {
     frames: usize,
@@ -222,6 +463,8 @@ struct RunFill {
     kept: Option<Vec<usize>>,
     source_frames: Vec<usize>,
     blend: Blend,
+    /// Gaps with observations on both sides left unfilled, longer than the longest asked.
+    left_long: usize,
 }
 
 impl RunFill {
@@ -291,14 +534,18 @@ fn read_input(
     t: usize,
     n: usize,
 ) -> Result<(Tracks, Range<usize>, Option<f32>)> {
+    let malformed = |reason| DomaError::Malformed {
+        path: config.data.clone(),
+        reason,
+    };
     let (mut input, rate) = if is_c3d(&config.data) {
         let markers = read_c3d(&config.data)?;
         let rate = markers.rate;
-        let tracks = c3d_tracks(markers).map_err(|reason| DomaError::Malformed {
-            path: config.data.clone(),
-            reason,
-        })?;
-        (tracks, Some(rate))
+        (c3d_tracks(markers).map_err(malformed)?, Some(rate))
+    } else if is_trc(&config.data) {
+        let markers = read_trc(&config.data)?;
+        let rate = markers.rate as f32;
+        (trc_tracks(markers).map_err(malformed)?, Some(rate))
     } else {
         (read_tracks(&config.data, &config.tracks)?.0, None)
     };
@@ -426,7 +673,7 @@ fn fill_one(
     let stride = config.stride.max(1);
     let source_frames: Vec<usize> = frame_range.step_by(stride).collect();
     let rate = rate.map(f64::from);
-    let entries = chosen(&tracks, &source_frames, policy, rate, &config.data)?;
+    let (entries, left_long) = chosen(&tracks, &source_frames, policy, rate, &config.data)?;
     // The fill of the chosen entries alone: a long recording holds no second copy of itself.
     let (mut values, blend) = match policy.method {
         None => {
@@ -458,6 +705,7 @@ fn fill_one(
         kept,
         source_frames,
         blend,
+        left_long,
     })
 }
 

@@ -45,7 +45,8 @@ impl std::str::FromStr for MaxGap {
     }
 }
 
-/// The unobserved entries `policy` fills, `(frame, track)` in frame-major order. A gap's
+/// The unobserved entries `policy` fills, `(frame, track)` in frame-major order, and how
+/// many gaps with observations on both sides it leaves (longer than its longest). A gap's
 /// length is counted in the input's frames (`source_frames` maps the clip's), in seconds at
 /// `rate` for [`MaxGap::Seconds`].
 pub(super) fn chosen(
@@ -54,7 +55,7 @@ pub(super) fn chosen(
     policy: FillPolicy,
     rate: Option<f64>,
     data: &Path,
-) -> Result<Vec<(usize, usize)>> {
+) -> Result<(Vec<(usize, usize)>, usize)> {
     let longest = match policy.max_gap {
         None => usize::MAX,
         Some(MaxGap::Frames(f)) => f,
@@ -62,16 +63,21 @@ pub(super) fn chosen(
             Some(rate) => (secs * rate).floor() as usize,
             None => {
                 return Err(DomaError::Usage(format!(
-                    "--max-gap {secs}s: {} has no frame rate (a .c3d has); give the length \
-                     in frames",
+                    "--max-gap {secs}s: {} has no frame rate (a .c3d or .trc has); give the \
+                     length in frames",
                     data.display()
                 )));
             }
         },
     };
+    let mut too_long = 0;
     let gaps: Vec<_> = crate::gaps::spans::gaps(tracks)
         .filter(|gap| match (gap.before, gap.after) {
-            (Some(a), Some(b)) => source_frames[b] - source_frames[a] - 1 <= longest,
+            (Some(a), Some(b)) => {
+                let fits = source_frames[b] - source_frames[a] - 1 <= longest;
+                too_long += usize::from(!fits);
+                fits
+            }
             _ => policy.extrapolate,
         })
         .collect();
@@ -81,5 +87,5 @@ pub(super) fn chosen(
     }
     // The gaps come track by track.
     entries.sort_unstable();
-    Ok(entries)
+    Ok((entries, too_long))
 }

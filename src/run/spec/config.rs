@@ -190,7 +190,7 @@ impl RunSpec {
     /// The run config of this fit without its data read: what the options say, checked
     /// where the data is not needed. A DPF model's frame count is set by
     /// [`RunSpec::prepare`], from the data.
-    fn run_config(&self) -> Result<RunConfig> {
+    pub(crate) fn run_config(&self) -> Result<RunConfig> {
         let data = self
             .data
             .as_deref()

@@ -1,0 +1,188 @@
+//! One recording filled end to end, as `doma fill` does it for each file: fitted into a run
+//! folder of its own (a temporary one unless kept), completed into the output in the
+//! format its extension names, the run folder removed; or completed without a fit.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+use burn::tensor::Device;
+
+use super::{
+    Completion, FillPolicy, FitOutcome, RunDir, RunSpec, complete_run_with, complete_without_fit,
+    fit_run, output_kind_for,
+};
+use crate::train::select::WeightSearch;
+use crate::{DomaError, Result};
+
+/// How [`fill_recording`] fills a recording.
+#[derive(Clone, Debug, Default)]
+pub struct RecordingFill {
+    /// Fit a field first (doma's fill, the blend); `false`: the fit-free fill
+    /// ([`complete_without_fit`]).
+    pub fit: bool,
+    /// Which gaps are filled, and by what.
+    pub policy: FillPolicy,
+    /// The fit's options beside the data (the defaults of `doma fit` where empty).
+    pub spec: RunSpec,
+    /// Keep the run folder here instead of a temporary one that is removed.
+    pub keep_run: Option<PathBuf>,
+}
+
+/// Fills the gaps of the recording `input` into `out` ([`RecordingFill`]): its format by
+/// its extension, checked before the fit. The run folder is removed afterwards, whether
+/// the fill succeeded or not, unless [`RecordingFill::keep_run`] names it. A fit stopped
+/// by `interrupt` is an error.
+pub fn fill_recording(
+    input: &Path,
+    out: &Path,
+    how: &RecordingFill,
+    device: &Device,
+    interrupt: &AtomicBool,
+) -> Result<Completion> {
+    output_kind_for(input, out)?;
+    if !how.fit {
+        return complete_without_fit(input, out, None, how.policy);
+    }
+    let (dir, temporary) = match &how.keep_run {
+        Some(dir) => (dir.clone(), false),
+        None => (temporary_run(), true),
+    };
+    let run = RunDir::new(&dir);
+    let done = (|| {
+        let spec = RunSpec {
+            data: Some(input.to_path_buf()),
+            ..how.spec.clone()
+        };
+        let new = spec.prepare(&WeightSearch::default(), |_| {})?;
+        match fit_run(&run, Some(new), device, interrupt, None, false)? {
+            FitOutcome::Finished(_) => complete_run_with(&run, out, None, how.policy, device),
+            FitOutcome::Interrupted { .. } => Err(DomaError::Usage(format!(
+                "{}: the fit was interrupted",
+                input.display()
+            ))),
+        }
+    })();
+    if temporary {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    done
+}
+
+/// A fresh folder name under the system's temporary folder, for one run.
+fn temporary_run() -> PathBuf {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    static NEXT: AtomicUsize = AtomicUsize::new(0);
+    let n = NEXT.fetch_add(1, Ordering::Relaxed);
+    std::env::temp_dir().join(format!("doma-fill-{}-{n}", std::process::id()))
+}
+
+/// One filled gap of a recording as a lab reads it ([`gap_rows`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct GapRow {
+    /// The marker's name (`track I` where the input names none).
+    pub marker: String,
+    /// The input's first and last frame filled (0-based, inclusive).
+    pub first_frame: usize,
+    /// See `first_frame`.
+    pub last_frame: usize,
+    /// The first filled frame's time (s), where the input has a rate.
+    pub start_s: Option<f64>,
+    /// The last filled frame's time (s).
+    pub end_s: Option<f64>,
+    /// The frames filled.
+    pub length_frames: usize,
+    /// Their length (s): frames over the rate.
+    pub length_s: Option<f64>,
+    /// Before the marker's first observation or after its last.
+    pub past_ends: bool,
+    /// What filled it: `doma` (the blend) or one filler's name.
+    pub filled_by: &'static str,
+}
+
+/// The input's marker names and frame rate (a `.c3d`'s or a `.trc`'s; `None` elsewhere).
+pub fn names_and_rate(input: &Path) -> Result<(Vec<String>, Option<f64>)> {
+    let ext = input
+        .extension()
+        .map_or(String::new(), |e| e.to_string_lossy().to_ascii_lowercase());
+    Ok(match ext.as_str() {
+        "c3d" => {
+            let c = crate::data::c3d::read_c3d(input)?;
+            (c.labels, Some(c.rate as f64))
+        }
+        "trc" => {
+            let t = crate::data::trc::read_trc(input)?;
+            (t.labels, Some(t.rate))
+        }
+        _ => (Vec::new(), None),
+    })
+}
+
+/// What filled a completion's gaps: one filler's name, or `doma` (the blend).
+pub fn filled_by(c: &Completion) -> &'static str {
+    let only = crate::gaps::Filler::ALL
+        .into_iter()
+        .find(|&f| c.blend.short[f] == 1.0 && c.blend.long[f] == 1.0 && c.blend.leans.is_empty());
+    only.map_or("doma", crate::gaps::Filler::name)
+}
+
+/// The filled gaps of `c`, a completion of the recording `input`, with their markers'
+/// names and times.
+pub fn gap_rows(input: &Path, c: &Completion) -> Result<Vec<GapRow>> {
+    let (labels, rate) = names_and_rate(input)?;
+    let by = filled_by(c);
+    Ok(c.gaps
+        .iter()
+        .map(|g| {
+            let frames = g.frames[1] - g.frames[0] + 1;
+            GapRow {
+                marker: labels
+                    .get(g.track)
+                    .filter(|l| !l.is_empty())
+                    .cloned()
+                    .unwrap_or_else(|| format!("track {}", g.track)),
+                first_frame: g.frames[0],
+                last_frame: g.frames[1],
+                start_s: rate.map(|r| g.frames[0] as f64 / r),
+                end_s: rate.map(|r| g.frames[1] as f64 / r),
+                length_frames: frames,
+                length_s: rate.map(|r| frames as f64 / r),
+                past_ends: g.extrapolated,
+                filled_by: by,
+            }
+        })
+        .collect())
+}
+
+/// Where the table of a recording's filled gaps goes: beside the output, `trial.c3d` →
+/// `trial.gaps.csv`.
+pub fn gaps_csv_path(output: &Path) -> PathBuf {
+    let stem = output.file_stem().unwrap_or_default().to_string_lossy();
+    output.with_file_name(format!("{stem}.gaps.csv"))
+}
+
+/// `rows` as CSV, a header line first; a marker's name quoted where CSV needs it.
+pub fn gaps_csv(rows: &[GapRow]) -> String {
+    let mut out = String::from(
+        "marker,first_frame,last_frame,start_s,end_s,length_frames,length_s,past_ends,filled_by\n",
+    );
+    let time = |t: Option<f64>| t.map_or(String::new(), |t| format!("{t:.4}"));
+    for r in rows {
+        let marker = if r.marker.contains([',', '"', '\n', '\r']) {
+            format!("\"{}\"", r.marker.replace('"', "\"\""))
+        } else {
+            r.marker.clone()
+        };
+        out.push_str(&format!(
+            "{marker},{},{},{},{},{},{},{},{}\n",
+            r.first_frame,
+            r.last_frame,
+            time(r.start_s),
+            time(r.end_s),
+            r.length_frames,
+            time(r.length_s),
+            r.past_ends,
+            r.filled_by
+        ));
+    }
+    out
+}
