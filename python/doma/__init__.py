@@ -600,6 +600,7 @@ def fill_file(
     extrapolate: bool = False,
     method: Optional[str] = None,
     overwrite: bool = False,
+    flag_above_mm: float = 5.0,
 ) -> dict:
     """Fills the gaps of the recording at ``path`` (.c3d, .trc, or any format
     :func:`read_tracks` reads) into ``out``, as ``doma fill`` does: fitted and completed in
@@ -613,8 +614,11 @@ def fill_file(
     Returns the report: ``markers``, ``frames``, ``filled``, ``extrapolated``,
     ``unfilled`` (entries), ``left_long`` (gaps longer than ``max_gap`` left),
     ``filled_by``, ``gaps`` (per filled gap: ``marker``, ``first_frame``, ``last_frame``,
-    ``start_s``, ``end_s``, ``length_frames``, ``length_s``, ``past_ends``, ``filled_by``)
-    and ``csv`` (the table's path).
+    ``start_s``, ``end_s``, ``length_frames``, ``length_s``, ``past_ends``, ``filled_by``,
+    ``expected_error`` in ``units`` and ``flagged`` where it passes ``flag_above_mm``;
+    the flagged first), ``units``, ``calibration`` (the factor from the donor fillers'
+    spread to the expected error, and the hidden spans that chose it) and ``csv`` (the
+    table's path).
     """
     text = _native.fill_file(
         os.fspath(path),
@@ -624,6 +628,7 @@ def fill_file(
         bool(extrapolate),
         None if method is None else str(method).lower(),
         bool(overwrite),
+        float(flag_above_mm),
     )
     return json.loads(text)
 

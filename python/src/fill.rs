@@ -82,9 +82,10 @@ pub fn fill_into(
 /// Fills the gaps of the recording at `path` into `out` (its format by its extension), as
 /// `doma fill` does for one file, and writes the table of filled gaps beside it; returns
 /// the report as JSON: `input`, `output`, `markers`, `frames`, `filled`, `extrapolated`,
-/// `unfilled`, `left_long`, `filled_by`, `gaps` (one row per filled gap) and `csv`.
+/// `unfilled`, `left_long`, `filled_by`, `gaps` (one row per filled gap, with its expected
+/// error and whether it passes `flag_above_mm`), `units`, `calibration` and `csv`.
 #[pyfunction]
-#[pyo3(signature = (path, out, fit=true, max_gap=None, extrapolate=false, method=None, overwrite=false))]
+#[pyo3(signature = (path, out, fit=true, max_gap=None, extrapolate=false, method=None, overwrite=false, flag_above_mm=5.0))]
 // The keywords of `doma.fill_file`, one argument each, as PyO3 takes them.
 #[allow(clippy::too_many_arguments)]
 pub fn fill_file(
@@ -96,6 +97,7 @@ pub fn fill_file(
     extrapolate: bool,
     method: Option<String>,
     overwrite: bool,
+    flag_above_mm: f64,
 ) -> PyResult<String> {
     use doma::run::{FillPolicy, MaxGap, RecordingFill};
     guarded("fill_file", Some(&path), || {
@@ -107,6 +109,11 @@ pub fn fill_file(
             .map(|m| Filler::parse(&m))
             .transpose()
             .map_err(|e| PyValueError::new_err(format!("method: {e}")))?;
+        if !(flag_above_mm.is_finite() && flag_above_mm > 0.0) {
+            return Err(PyValueError::new_err(format!(
+                "flag_above_mm={flag_above_mm} is not a positive length"
+            )));
+        }
         if out.exists() && !overwrite {
             return Err(pyo3::exceptions::PyFileExistsError::new_err(format!(
                 "{} exists: overwrite=True writes over it",
@@ -125,16 +132,14 @@ pub fn fill_file(
         let device = doma::backend::BackendKind::Flex.device().py()?;
         let (done, raised) = crate::interrupt::run_interruptible(py, |flag| {
             doma::run::fill_recording(&path, &out, &how, &device, flag).and_then(|c| {
-                let rows = doma::run::gap_rows(&path, &c)?;
-                let csv = doma::run::gaps_csv_path(&out);
-                doma::io::write_atomic(&csv, doma::run::gaps_csv(&rows).as_bytes())?;
-                Ok((c, rows, csv))
+                let table = doma::run::write_gap_report(&path, &out, &c, flag_above_mm)?;
+                Ok((c, table, doma::run::gaps_csv_path(&out)))
             })
         });
         if let Some(e) = raised {
             return Err(e);
         }
-        let (c, rows, csv) = done.py()?;
+        let (c, table, csv) = done.py()?;
         let report = serde_json::json!({
             "input": path,
             "output": out,
@@ -145,8 +150,14 @@ pub fn fill_file(
             "unfilled": c.unfilled,
             "left_long": c.left_long,
             "filled_by": doma::run::filled_by(&c),
-            "gaps": rows,
+            "gaps": table.rows,
+            "units": table.units,
+            "calibration": table.calibration.map(|k| serde_json::json!({
+                "factor": k.factor,
+                "spans": k.spans,
+            })),
             "csv": csv,
+            "html": doma::run::gaps_html_path(&out),
         });
         Ok(report.to_string())
     })

@@ -92,8 +92,9 @@ def test_a_folder_is_filled_in_one_command(cli, folder, tmp_path):
     assert "broken.c3d: failed" in done.stderr and "the parameter section ends" in done.stderr
     assert "4 recordings filled" in done.stderr and "1 failed" in done.stderr
     names = sorted(p.name for p in out.iterdir())
-    assert names == sorted(["Eb015vr.c3d", "Eb015vr.gaps.csv", "knee.trc", "knee.gaps.csv",
-                            "pc_int.c3d", "pc_int.gaps.csv", "right_knee.c3d", "right_knee.gaps.csv"])
+    stems = ["Eb015vr", "knee", "pc_int", "right_knee"]
+    assert names == sorted([f"{s}.{e}" for s in stems for e in ["gaps.csv", "gaps.html"]]
+                           + ["Eb015vr.c3d", "knee.trc", "pc_int.c3d", "right_knee.c3d"])
     for source in TRIALS:
         before, after = ezc3d.c3d(str(source)), ezc3d.c3d(str(out / source.name))
         assert np.array_equal(before["data"]["analogs"], after["data"]["analogs"])
@@ -115,6 +116,11 @@ def test_a_folder_is_filled_in_one_command(cli, folder, tmp_path):
     rows = list(csv.DictReader((out / "knee.gaps.csv").open()))
     assert {(r["marker"], r["first_frame"], r["last_frame"]) for r in rows} == {
         (knee.labels[4], "30", "44"), (knee.labels[10], "60", "63")}
+    # Each gap's expected error in mm, the flagged ones (past 5 mm) first.
+    assert all(r["units"] == "mm" and float(r["expected_error"]) >= 0 for r in rows)
+    flags = [r["flagged"] == "true" for r in rows]
+    assert flags == sorted(flags, reverse=True)
+    assert flags == [float(r["expected_error"]) > 5 for r in rows]
     # A second run skips what exists; --overwrite writes again.
     stamps = {p: p.stat().st_mtime_ns for p in out.iterdir()}
     again = subprocess.run([cli, "fill", folder / "knee.trc", folder / "pc_int.c3d", "--out", out, "--no-fit"],
@@ -147,9 +153,12 @@ def test_one_file_to_another_format_and_bad_outputs_refused(cli, folder, tmp_pat
 def test_fill_file_from_python_returns_the_report(folder, tmp_path):
     out = tmp_path / "knee_filled.trc"
     report = doma.fill_file(folder / "knee.trc", out, fit=False)
-    assert report["filled_by"] == "chain" and report["markers"] == 73
+    assert report["filled_by"] == "chain" and report["markers"] == 73 and report["units"] == "mm"
+    assert report["calibration"]["spans"] >= 8 and report["calibration"]["factor"] > 0
     assert {(g["first_frame"], g["last_frame"]) for g in report["gaps"]} == {(30, 44), (60, 63)}
     assert pathlib.Path(report["csv"]).is_file()
+    page = pathlib.Path(report["html"]).read_text()
+    assert page.count("<svg") == 3 * len(report["gaps"]) and "</html>" in page
     back = doma.read_tracks(out)
     assert back.observed.all() and back.labels == doma.read_tracks(folder / "knee.trc").labels
     with pytest.raises(FileExistsError):

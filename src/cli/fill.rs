@@ -13,8 +13,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::cli::DeviceArgs;
 use crate::gaps::Filler;
 use crate::run::{
-    Completion, FillPolicy, MaxGap, RecordingFill, fill_recording, filled_by, gap_rows, gaps_csv,
-    gaps_csv_path, names_and_rate, output_kind_for,
+    Completion, FillPolicy, MaxGap, RecordingFill, fill_recording, filled_by, names_and_rate,
+    output_kind_for, write_gap_report,
 };
 use crate::{DomaError, Result};
 
@@ -56,6 +56,10 @@ pub struct FillArgs {
     /// Recordings filled at once.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     pub jobs: u64,
+    /// Flag the gaps whose expected error passes this many millimetres (in the table and
+    /// the line of each recording).
+    #[arg(long, value_name = "MM", default_value_t = 5.0, value_parser = positive_mm)]
+    pub flag_above: f64,
     /// Write over an output that exists (by default it is skipped, with a line saying so).
     #[arg(long)]
     pub overwrite: bool,
@@ -69,6 +73,13 @@ pub struct FillArgs {
     /// The device.
     #[command(flatten)]
     pub device: DeviceArgs,
+}
+
+fn positive_mm(s: &str) -> std::result::Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("`{s}` is not a positive length in mm")),
+    }
 }
 
 /// The format of the files `doma fill` writes into a folder.
@@ -168,7 +179,8 @@ pub(crate) fn ext(path: &Path) -> String {
 
 /// What happened to one recording.
 enum Outcome {
-    Filled(Box<Completion>, f64),
+    /// The completion, the seconds it took, and the gaps flagged.
+    Filled(Box<Completion>, f64, usize),
     Skipped,
     Failed(DomaError),
 }
@@ -234,7 +246,7 @@ pub fn run(args: &FillArgs) -> Result<()> {
     let (mut filled, mut skipped, mut failed, mut gaps) = (0, 0, 0, 0);
     for outcome in outcomes.iter().flatten() {
         match outcome {
-            Outcome::Filled(c, _) => {
+            Outcome::Filled(c, _, _) => {
                 filled += 1;
                 gaps += c.gaps.len();
             }
@@ -283,12 +295,11 @@ fn fill_one(
             .map(|dir| dir.join(job.input.file_stem().unwrap_or_default())),
     };
     let done = fill_recording(&job.input, &job.output, &how, device, interrupt).and_then(|c| {
-        let rows = gap_rows(&job.input, &c)?;
-        crate::io::write_atomic(&gaps_csv_path(&job.output), gaps_csv(&rows).as_bytes())?;
-        Ok(c)
+        let table = write_gap_report(&job.input, &job.output, &c, args.flag_above)?;
+        Ok((c, table.rows.iter().filter(|r| r.flagged).count()))
     });
     match done {
-        Ok(c) => Outcome::Filled(Box::new(c), started.elapsed().as_secs_f64()),
+        Ok((c, flagged)) => Outcome::Filled(Box::new(c), started.elapsed().as_secs_f64(), flagged),
         Err(e) => Outcome::Failed(e),
     }
 }
@@ -302,7 +313,7 @@ fn describe(job: &Job, outcome: &Outcome, max_gap: bool) -> String {
             job.output.display()
         ),
         Outcome::Failed(e) => format!("{name}: failed: {e}"),
-        Outcome::Filled(c, seconds) => {
+        Outcome::Filled(c, seconds, flagged) => {
             let longest = c
                 .gaps
                 .iter()
@@ -320,6 +331,11 @@ fn describe(job: &Job, outcome: &Outcome, max_gap: bool) -> String {
                 c.gaps.len(),
                 filled_by(c)
             );
+            if *flagged > 0 {
+                line.push_str(&format!(
+                    ", {flagged} flagged (expected error over --flag-above)"
+                ));
+            }
             if max_gap || c.left_long > 0 {
                 line.push_str(&format!(
                     ", {} gaps longer than --max-gap left",

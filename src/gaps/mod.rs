@@ -48,6 +48,7 @@
 //! | `prediction.rs` | [`FieldPrediction`]: the field's prediction, given or computed window by window |
 //! | `blend.rs` | [`blend::Weights`] (one per filler), learning them per class of gap length and applying a blend (tests in `blend/tests.rs`) |
 //! | `spans.rs` | gaps and their classes and lengths, hidden and validation spans |
+//! | `confidence.rs` | the expected error of a filled gap: the donor fillers' spread, calibrated on hidden spans |
 //! | `linalg.rs` | the small solvers: the spline's system, simplex least squares |
 //! | `eigen.rs` | eigenproblems (Jacobi, Householder + QL) and principal components |
 //! | `window.rs` | long recordings in windows of time: where each gap is filled, each validation draw drawn |
@@ -60,6 +61,7 @@
 pub mod blend;
 pub mod chain;
 pub mod classic;
+pub mod confidence;
 pub mod donors;
 pub mod eigen;
 pub mod field_fill;

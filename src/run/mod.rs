@@ -28,6 +28,7 @@ mod info;
 mod lock;
 mod plot;
 mod recording;
+pub mod report;
 mod resume;
 mod spec;
 mod warp;
@@ -45,8 +46,8 @@ pub use info::{RunInfo, info};
 pub use lock::RunLock;
 pub use plot::plot_run;
 pub use recording::{
-    GapRow, RecordingFill, fill_recording, filled_by, gap_rows, gaps_csv, gaps_csv_path,
-    names_and_rate,
+    GapRow, GapTable, RecordingFill, fill_recording, filled_by, gap_rows, gaps_csv, gaps_csv_path,
+    gaps_html_path, mm_per_unit, names_and_rate, write_gap_report,
 };
 pub use spec::{
     GAP_FILLING_FRAMES_PER_ITERATION, GAP_FILLING_H_WEIGHT, GAP_FILLING_ITERATIONS, ModelChoice,
