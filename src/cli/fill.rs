@@ -64,7 +64,7 @@ pub struct FillArgs {
     #[arg(long)]
     pub overwrite: bool,
     /// Keep each fit's run folder under this folder (one per recording, by its name)
-    /// instead of removing it.
+    /// instead of removing it (`--overwrite` replaces a run kept before).
     #[arg(long, value_name = "DIR")]
     pub keep_runs: Option<PathBuf>,
     /// Print errors only.
@@ -179,8 +179,9 @@ pub(crate) fn ext(path: &Path) -> String {
 
 /// What happened to one recording.
 enum Outcome {
-    /// The completion, the seconds it took, and the gaps flagged.
-    Filled(Box<Completion>, f64, usize),
+    /// The completion, the seconds it took, the gaps flagged, and the largest expected
+    /// error with its units.
+    Filled(Box<Completion>, f64, usize, Option<(f64, String)>),
     Skipped,
     Failed(DomaError),
 }
@@ -246,7 +247,7 @@ pub fn run(args: &FillArgs) -> Result<()> {
     let (mut filled, mut skipped, mut failed, mut gaps) = (0, 0, 0, 0);
     for outcome in outcomes.iter().flatten() {
         match outcome {
-            Outcome::Filled(c, _, _) => {
+            Outcome::Filled(c, _, _, _) => {
                 filled += 1;
                 gaps += c.gaps.len();
             }
@@ -294,12 +295,30 @@ fn fill_one(
             .as_ref()
             .map(|dir| dir.join(job.input.file_stem().unwrap_or_default())),
     };
+    // A run kept by an earlier fill of this recording is replaced where the output is.
+    if let Some(run) = how
+        .keep_run
+        .as_ref()
+        .filter(|r| args.overwrite && r.join("config.json").is_file())
+        && let Err(e) = std::fs::remove_dir_all(run)
+    {
+        return Outcome::Failed(DomaError::io(run, e));
+    }
     let done = fill_recording(&job.input, &job.output, &how, device, interrupt).and_then(|c| {
         let table = write_gap_report(&job.input, &job.output, &c, args.flag_above)?;
-        Ok((c, table.rows.iter().filter(|r| r.flagged).count()))
+        let flagged = table.rows.iter().filter(|r| r.flagged).count();
+        let worst = table
+            .rows
+            .iter()
+            .filter_map(|r| r.expected_error)
+            .max_by(f64::total_cmp)
+            .map(|e| (e, table.units.clone().unwrap_or_default()));
+        Ok((c, flagged, worst))
     });
     match done {
-        Ok((c, flagged)) => Outcome::Filled(Box::new(c), started.elapsed().as_secs_f64(), flagged),
+        Ok((c, flagged, worst)) => {
+            Outcome::Filled(Box::new(c), started.elapsed().as_secs_f64(), flagged, worst)
+        }
         Err(e) => Outcome::Failed(e),
     }
 }
@@ -313,7 +332,7 @@ fn describe(job: &Job, outcome: &Outcome, max_gap: bool) -> String {
             job.output.display()
         ),
         Outcome::Failed(e) => format!("{name}: failed: {e}"),
-        Outcome::Filled(c, seconds, flagged) => {
+        Outcome::Filled(c, seconds, flagged, worst) => {
             let longest = c
                 .gaps
                 .iter()
@@ -331,10 +350,11 @@ fn describe(job: &Job, outcome: &Outcome, max_gap: bool) -> String {
                 c.gaps.len(),
                 filled_by(c)
             );
+            if let Some((e, units)) = worst {
+                line.push_str(&format!(", expected error up to {e:.1} {units}"));
+            }
             if *flagged > 0 {
-                line.push_str(&format!(
-                    ", {flagged} flagged (expected error over --flag-above)"
-                ));
+                line.push_str(&format!(", {flagged} flagged (over --flag-above)"));
             }
             if max_gap || c.left_long > 0 {
                 line.push_str(&format!(
