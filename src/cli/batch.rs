@@ -17,7 +17,9 @@ Exit status: 0 when every entry of the shard is done or left to another process,
 any failed (see DIR/NAME/error.json), 128 + the signal when interrupted."
 )]
 pub struct BatchArgs {
-    /// The manifest (JSON; see the docs of `doma::batch::manifest`).
+    /// The manifest (JSON; see the docs of `doma::batch::manifest`), or a folder or a
+    /// pattern (`trials/*.c3d`) of recordings, each filled as `doma fill` fills it into
+    /// --out (its shard of them).
     #[arg(required_unless_present = "collect")]
     pub manifest: Option<PathBuf>,
     /// The batch folder: one run folder per entry.
@@ -74,6 +76,28 @@ pub fn run(args: &BatchArgs) -> Result<()> {
             "give MANIFEST and --out, or --collect DIR".into(),
         ));
     };
+    // A folder or a pattern of recordings is `doma fill`'s job over them, sharded.
+    if path.is_dir() || path.to_str().is_some_and(|p| p.contains(['*', '?'])) {
+        return crate::cli::fill::run(&crate::cli::fill::FillArgs {
+            inputs: vec![path.clone()],
+            out: out.clone(),
+            format: None,
+            no_fit: false,
+            max_gap: None,
+            extrapolate: false,
+            method: None,
+            iterations: None,
+            jobs: 1,
+            flag_above: 5.0,
+            overwrite: false,
+            keep_runs: None,
+            shard: Some(args.shard()?),
+            quiet: args.quiet,
+            device: crate::cli::DeviceArgs {
+                backend: crate::backend::BackendKind::Flex,
+            },
+        });
+    }
     let manifest = Manifest::load(path)?;
     let shard = args.shard()?;
     let search = args.search.search()?;

@@ -24,8 +24,8 @@ use crate::{DomaError, Result};
     about = "Fill the gaps of recordings (files or folders of .c3d and .trc) in one go, each written back in its own format"
 )]
 pub struct FillArgs {
-    /// The recordings: files (.c3d, .trc, or any format doma fit reads) or folders (their
-    /// .c3d and .trc files).
+    /// The recordings: files (.c3d, .trc, or any format doma fit reads), folders (their
+    /// .c3d and .trc files) or a pattern of file names (`trials/*.c3d`).
     #[arg(required = true, value_name = "INPUT")]
     pub inputs: Vec<PathBuf>,
     /// A folder for the filled recordings (each under its input's name), or, for one
@@ -67,6 +67,10 @@ pub struct FillArgs {
     /// instead of removing it (`--overwrite` replaces a run kept before).
     #[arg(long, value_name = "DIR")]
     pub keep_runs: Option<PathBuf>,
+    /// Fill shard I of N of the recordings (in name order: I, I+N, I+2N, …), for an array
+    /// of jobs on Slurm or Kubernetes (default: the scheduler's, as `doma batch`'s).
+    #[arg(long, value_parser = crate::batch::Shard::parse, value_name = "I/N")]
+    pub shard: Option<crate::batch::Shard>,
     /// Print errors only.
     #[arg(long)]
     pub quiet: bool,
@@ -124,6 +128,8 @@ pub fn jobs(inputs: &[PathBuf], out: &Path, format: Option<Format>) -> Result<Ve
             files.extend(found);
         } else if input.exists() {
             files.push(input.clone());
+        } else if let Some(found) = glob(input)? {
+            files.extend(found);
         } else {
             return Err(DomaError::io(
                 input,
@@ -172,6 +178,64 @@ pub fn jobs(inputs: &[PathBuf], out: &Path, format: Option<Format>) -> Result<Ve
     Ok(jobs)
 }
 
+/// The files that `pattern`'s last component matches in its folder (`*` any run of
+/// characters, `?` one), sorted; `None` where it has no wildcard. A pattern matching
+/// nothing is refused, naming it.
+fn glob(pattern: &Path) -> Result<Option<Vec<PathBuf>>> {
+    let Some(name) = pattern.file_name().and_then(|n| n.to_str()) else {
+        return Ok(None);
+    };
+    if !name.contains(['*', '?']) {
+        return Ok(None);
+    }
+    let dir = match pattern.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let mut found: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .map_err(|e| DomaError::io(&dir, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.is_file()
+                && p.file_name()
+                    .and_then(|n| n.to_str())
+                    .is_some_and(|n| matches(name, n))
+        })
+        .collect();
+    if found.is_empty() {
+        return Err(DomaError::Usage(format!(
+            "{}: no file matches",
+            pattern.display()
+        )));
+    }
+    found.sort();
+    Ok(Some(found))
+}
+
+/// Whether `name` matches `pattern` (`*` any run of characters, `?` one).
+fn matches(pattern: &str, name: &str) -> bool {
+    let (p, n): (Vec<char>, Vec<char>) = (pattern.chars().collect(), name.chars().collect());
+    // The classic two-pointer match with the last star's place to fall back to.
+    let (mut i, mut j, mut star, mut from) = (0, 0, None, 0);
+    while j < n.len() {
+        if i < p.len() && (p[i] == '?' || p[i] == n[j]) {
+            i += 1;
+            j += 1;
+        } else if i < p.len() && p[i] == '*' {
+            star = Some(i);
+            from = j;
+            i += 1;
+        } else if let Some(s) = star {
+            i = s + 1;
+            from += 1;
+            j = from;
+        } else {
+            return false;
+        }
+    }
+    p[i..].iter().all(|&c| c == '*')
+}
+
 pub(crate) fn ext(path: &Path) -> String {
     path.extension()
         .map_or(String::new(), |e| e.to_string_lossy().to_ascii_lowercase())
@@ -189,7 +253,20 @@ enum Outcome {
 /// Fills every recording; an error in one is reported and the others still run, and the
 /// command then fails naming how many.
 pub fn run(args: &FillArgs) -> Result<()> {
-    let jobs = jobs(&args.inputs, &args.out, args.format)?;
+    let mut jobs = jobs(&args.inputs, &args.out, args.format)?;
+    let shard = match args.shard {
+        Some(s) => s,
+        None => crate::batch::Shard::from_env(|k| std::env::var(k).ok(), None)?
+            .unwrap_or(crate::batch::Shard::ALL),
+    };
+    if shard.count > 1 {
+        jobs = jobs
+            .into_iter()
+            .enumerate()
+            .filter(|(k, _)| k % shard.count == shard.index)
+            .map(|(_, j)| j)
+            .collect();
+    }
     // Every output's format checked before anything is written.
     for job in &jobs {
         output_kind_for(&job.input, &job.output)?;
@@ -371,5 +448,21 @@ fn describe(job: &Job, outcome: &Outcome, max_gap: bool) -> String {
             line.push_str(&format!(" -> {} ({seconds:.1} s)", job.output.display()));
             line
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::matches;
+
+    #[test]
+    fn patterns_match_as_a_shell_does() {
+        assert!(matches("*.c3d", "trial01.c3d"));
+        assert!(matches("trial??.c3d", "trial01.c3d"));
+        assert!(matches("*", "x"));
+        assert!(matches("a*b*c", "aXXbYYc"));
+        assert!(!matches("*.c3d", "trial01.trc"));
+        assert!(!matches("trial?.c3d", "trial01.c3d"));
+        assert!(!matches("a*b*c", "aXXbYY"));
     }
 }

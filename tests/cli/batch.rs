@@ -468,3 +468,107 @@ fn the_batch_folder_s_files_never_replace_the_manifest() {
     assert_eq!(std::fs::read(&kept).unwrap(), before);
     assert!(!dir.join("a").exists());
 }
+
+/// Three small C3D trials, each with a gap in one marker.
+fn trials(dir: &Path) -> PathBuf {
+    use doma::data::c3d::{C3d, write_c3d};
+    let folder = dir.join("trials");
+    std::fs::create_dir_all(&folder).unwrap();
+    let (t, n) = (40, 4);
+    for k in 0..3 {
+        let positions: Vec<f32> = (0..t * n * 3)
+            .map(|e| {
+                let (f, i, d) = (e / (3 * n), e / 3 % n, e % 3);
+                100.0 * i as f32 + 10.0 * d as f32 + (0.1 * f as f32 + k as f32).sin() * 20.0
+            })
+            .collect();
+        let residuals = (0..t * n)
+            .map(|e| {
+                if e % n == 1 && (10..18).contains(&(e / n)) {
+                    -1.0
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        let c = C3d {
+            frames: t,
+            points: n,
+            first_frame: 1,
+            rate: 100.0,
+            scale: -0.1,
+            units: "mm".into(),
+            labels: (0..n).map(|i| format!("M{i}")).collect(),
+            model_outputs: vec![None; n],
+            positions,
+            residuals,
+            cameras: vec![1; t * n],
+            notes: Vec::new(),
+        };
+        write_c3d(folder.join(format!("trial{k}.c3d")), &c).unwrap();
+    }
+    folder
+}
+
+#[test]
+fn a_folder_or_a_pattern_of_recordings_is_filled_shard_by_shard() {
+    let dir = temp("fill");
+    let folder = trials(&dir);
+    let out = dir.join("filled");
+    // `doma fill --shard 0/2` of the folder: its trials 0 and 2, without a fit.
+    let done = doma()
+        .args([
+            "fill",
+            folder.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--no-fit",
+        ])
+        .args(["--shard", "0/2"])
+        .output()
+        .unwrap();
+    assert!(done.status.success(), "{}", text(&done.stderr));
+    let written = |out: &Path| -> BTreeSet<String> {
+        std::fs::read_dir(out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".c3d"))
+            .collect()
+    };
+    assert_eq!(
+        written(&out),
+        ["trial0.c3d", "trial2.c3d"].map(String::from).into()
+    );
+    // `doma batch` of a pattern, shard 1 of 2 from Slurm's environment: trial 1, fitted.
+    let pattern = folder.join("trial*.c3d");
+    let done = doma()
+        .args([
+            "batch",
+            pattern.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ])
+        .env("SLURM_ARRAY_TASK_ID", "1")
+        .env("SLURM_ARRAY_TASK_COUNT", "2")
+        .output()
+        .unwrap();
+    assert!(done.status.success(), "{}", text(&done.stderr));
+    assert_eq!(written(&out).len(), 3);
+    let table = std::fs::read_to_string(out.join("trial1.gaps.csv")).unwrap();
+    assert!(
+        table.lines().nth(1).unwrap().starts_with("M1,10,17,"),
+        "{table}"
+    );
+    // A pattern that matches nothing is refused, naming it.
+    let none = doma()
+        .args([
+            "fill",
+            folder.join("*.trc").to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(!none.status.success() && text(&none.stderr).contains("no file matches"));
+}
