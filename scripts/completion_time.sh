@@ -14,7 +14,7 @@ trap 'rm -rf "$work"' EXIT
 now() { date +%s.%N; }
 t0=$(now)
 "$DOMA" fit data/mocap/right_knee.c3d --frames 0..400 --stride 4 \
-  --holdout-observations 0.15 --out "$work/run" --quiet > "$work/report.json"
+  --holdout-observations 0.15 --out "$work/run" --quiet --json "$work/report.json"
 t1=$(now)
 "$DOMA" complete "$work/run" --out "$work/filled.c3d" 2> /dev/null
 t2=$(now)

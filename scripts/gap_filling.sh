@@ -13,7 +13,7 @@ cargo run --release --quiet --example tracker_data -- "$work/data"
 mkdir -p results/tracks
 for name in cdp_male_wave md2_faerie; do
   for layout in pointodyssey tapvid3d; do
-    "$DOMA" fit "$work/data/${name}_$layout.npz" --out "$work/$name-$layout" --quiet \
+    "$DOMA" fit "$work/data/${name}_$layout.npz" --out "$work/$name-$layout" --quiet --json - \
       --drop-unobserved --holdout-observations 0.2 --test-fraction 0.1 \
       > "results/tracks/${name}_$layout.json"
   done

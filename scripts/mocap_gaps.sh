@@ -27,7 +27,7 @@ for seed in $seeds; do
       out="results/mocap/${name}_${span/..=/-}_$seed.json"
       "$DOMA" fit "$dir/$name.npz" --stride "$stride" --frames "$frames" --iters 300 \
         --holdout-observations 0.15 --holdout-span "$span" --seed "$seed" \
-        --out "$work/$name-$span-$seed" --quiet > "$out"
+        --out "$work/$name-$span-$seed" --quiet --json "$out"
     done
   done <<< "$clips"
 done

@@ -47,6 +47,8 @@ pub struct Sequence {
     /// What the reader decided where the file was not plain ([`c3d::C3d::notes`]), to be
     /// said once to the user.
     pub notes: Vec<String>,
+    /// The units a motion-capture file states (`mm`, `m`, ...); `None` for other formats.
+    pub units: Option<String>,
 }
 
 /// Observations hidden from a fit, and what they were.
@@ -135,6 +137,7 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
         mut faces,
         markers,
         notes,
+        units,
         ..
     } = read_points(data, &options.file)?;
     // A model's outputs (joint angles, moments, ...) are not positions of the scene.
@@ -242,6 +245,7 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
         kept,
         model_outputs_left_out,
         notes,
+        units,
     })
 }
 

@@ -38,6 +38,8 @@ pub fn evaluate(
         iterations: 0,
         seconds: 0.0,
         held_out_observations: None,
+        epe: None,
+        units: None,
     })
 }
 
@@ -149,7 +151,8 @@ pub fn eval_run_as(
         iterations: history.len(),
         seconds: history.last().map_or(0.0, |r| r.seconds),
         ..report
-    })
+    }
+    .in_units(own.units.clone(), own.scale))
 }
 
 fn denormalize(t: &Trajectories, center: [f32; 3], scale: f32) -> Result<Trajectories> {

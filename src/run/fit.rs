@@ -264,6 +264,7 @@ fn finish(
                 kept: sequence.kept.clone(),
                 model_outputs_left_out: sequence.model_outputs_left_out,
                 notes: sequence.notes.clone(),
+                units: sequence.units.clone(),
             };
             (Some(sequence), with)
         }
@@ -284,7 +285,8 @@ fn finish(
         seconds: fitted.seconds,
         held_out_observations: gap_report(&fitted.field, config, placed, sequence, device)?,
         ..evaluate(&fitted.field, &test, what, device)?
-    };
+    }
+    .in_units(sequence.units.clone(), sequence.scale);
     save_json(&report, &run.report())?;
     Ok(report)
 }

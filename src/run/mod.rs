@@ -366,6 +366,22 @@ pub struct Report {
     /// (`--holdout-observations`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out_observations: Option<GapReport>,
+    /// The EPE in the data's own units (`epe_x1e4` × 10⁻⁴ × the normalisation's scale), for
+    /// data that states its units (a `.c3d` or `.trc`: millimetres, as a lab reads them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub epe: Option<f64>,
+    /// The units of `epe` (`mm`, `m`, ...).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub units: Option<String>,
+}
+
+impl Report {
+    /// This report with its EPE also in `units`, the data's, whose normalisation divided
+    /// its coordinates by `scale`.
+    pub fn in_units(self, units: Option<String>, scale: f32) -> Report {
+        let epe = units.as_ref().map(|_| self.epe_x1e4 * 1e-4 * scale as f64);
+        Report { epe, units, ..self }
+    }
 }
 
 /// A per-frame list with NaN (a frame with nothing to measure) written as JSON's `null`.

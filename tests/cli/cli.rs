@@ -919,3 +919,39 @@ fn fit_takes_soap_from_the_flag_and_refuses_it_without_the_fused_step() {
     assert_eq!(config["fit"]["soap"]["every"], 100);
     assert_eq!(config["fit"]["step"], "auto");
 }
+
+#[test]
+fn a_motion_capture_fit_reports_its_error_in_millimetres_and_quiet_is_quiet() {
+    let dir = common::scratch("doma-cli-mm");
+    let knee = concat!(env!("CARGO_MANIFEST_DIR"), "/data/mocap/right_knee.c3d");
+    let run = dir.join("run");
+    let json = dir.join("report.json");
+    let (ok, stdout, stderr) = doma(&[
+        "fit",
+        knee,
+        "--frames",
+        "0..30",
+        "--iters",
+        "2",
+        "--quiet",
+        "--json",
+        json.to_str().unwrap(),
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.is_empty() && stderr.is_empty(), "{stdout}{stderr}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(report["units"], "mm");
+    let (epe, x1e4) = (
+        report["epe"].as_f64().unwrap(),
+        report["epe_x1e4"].as_f64().unwrap(),
+    );
+    // The normalisation divides by a scale of the recording's size: metres of a person.
+    let scale = epe / (x1e4 * 1e-4);
+    assert!(
+        epe > 0.0 && (100.0..10_000.0).contains(&scale),
+        "{epe} {x1e4}"
+    );
+}
