@@ -35,7 +35,7 @@ pub struct CompleteArgs {
     pub extrapolate: bool,
     /// Fill with one filler alone instead of doma's fill (the blend): field_fill,
     /// field_fill_framewise, spline, linear, neighbours, iterative_pca, pattern,
-    /// rigid_body, kalman, gloersen or segment.
+    /// rigid_body, kalman, gloersen, segment or chain.
     #[arg(long, value_name = "FILLER", value_parser = Filler::parse)]
     pub method: Option<Filler>,
     /// The device.
@@ -166,4 +166,33 @@ fn listed(w: &crate::gaps::blend::Weights) -> String {
         .map(|(f, v)| format!("{} {v:.2}", f.label()))
         .collect();
     weights.join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// `--method`'s help names every filler there is (it is written by hand).
+    #[test]
+    fn the_help_lists_every_filler() {
+        for command in [
+            super::CompleteArgs::command(),
+            crate::cli::fill::FillArgs::command(),
+        ] {
+            let help = command
+                .get_arguments()
+                .find(|a| a.get_id() == "method")
+                .and_then(|a| a.get_long_help().or(a.get_help()))
+                .map(|h| h.to_string())
+                .unwrap_or_default();
+            for f in crate::gaps::Filler::ALL {
+                assert!(
+                    help.contains(f.name()),
+                    "{} misses {}: {help}",
+                    command.get_name(),
+                    f.name()
+                );
+            }
+        }
+    }
 }

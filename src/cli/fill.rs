@@ -47,7 +47,9 @@ pub struct FillArgs {
     /// Also fill before a marker's first observation and after its last.
     #[arg(long)]
     pub extrapolate: bool,
-    /// Fill with one filler alone instead of doma's fill.
+    /// Fill with one filler alone instead of doma's fill: chain (the default with
+    /// --no-fit), segment, rigid_body, pattern, kalman, gloersen, spline, linear,
+    /// neighbours, iterative_pca, or, after a fit, field_fill or field_fill_framewise.
     #[arg(long, value_name = "FILLER", value_parser = Filler::parse)]
     pub method: Option<Filler>,
     /// The fit's iterations (default: `doma fit`'s for tracks with gaps).
