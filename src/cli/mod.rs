@@ -71,7 +71,7 @@ pub enum Command {
     View(view::ViewArgs),
     /// Print a run's model, parameter count, checkpoint size and data shape.
     Info(info::InfoArgs),
-    /// Write plots of a run (loss, per-frame EPE, 3-view error scatters) to RUN/plots/, PNG and SVG.
+    /// Write plots of a run (loss, per-frame EPE, the longest filled gaps, 3-view error scatters) to RUN/plots/, PNG and SVG.
     Plot(plot::PlotArgs),
 }
 

@@ -8,7 +8,9 @@ use crate::run::{RunDir, plot_run};
 
 /// The flags of `doma plot`.
 #[derive(clap::Parser, Debug, Clone)]
-#[command(about = "Write plots of a run, PNG and SVG (loss, per-frame EPE, 3-view error scatters)")]
+#[command(
+    about = "Write plots of a run, PNG and SVG (loss, per-frame EPE, the longest filled gaps of tracks with gaps, 3-view error scatters)"
+)]
 pub struct PlotArgs {
     /// The run folder.
     pub run: PathBuf,

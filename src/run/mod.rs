@@ -44,7 +44,7 @@ pub use folder::{OpenRun, RunDir};
 pub use gap_report::{GapErrors, GapReport, gap_report};
 pub use info::{RunInfo, info};
 pub use lock::RunLock;
-pub use plot::plot_run;
+pub use plot::{GAP_FIGURES, plot_run};
 pub use recording::{
     GapRow, GapTable, RecordingFill, fill_recording, filled_by, gap_rows, gaps_csv, gaps_csv_path,
     gaps_html_path, mm_per_unit, names_and_rate, write_gap_report,

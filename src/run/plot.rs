@@ -14,8 +14,9 @@ use crate::train::select::WeightChoice;
 use crate::{DomaError, Result};
 
 /// Writes the run's plots into `RUN_DIR/plots/`, each as `.png` and `.svg`: `loss`
-/// (trajectory and total loss per iteration, log scale), `epe_per_frame` (held-out EPE per
-/// frame) and, for each of `frames` (default: the middle and the last frame),
+/// (trajectory and total loss per iteration, log scale), `epe_per_frame` (the EPE per frame
+/// on what the run measures, its title says which), for tracks with gaps `gap_KK` (the
+/// longest gaps as `doma complete` fills them, [`GAP_FIGURES`]) and, for each of `frames` (default: the middle and the last frame),
 /// `points_frame_KKKK` (three views of the held-out points observed in frame KKKK, coloured
 /// by error; a frame where none is observed is skipped). Returns the PNG paths written.
 pub fn plot_run(run: &RunDir, frames: Option<&[usize]>, device: &Device) -> Result<Vec<PathBuf>> {
@@ -38,7 +39,19 @@ pub fn plot_run(run: &RunDir, frames: Option<&[usize]>, device: &Device) -> Resu
     std::fs::create_dir_all(&dir).map_err(|e| DomaError::io(&dir, e))?;
     let predicted = predict(&field, &test, device)?;
     let per_frame = epe_per_frame(&predicted, &test)?;
-    let mut written = vec![loss_plot(&history, &dir)?, epe_plot(&per_frame, &dir)?];
+    let (_, what) = config.measured(&data.trajectories)?;
+    let mut written = vec![
+        loss_plot(&history, &dir)?,
+        epe_plot(&per_frame, what, &dir)?,
+    ];
+    // Tracks with gaps: the longest gaps as `doma complete` fills them, in the data's units.
+    if data
+        .trajectories
+        .observed()
+        .is_some_and(|o| o.iter().any(|&seen| !seen))
+    {
+        written.extend(gap_plots(run, &config, &dir, device)?);
+    }
     if let Some(choice) = &config.weight_search {
         written.push(weight_plot(choice, &dir)?);
     }
@@ -133,8 +146,99 @@ fn weight_plot(choice: &WeightChoice, dir: &Path) -> Result<PathBuf> {
     Ok(path)
 }
 
-/// `epe_per_frame.png`: the held-out EPE of each frame.
-fn epe_plot(per_frame: &[f64], dir: &Path) -> Result<PathBuf> {
+/// The gaps `doma plot` draws for a run of tracks with gaps, the longest first.
+pub const GAP_FIGURES: usize = 4;
+
+/// `gap_KK.png` for the [`GAP_FIGURES`] longest gaps that `doma complete` fills (by
+/// default): the track's coordinate that moves most around the gap, observed before and
+/// after it and filled inside it, in the data's units.
+fn gap_plots(
+    run: &RunDir,
+    config: &super::RunConfig,
+    dir: &Path,
+    device: &Device,
+) -> Result<Vec<PathBuf>> {
+    let done = super::complete_tracks(run, super::FillPolicy::default(), device)?;
+    let (t, n) = (done.frames, done.points);
+    let (labels, _) = super::names_and_rate(&config.data).unwrap_or_default();
+    let mut gaps: Vec<(usize, usize, usize)> = Vec::new();
+    for i in 0..n {
+        let mut k = 0;
+        while k < t {
+            if !done.filled[k * n + i] {
+                k += 1;
+                continue;
+            }
+            let start = k;
+            while k < t && done.filled[k * n + i] {
+                k += 1;
+            }
+            gaps.push((i, start, k));
+        }
+    }
+    gaps.sort_by_key(|&(i, a, b)| (std::cmp::Reverse(b - a), i, a));
+    let mut written = Vec::new();
+    for (g, &(i, a, b)) in gaps.iter().take(GAP_FIGURES).enumerate() {
+        let from = a.saturating_sub(b - a);
+        let to = (b + (b - a)).min(t);
+        let at = |k: usize, d: usize| done.tracks[3 * (k * n + i) + d] as f64;
+        let range = |d: usize| {
+            let v: Vec<f64> = (from..to)
+                .map(|k| at(k, d))
+                .filter(|v| v.is_finite())
+                .collect();
+            v.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+                - v.iter().cloned().fold(f64::INFINITY, f64::min)
+        };
+        let d = (0..3)
+            .max_by(|&x, &y| range(x).total_cmp(&range(y)))
+            .unwrap_or(0);
+        let seen = |ks: std::ops::Range<usize>| -> Vec<(f64, f64)> {
+            ks.filter(|&k| done.observed[k * n + i])
+                .map(|k| (done.source_frames[k] as f64, at(k, d)))
+                .collect()
+        };
+        let series = [
+            Series {
+                name: "observed, before",
+                color: [40, 60, 200],
+                points: seen(from..a),
+            },
+            Series {
+                name: "filled",
+                color: [210, 30, 30],
+                points: (a.saturating_sub(1)..(b + 1).min(t))
+                    .map(|k| (done.source_frames[k] as f64, at(k, d)))
+                    .collect(),
+            },
+            Series {
+                name: "observed, after",
+                color: [40, 160, 90],
+                points: seen(b..to),
+            },
+        ];
+        let input = |k: usize| done.kept.as_ref().map_or(k, |kept| kept[k]);
+        let marker = labels
+            .get(input(i))
+            .filter(|l| !l.is_empty())
+            .cloned()
+            .unwrap_or_else(|| format!("track {}", input(i)));
+        let title = format!(
+            "{marker}: {} frames filled ({}–{}), {}",
+            b - a,
+            done.source_frames[a],
+            done.source_frames[b - 1],
+            ["x", "y", "z"][d]
+        );
+        let path = dir.join(format!("gap_{g:02}.png"));
+        line_plot(&title, "frame", ["x", "y", "z"][d], &series, false).save_png_and_svg(&path)?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+/// `epe_per_frame.png`: the EPE of each frame on `what` the run measures.
+fn epe_plot(per_frame: &[f64], what: &str, dir: &Path) -> Result<PathBuf> {
     let series = [Series {
         name: "EPE",
         color: [30, 170, 90],
@@ -148,7 +252,7 @@ fn epe_plot(per_frame: &[f64], dir: &Path) -> Result<PathBuf> {
     }];
     let path = dir.join("epe_per_frame.png");
     line_plot(
-        "Held-out EPE per frame",
+        &format!("EPE per frame on {what}"),
         "frame",
         "EPE ×1e-4",
         &series,

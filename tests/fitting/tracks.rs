@@ -166,12 +166,18 @@ fn held_out_observations_are_reported_beside_every_baseline_and_eval_repeats_the
     assert!(about.tracks_unseen_in_reference.is_some());
     assert_eq!(about.test_fraction, 0.25);
     assert!(about.fitted_tracks < about.points && about.fitted_tracks > 0);
-    // The plots of a run with gaps: the points observed in each plotted frame.
+    // The plots of a run with gaps: the points observed in each plotted frame, and its
+    // longest gaps as they are filled.
     let plots = doma::run::plot_run(&run, None, &Device::flex()).unwrap();
     assert!(
         plots.len() >= 3 && plots.iter().all(|p| p.is_file()),
         "{plots:?}"
     );
+    let gaps = plots
+        .iter()
+        .filter(|p| p.file_name().unwrap().to_string_lossy().starts_with("gap_"))
+        .count();
+    assert_eq!(gaps, doma::run::GAP_FIGURES, "{plots:?}");
 }
 
 /// With blind validation (a new fit's default) the fit never sees the validation spans,
