@@ -143,8 +143,30 @@ def test_one_file_to_another_format_and_bad_outputs_refused(cli, folder, tmp_pat
     knee = doma.read_tracks(RIGHT_KNEE)
     assert labels == list(knee.labels) and rate == 100.0 and units == "mm"
     np.testing.assert_allclose(values, knee.tracks, atol=1e-3)
-    for bad, why in [(tmp_path / "x.csv", "extension"), (tmp_path / "y.c3d", "C3D input")]:
-        source = folder / ("right_knee.c3d" if why == "extension" else "knee.trc")
+    # A TRC to a new C3D: its markers, rate and units; measured residual 0, filled −0.0.
+    ezc3d = pytest.importorskip("ezc3d")
+    made = tmp_path / "from_trc.c3d"
+    done = subprocess.run([cli, "fill", folder / "knee.trc", "--out", made, "--no-fit"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    c = ezc3d.c3d(str(made))
+    seq = doma.read_tracks(folder / "knee.trc")
+    assert list(c["parameters"]["POINT"]["LABELS"]["value"]) == list(seq.labels)
+    assert c["parameters"]["POINT"]["RATE"]["value"][0] == seq.rate
+    points = c["data"]["points"][:3].transpose(2, 1, 0)
+    np.testing.assert_allclose(points[seq.observed], seq.tracks[seq.observed], atol=1e-3)
+    assert np.isfinite(points[30:45, 4]).all()
+    import c3d as c3d_package
+
+    with open(made, "rb") as h:
+        residual = np.stack([p[:, 3].copy() for _, p, _ in c3d_package.Reader(h).read_frames()])
+    assert (residual == 0).all()
+    assert np.array_equal(np.signbit(residual), ~seq.observed)
+    back = doma.read_tracks(made)
+    assert back.observed.all() and back.labels == seq.labels
+    npz = tmp_path / "plain.npz"
+    np.savez(npz, tracks=seq.tracks, observed=seq.observed)
+    for source, bad, why in [(folder / "right_knee.c3d", tmp_path / "x.csv", "extension"),
+                             (npz, tmp_path / "y.c3d", "marker names")]:
         refused = subprocess.run([cli, "fill", source, "--out", bad], capture_output=True, text=True)
         assert refused.returncode != 0 and why in refused.stderr and str(bad) in refused.stderr
         assert not bad.exists()

@@ -9,7 +9,7 @@ use burn::tensor::Device;
 use doma_formats::npy::NpyValues;
 
 use super::{RunConfig, RunDir, field_at_frames};
-use crate::data::c3d::{c3d_tracks, read_c3d, write_c3d_patched};
+use crate::data::c3d::{C3d, c3d_tracks, read_c3d, write_c3d, write_c3d_patched};
 use crate::data::layout::Layout;
 use crate::data::mesh::as_points;
 use crate::data::sequence::{Sequence, read_points, read_tracks};
@@ -101,12 +101,14 @@ fn filled_gaps(fill: &RunFill, past_ends: &impl Fn(usize, usize) -> bool) -> Vec
 /// instead: PointOdyssey's `trajs_3d` (as `f32`), `visibs` (the mask) and `valids` (all
 /// true), or TAPVid-3D's `tracks_XYZ` and `visibility`.
 ///
-/// A `.c3d` (from a C3D input alone, [`crate::data::c3d`]) is the input file with only the
+/// A `.c3d` from a C3D input ([`crate::data::c3d`]) is the input file with only the
 /// filled entries written, in its own byte order and number format: every group and
 /// parameter in its order, the analog samples, the events, the frames, rate and scale,
 /// and every marker (one never seen stays invalid). A filled entry has residual 0, which
-/// marks a point computed rather than measured; the frames outside the fitted clip, or
-/// between the frames of its stride, are as the input holds them.
+/// marks a point computed rather than measured (−0.0 in a float file: a fill's); the
+/// frames outside the fitted clip, or between the frames of its stride, are as the input
+/// holds them. From a `.trc` input it is a new file of its markers. A `.trc` keeps a
+/// `.trc` input's header, or takes a `.c3d`'s labels, rate and units.
 pub fn complete_run(
     run: &RunDir,
     out: &Path,
@@ -229,10 +231,11 @@ pub fn output_kind_for(data: &Path, out: &Path) -> Result<OutputKind> {
             data.display()
         )));
     }
-    if kind == OutputKind::C3d && !is_c3d(data) {
+    if kind == OutputKind::C3d && !(is_c3d(data) || is_trc(data)) {
         return Err(DomaError::Usage(format!(
-            "{}: a .c3d output is the C3D input with its gaps filled, and the input is {}: \
-             write a .trc or a .npz",
+            "{}: a .c3d output needs marker names and a frame rate (from a .c3d input, the \
+             input with its gaps written; from a .trc, a new file), and the input is {}: \
+             write a .npz",
             out.display(),
             data.display()
         )));
@@ -269,7 +272,11 @@ fn write_completion(
         gaps: filled_gaps(&fill, &past_ends),
         left_long: fill.left_long,
     };
-    if to_c3d {
+    if to_c3d && is_trc(&config.data) {
+        let tracks = fill.tracks(config)?;
+        let trc = trc_output(out, config, &fill, tracks)?;
+        write_c3d(out, &c3d_of_trc(trc, &fill))?;
+    } else if to_c3d {
         // The input file itself, with only the filled entries written: every group,
         // parameter, analog sample and event kept, and the frames outside the fitted clip
         // (or between its strided frames) as they were. The input's other values are never
@@ -385,6 +392,41 @@ impl OutputKind {
             "trc" => Some(OutputKind::Trc),
             _ => None,
         }
+    }
+}
+
+/// A new C3D file (Intel floats, the `POINT` group) of a completed `.trc`: its labels,
+/// rate, units and first frame number; a measured point of residual 0 (a TRC states no
+/// residual), a filled one of −0.0 (doma's fill, [`doma_formats::c3d::C3d::residuals`]),
+/// one left unfilled not measured.
+fn c3d_of_trc(trc: Trc, fill: &RunFill) -> C3d {
+    let (t, n) = (trc.frames(), trc.points());
+    let mut residuals: Vec<f32> = fill
+        .seen
+        .iter()
+        .map(|&seen| if seen { 0.0 } else { -1.0 })
+        .collect();
+    for &(k, i) in &fill.entries {
+        residuals[k * n + i] = -0.0;
+    }
+    let positions = trc
+        .positions
+        .iter()
+        .map(|&v| if v.is_finite() { v } else { 0.0 })
+        .collect();
+    C3d {
+        frames: t,
+        points: n,
+        first_frame: u32::try_from(trc.frame_numbers.first().copied().unwrap_or(1)).unwrap_or(1),
+        rate: trc.rate as f32,
+        scale: -0.1,
+        units: trc.units,
+        labels: trc.labels,
+        model_outputs: vec![None; n],
+        positions,
+        residuals,
+        cameras: vec![0; t * n],
+        notes: Vec::new(),
     }
 }
 
