@@ -23,6 +23,7 @@
 
 #[cfg(test)]
 mod conventions;
+mod layout;
 mod patch;
 mod read;
 mod write;

@@ -5,7 +5,8 @@
 use std::io::{self, Write};
 
 use super::Processor;
-use super::read::{Layout, head, parameters, tail};
+use super::layout::Layout;
+use super::read::{head, parameters, tail};
 use crate::source::Source;
 
 /// One point to write over a file's.
