@@ -297,3 +297,35 @@ impl RecipeArgs {
         }
     }
 }
+
+/// Which gaps a completion fills and by what: `doma complete`'s and `doma fill`'s flags
+/// ([`crate::run::FillPolicy`]).
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct FillPolicyArgs {
+    /// Fill gaps of at most this length only: N frames of the input, or Xs seconds (a
+    /// .c3d or .trc input's rate); longer gaps are left as the input holds them (NaN in a
+    /// .npz), and counted.
+    #[arg(long, value_name = "N|Xs")]
+    pub max_gap: Option<crate::run::MaxGap>,
+    /// Also fill before a track's first observation and after its last (by default only
+    /// gaps with observations on both sides are filled); the count is printed.
+    #[arg(long)]
+    pub extrapolate: bool,
+    /// Fill with one filler alone instead of doma's fill (the blend): chain (the default
+    /// of `doma fill --no-fit`), segment, rigid_body, pattern, kalman, gloersen, spline,
+    /// linear, neighbours, iterative_pca, or, after a fit, field_fill or
+    /// field_fill_framewise.
+    #[arg(long, value_name = "FILLER", value_parser = crate::gaps::Filler::parse)]
+    pub method: Option<crate::gaps::Filler>,
+}
+
+impl FillPolicyArgs {
+    /// The policy these flags ask for.
+    pub fn policy(&self) -> crate::run::FillPolicy {
+        crate::run::FillPolicy {
+            max_gap: self.max_gap,
+            extrapolate: self.extrapolate,
+            method: self.method,
+        }
+    }
+}

@@ -6,7 +6,7 @@ use crate::Result;
 use crate::cli::DeviceArgs;
 use crate::data::layout::Layout;
 use crate::gaps::Filler;
-use crate::run::{FillPolicy, MaxGap, RunDir, complete_run_with};
+use crate::run::{RunDir, complete_run_with};
 
 /// The flags of `doma complete`.
 #[derive(clap::Parser, Debug, Clone)]
@@ -25,19 +25,9 @@ pub struct CompleteArgs {
     /// tracks_XYZ, visibility).
     #[arg(long, value_enum)]
     pub layout: Option<Layout>,
-    /// Fill gaps of at most this length only: N frames of the input, or Xs seconds (a
-    /// .c3d input's rate); longer gaps are left as the input holds them (NaN in a .npz).
-    #[arg(long, value_name = "N|Xs")]
-    pub max_gap: Option<MaxGap>,
-    /// Also fill before a track's first observation and after its last (by default only
-    /// gaps with observations on both sides are filled); the count is printed.
-    #[arg(long)]
-    pub extrapolate: bool,
-    /// Fill with one filler alone instead of doma's fill (the blend): field_fill,
-    /// field_fill_framewise, spline, linear, neighbours, iterative_pca, pattern,
-    /// rigid_body, kalman, gloersen, segment or chain.
-    #[arg(long, value_name = "FILLER", value_parser = Filler::parse)]
-    pub method: Option<Filler>,
+    /// Which gaps are filled, and by what.
+    #[command(flatten)]
+    pub fill: crate::cli::FillPolicyArgs,
     /// The device.
     #[command(flatten)]
     pub device: DeviceArgs,
@@ -46,11 +36,7 @@ pub struct CompleteArgs {
 /// Writes the completed tracks.
 pub fn run(args: &CompleteArgs) -> Result<()> {
     let device = args.device.backend.device()?;
-    let policy = FillPolicy {
-        max_gap: args.max_gap,
-        extrapolate: args.extrapolate,
-        method: args.method,
-    };
+    let policy = args.fill.policy();
     let c = complete_run_with(
         &RunDir::new(&args.run),
         &args.out,
@@ -73,7 +59,7 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
         );
     }
     if c.unfilled > 0 {
-        let why = match (args.max_gap, args.extrapolate) {
+        let why = match (args.fill.max_gap, args.fill.extrapolate) {
             (Some(_), false) => {
                 "past --max-gap, or past a track's ends (--extrapolate fills those)"
             }

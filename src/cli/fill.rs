@@ -11,9 +11,8 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::cli::DeviceArgs;
-use crate::gaps::Filler;
 use crate::run::{
-    Completion, FillPolicy, MaxGap, RecordingFill, fill_recording, filled_by, names_and_rate,
+    Completion, FillPolicy, RecordingFill, fill_recording, filled_by, names_and_rate,
     output_kind_for, write_gap_report,
 };
 use crate::{DomaError, Result};
@@ -40,18 +39,9 @@ pub struct FillArgs {
     /// per recording instead of a fit's 15–30 s.
     #[arg(long)]
     pub no_fit: bool,
-    /// Fill gaps of at most this length only: N frames, or Xs seconds; longer gaps are
-    /// left as the input holds them, and counted.
-    #[arg(long, value_name = "N|Xs")]
-    pub max_gap: Option<MaxGap>,
-    /// Also fill before a marker's first observation and after its last.
-    #[arg(long)]
-    pub extrapolate: bool,
-    /// Fill with one filler alone instead of doma's fill: chain (the default with
-    /// --no-fit), segment, rigid_body, pattern, kalman, gloersen, spline, linear,
-    /// neighbours, iterative_pca, or, after a fit, field_fill or field_fill_framewise.
-    #[arg(long, value_name = "FILLER", value_parser = Filler::parse)]
-    pub method: Option<Filler>,
+    /// Which gaps are filled, and by what.
+    #[command(flatten)]
+    pub fill: crate::cli::FillPolicyArgs,
     /// The fit's iterations (default: `doma fit`'s for tracks with gaps).
     #[arg(long = "iters", value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub iterations: Option<u64>,
@@ -281,11 +271,7 @@ pub fn run(args: &FillArgs) -> Result<()> {
     }
     let device = args.device.backend.device()?;
     let interrupt = crate::cli::interrupt::install();
-    let policy = FillPolicy {
-        max_gap: args.max_gap,
-        extrapolate: args.extrapolate,
-        method: args.method,
-    };
+    let policy = args.fill.policy();
     let bar = if args.quiet {
         ProgressBar::hidden()
     } else {
@@ -307,7 +293,7 @@ pub fn run(args: &FillArgs) -> Result<()> {
                     let k = next.fetch_add(1, Ordering::Relaxed);
                     let Some(job) = jobs.get(k) else { break };
                     let outcome = fill_one(job, args, policy, &device, interrupt);
-                    let line = describe(job, &outcome, args.max_gap.is_some());
+                    let line = describe(job, &outcome, args.fill.max_gap.is_some());
                     // Through the bar, which prints nothing itself where stderr is no
                     // terminal.
                     if !args.quiet || matches!(outcome, Outcome::Failed(_)) {
