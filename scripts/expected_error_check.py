@@ -1,4 +1,4 @@
-"""How well `doma fill`'s expected error per gap ranks the true errors (docs/results.md,
+"""How well `doma fill`'s expected error per gap ranks the true errors (docs/gap-filling.md,
 "Expected error per gap"), on the native-rate protocol's hidden gaps
 (scripts/native_rate_gaps.py: its draw sets, the same seed).
 

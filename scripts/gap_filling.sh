@@ -2,7 +2,7 @@
 # Gap filling on tracker-like data made from the shipped meshes (examples/tracker_data.rs):
 # each sequence in both layouts, 20 % of the observations hidden in spans, 90 % of the
 # tracks fitted at doma fit's defaults. Writes results/tracks/NAME.json
-# (each fit's report, its per-track leans counted) and prints the table of docs/results.md.
+# (each fit's report, its per-track leans counted) and prints the table of docs/gap-filling.md.
 #   scripts/gap_filling.sh [DOMA_BINARY]
 set -euo pipefail
 cd "$(dirname "$0")/.."

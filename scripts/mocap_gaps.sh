@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Gap filling on real motion-capture markers (docs/results.md, "Gap filling: real markers").
+# Gap filling on real motion-capture markers (docs/gap-filling.md, "Real markers, thinned").
 # The recordings are not in the repository (two have no stated licence): point MOCAP_DIR at
 # a folder holding their masked .npz (tracks [T, N, 3] in metres, observed [T, N]).
 # Each file is cut to about 100 frames (every 4th or 7th frame), 15 % of its observed

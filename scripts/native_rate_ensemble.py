@@ -1,5 +1,5 @@
 """doma's fill averaged over several fits, on the native-rate protocol
-(docs/results.md, "Gap filling at the native rate").
+(docs/gap-filling.md, "At the native rate").
 
 Each FITS folder holds the runs that `native_rate_gaps.py --fits FITS` kept for the same
 draw sets (the same events, drawn with the same --seed and --draws), fitted with different

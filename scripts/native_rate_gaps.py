@@ -1,5 +1,5 @@
 """Gap filling at the native rate, on the protocol of the gap-filling literature
-(docs/results.md, "Gap filling at the native rate").
+(docs/gap-filling.md, "At the native rate").
 
 Each recording is read whole from its C3D, at its own rate. For 1 and for 3 markers at once
 and each gap length (0.1, 0.25, 0.5, 1 and 2 s), DRAWS events are drawn: a start frame and

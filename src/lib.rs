@@ -33,7 +33,7 @@
 //! ```
 //!
 //! **Layers**: each module imports only those of the layers before it, from the leaves
-//! ([`dual`], [`io`], [`knn`], [`names`], …) and gap filling on bare numbers ([`gaps`]:
+//! ([`dual`], [`io`], [`numeric`]: k-NN, eigensolvers and small solvers, [`names`], …) and gap filling on bare numbers ([`gaps`]:
 //! the fillers, the field's fill, the blend, the spans) through the network ([`siren`],
 //! [`jacobian`], [`field`]), data and losses ([`data`], [`loss`]), [`warp`] and
 //! [`metrics`], fitting ([`train`], [`register`]) and the jobs ([`run`], [`experiments`],
@@ -59,10 +59,10 @@ pub mod field;
 pub mod gaps;
 pub mod io;
 pub mod jacobian;
-pub mod knn;
 pub mod loss;
 pub mod metrics;
 pub mod names;
+pub mod numeric;
 pub mod plot;
 pub mod prelude;
 pub mod readback;

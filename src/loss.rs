@@ -265,7 +265,7 @@ impl AiapNeighbourhoods {
                 canonical.len()
             )));
         }
-        let tree = crate::knn::PointTree::new(canonical)?;
+        let tree = crate::numeric::knn::PointTree::new(canonical)?;
         let indices: Vec<usize> = canonical
             .iter()
             .flat_map(|q| tree.nearest_k(q, k))

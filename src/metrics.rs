@@ -5,7 +5,7 @@ use burn::tensor::Device;
 use crate::data::Trajectories;
 use crate::data::mesh::as_points;
 use crate::field::MotionField;
-use crate::knn::PointTree;
+use crate::numeric::knn::PointTree;
 use crate::{DomaError, Result};
 
 /// The factor by which tables report the EPE (the paper's "×10⁻⁴").

@@ -550,19 +550,15 @@ def fill(
     observation or after its last unless ``extrapolate``. ``tracks`` may be the
     :class:`Tracks` that :func:`read_tracks` returns (its mask and rate are used).
 
-    Methods (:data:`FILLERS`): ``chain`` (the default, doma's: the rigid-body fill with its
-    donors passed on to others where they are lost, the best fit-free fill on the
-    recordings of docs/results.md), ``rigid_body`` (Vicon Nexus's: the three nearest
-    markers seen through the gap moved as a rigid body, from both borders), ``pattern``
-    (Nexus's: one donor's motion), ``spline`` (natural cubic), ``linear``, ``neighbours``
-    (the mean motion of the 4 nearest), ``iterative_pca``, ``kalman`` (Burke & Lasenby's
-    low-dimensional Kalman smoother, as pyCGM2 runs it), ``gloersen`` (Gløersen &
-    Federolf's PCA fill, strategy R2 of their ``PredictMissingMarkers``), ``segment``
-    (doma's: the rigid-body fill from the three donors that best carry the marker through
-    its own observations around the gap). Where a gap is not interior or has too few
-    donors, ``rigid_body``, ``segment`` and ``pattern`` give the linear fill (``chain``
-    where it is not interior); where no two frames see every marker, so does ``kalman``;
-    where every marker has a gap, so does ``gloersen``.
+    Methods (:data:`FILLERS`, each described in docs/usage.md, "The fillers"): ``chain``
+    (the default, doma's: the rigid-body fill with its donors passed on where they are
+    lost), ``rigid_body`` and ``pattern`` (Vicon Nexus's), ``kalman`` (Burke & Lasenby's
+    smoother, as pyCGM2 runs it), ``gloersen`` (Gløersen & Federolf's PCA fill), and the
+    others. The command line's kebab-case spellings (``rigid-body``) are accepted too.
+    Where a gap is not interior or has too few donors, ``rigid_body``, ``segment`` and
+    ``pattern`` give the linear fill (``chain`` where it is not interior); where no two
+    frames see every marker, so does ``kalman``; where every marker has a gap, so does
+    ``gloersen``.
 
     Returns a new [T, N, 3] float32 array: the observed entries as given, the gaps asked
     for filled, every other unobserved entry NaN.
@@ -577,11 +573,12 @@ def fill(
     positions = _time_major(_checked_array(tracks, "tracks", (None, None, 3)), time_axis)
     positions = np.ascontiguousarray(positions, dtype=np.float32)
     mask = _mask(observed, positions, time_axis)
-    if not isinstance(method, str) or method.lower() not in FILLERS:
+    name = method.lower().replace("-", "_") if isinstance(method, str) else None
+    if name not in FILLERS:
         raise ValueError(f"method {method!r} is not one of {', '.join(FILLERS)}")
     longest = _max_gap_frames(max_gap, rate)
     out = np.empty_like(positions)
-    _native.fill_into(positions, mask, method.lower(), out)
+    _native.fill_into(positions, mask, name, out)
     seen = mask.view(np.bool_)
     for i, a, b, interior in _gap_spans(seen):
         if (not interior and not extrapolate) or (interior and longest is not None and b - a > longest):

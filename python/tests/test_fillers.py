@@ -65,6 +65,8 @@ def test_every_method_fills_every_gap_and_refuses_what_it_cannot_read():
         assert np.isfinite(filled[a + 1 : b, i]).all(), method
         assert np.array_equal(filled[observed], tracks[observed]), method
     assert set(doma.FILLERS) >= {"rigid_body", "pattern", "spline", "linear", "iterative_pca", "kalman"}
+    kebab = doma.fill(tracks, observed, "rigid-body")
+    assert np.array_equal(kebab, doma.fill(tracks, observed, "rigid_body"), equal_nan=True)
     with pytest.raises(ValueError, match="method 'field_fill' is not one of"):
         doma.fill(tracks, observed, "field_fill")
     poisoned = tracks.copy()
@@ -128,3 +130,17 @@ def test_three_fits_complete_with_the_median_of_their_fills(tmp_path):
     assert not np.array_equal(each[0], each[1])
     with pytest.raises(ValueError, match="fits"):
         doma.fit(tracks, observed, iters=2, progress=False, fits=0)
+
+
+def test_fillers_are_the_command_line_s_less_the_field_s(cli):
+    """`doma.FILLERS` is every filler of `doma fill -h` (made from `Filler::ALL`) but the
+    field's two fills, which need a fit."""
+    import re
+    import subprocess
+
+    help_text = subprocess.run([str(cli), "fill", "-h"], capture_output=True, text=True, check=True).stdout
+    listed = re.search(r"--method <FILLER>.*?\[possible values: ([^\]]*)\]", help_text, re.S).group(1)
+    flags = [v.strip() for v in listed.split(",")]
+    assert "field-fill" in flags and "field-fill-framewise" in flags
+    want = [f.replace("-", "_") for f in flags if not f.startswith("field-fill")]
+    assert list(doma.FILLERS) == want

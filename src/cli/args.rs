@@ -311,12 +311,28 @@ pub struct FillPolicyArgs {
     /// gaps with observations on both sides are filled); the count is printed.
     #[arg(long)]
     pub extrapolate: bool,
-    /// Fill with one filler alone instead of doma's fill (the blend): chain (the default
-    /// of `doma fill --no-fit`), segment, rigid_body, pattern, kalman, gloersen, spline,
-    /// linear, neighbours, iterative_pca, or, after a fit, field_fill or
-    /// field_fill_framewise.
-    #[arg(long, value_name = "FILLER", value_parser = crate::gaps::Filler::parse)]
+    /// Fill with one filler alone instead of doma's fill (the blend); `chain` is the
+    /// default of `doma fill --no-fit`, and the field's two fills need a fit. The
+    /// snake_case names of reports and Python are accepted too.
+    #[arg(long, value_name = "FILLER")]
     pub method: Option<crate::gaps::Filler>,
+}
+
+/// The fillers as the command line lists and reads them: every one of
+/// [`crate::gaps::Filler::ALL`] by its kebab-case [`crate::gaps::Filler::flag`], its report
+/// name and former names as aliases.
+impl ValueEnum for crate::gaps::Filler {
+    fn value_variants<'a>() -> &'a [Self] {
+        &crate::gaps::Filler::ALL
+    }
+
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        let value = clap::builder::PossibleValue::new(self.flag()).help(self.label());
+        let aliases = std::iter::once(self.name())
+            .filter(|name| *name != self.flag())
+            .chain(self.former_names().iter().copied());
+        Some(aliases.fold(value, |v, alias| v.alias(alias)))
+    }
 }
 
 impl FillPolicyArgs {

@@ -75,7 +75,12 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
             c.fits
         );
     }
-    let b = &c.blend;
+    print_blend(&c.blend);
+    Ok(())
+}
+
+/// The weights that `b` filled with, per class of gap, its leans and the field's share.
+fn print_blend(b: &crate::gaps::blend::Blend) {
     // One filler alone, or the blend's weights.
     let weights = |w: &crate::gaps::blend::Weights, count: usize| {
         if w.0.contains(&1.0) {
@@ -133,7 +138,6 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
             }
         }
     }
-    Ok(())
 }
 
 /// The label of the filler that holds the most weight (all of it, where it fills alone).
@@ -158,23 +162,33 @@ fn listed(w: &crate::gaps::blend::Weights) -> String {
 mod tests {
     use clap::CommandFactory;
 
-    /// `--method`'s help names every filler there is (it is written by hand).
+    /// `--method` offers every filler there is, by its command-line name, and reads the
+    /// report name too.
     #[test]
     fn the_help_lists_every_filler() {
         for command in [
             super::CompleteArgs::command(),
             crate::cli::fill::FillArgs::command(),
         ] {
-            let help = command
+            let method = command
                 .get_arguments()
                 .find(|a| a.get_id() == "method")
-                .and_then(|a| a.get_long_help().or(a.get_help()))
-                .map(|h| h.to_string())
-                .unwrap_or_default();
+                .expect("--method");
+            let offered: Vec<String> = method
+                .get_possible_values()
+                .iter()
+                .map(|v| v.get_name().to_string())
+                .collect();
+            let all: Vec<&str> = crate::gaps::Filler::ALL.iter().map(|f| f.flag()).collect();
+            assert_eq!(offered, all, "{}", command.get_name());
             for f in crate::gaps::Filler::ALL {
+                let value = method
+                    .get_possible_values()
+                    .into_iter()
+                    .find(|v| v.matches(f.name(), false));
                 assert!(
-                    help.contains(f.name()),
-                    "{} misses {}: {help}",
+                    value.is_some(),
+                    "{} does not read {}",
                     command.get_name(),
                     f.name()
                 );

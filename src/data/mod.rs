@@ -2,6 +2,7 @@
 
 pub mod anime;
 pub mod c3d;
+pub mod held_out;
 pub mod layout;
 pub mod mesh;
 pub mod npy;
@@ -70,7 +71,10 @@ impl From<doma_formats::Frames> for Trajectories {
 /// [`crate::gaps::Marked::linear`]); the losses and metrics never read it. The field's input
 /// `x` of each point, its *canonical* position, is frame 0's position for complete
 /// data, and for masked data the position in a reference frame
-/// ([`tracks::Tracks::into_trajectories`]).
+/// ([`tracks::Tracks::into_trajectories`]). Not one type with [`tracks::Tracks`] (a
+/// file's tracks as read, NaN where unobserved, no canonical frame yet) or
+/// [`crate::gaps::Marked`] (the borrowed view gap filling reads): what the trainer
+/// uploads must be finite everywhere and carry its canonical positions.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Trajectories {
     frames: usize,

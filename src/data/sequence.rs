@@ -9,12 +9,12 @@ use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
+pub use super::held_out::{HeldOut, HoldOut};
+use super::held_out::{hide_blind_spans, hold_out};
 use super::layout::TrackFile;
 use super::mesh::read_obj;
 use super::tracks::Tracks;
 use super::{Trajectories, anime, c3d, layout, npy, traj, trc};
-use crate::gaps::blend::blind_spans;
-use crate::gaps::spans::hold_out_spans;
 use crate::{DomaError, Result};
 
 /// An animated mesh: vertex trajectories `[T, V, 3]` and, when known, the triangles.
@@ -51,26 +51,6 @@ pub struct Sequence {
     pub units: Option<String>,
 }
 
-/// Observations hidden from a fit, and what they were.
-#[derive(Clone, Debug, PartialEq)]
-pub struct HeldOut {
-    /// `(frame, point)`, sorted.
-    pub entries: Vec<(usize, usize)>,
-    /// The observed position of each entry.
-    pub truth: Vec<[f32; 3]>,
-}
-
-/// Observations hidden from a fit to measure gap filling ([`hold_out_spans`]).
-#[derive(Clone, Debug, PartialEq)]
-pub struct HoldOut {
-    /// The fraction of the observed entries hidden.
-    pub fraction: f64,
-    /// The span lengths, in frames (of the clip, after the stride).
-    pub spans: std::ops::RangeInclusive<usize>,
-    /// The seed of the draw.
-    pub seed: u64,
-}
-
 /// How a sequence is loaded: beside the file, everything that decides which entries a fit
 /// sees and where its canonical positions are.
 #[derive(Clone, Debug, Default)]
@@ -96,6 +76,8 @@ pub struct LoadOptions {
     /// With tracks that have gaps (after `hold_out`), hide the validation spans of doma's
     /// fill drawn with this seed ([`blind_spans`]) from the fit.
     pub blind_validation: Option<u64>,
+    /// The validation whose share of the observations the blind spans hide.
+    pub validation: crate::gaps::blend::Validation,
 }
 
 /// Loads `data` (`.traj`, `.anime`, `.npy`, `.npz`, or a folder of OBJ frames with equal
@@ -155,26 +137,8 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
         tracks = tracks.select_points(&markers);
         kept = Some(markers);
     }
-    let ext = extension(data);
-    let sibling = data.with_extension("obj");
-    let obj = options
-        .mesh
-        .clone()
-        .or_else(|| (faces.is_none() && ext == "traj" && sibling.is_file()).then_some(sibling));
-    if let Some(obj) = obj {
-        let m = read_obj(&obj)?;
-        if m.vertices.len() != tracks.points() {
-            return Err(DomaError::Malformed {
-                path: obj,
-                reason: format!(
-                    "{} vertices, but {} has {} points",
-                    m.vertices.len(),
-                    data.display(),
-                    tracks.points()
-                ),
-            });
-        }
-        faces = Some(m.faces);
+    if let Some(mesh) = mesh_faces(data, options, faces.is_none(), tracks.points())? {
+        faces = Some(mesh);
     }
     let stride = options.stride.max(1);
     tracks = match options.frames.clone() {
@@ -199,18 +163,7 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
         Some(h) => Some(hold_out(&mut tracks, h).map_err(malformed)?),
         None => None,
     };
-    let blind = match options.blind_validation {
-        Some(seed) if tracks.observed().iter().any(|&o| !o) => {
-            let entries = blind_spans(&tracks.marked(), seed);
-            let kept = taken(&tracks, &entries);
-            tracks.hide(&entries);
-            (!entries.is_empty()).then_some(HeldOut {
-                entries,
-                truth: kept,
-            })
-        }
-        _ => None,
-    };
+    let blind = hide_blind_spans(&mut tracks, options.blind_validation, &options.validation);
     let trajectories = tracks
         .into_trajectories(options.reference)
         .map_err(|e| match e {
@@ -249,6 +202,36 @@ pub fn load_sequence_with(data: &Path, options: &LoadOptions) -> Result<Sequence
     })
 }
 
+/// The faces of the mesh `options` names, or of a `.traj` file's sibling `.obj` where the
+/// file has none of its own (`has_none`), checked against the `points` read from `data`.
+fn mesh_faces(
+    data: &Path,
+    options: &LoadOptions,
+    has_none: bool,
+    points: usize,
+) -> Result<Option<Vec<[u32; 3]>>> {
+    let sibling = data.with_extension("obj");
+    let obj = options.mesh.clone().or_else(|| {
+        (has_none && extension(data) == "traj" && sibling.is_file()).then_some(sibling)
+    });
+    let Some(obj) = obj else {
+        return Ok(None);
+    };
+    let m = read_obj(&obj)?;
+    if m.vertices.len() != points {
+        return Err(DomaError::Malformed {
+            path: obj,
+            reason: format!(
+                "{} vertices, but {} has {} points",
+                m.vertices.len(),
+                data.display(),
+                points
+            ),
+        });
+    }
+    Ok(Some(m.faces))
+}
+
 /// The tracks observed in some frame; refuses tracks none of which is.
 fn observed_somewhere(tracks: &Tracks) -> std::result::Result<Vec<usize>, String> {
     let never = tracks.never_observed();
@@ -275,29 +258,6 @@ fn renumber(faces: Option<Vec<[u32; 3]>>, kept: &[usize]) -> Option<Vec<[u32; 3]
             })
             .collect()
     })
-}
-
-/// Hides `h`'s seeded spans of `tracks`' observations ([`hold_out_spans`]), returning them
-/// with their true positions.
-fn hold_out(tracks: &mut Tracks, h: &HoldOut) -> std::result::Result<HeldOut, String> {
-    let entries = hold_out_spans(&tracks.marked(), h.fraction, h.spans.clone(), h.seed)
-        .map_err(|e| format!("--holdout-observations: {e}"))?;
-    let truth = taken(tracks, &entries);
-    tracks.hide(&entries);
-    Ok(HeldOut { entries, truth })
-}
-
-/// The positions of `entries` `(frame, point)` of `tracks`.
-fn taken(tracks: &Tracks, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
-    let n = tracks.points();
-    entries
-        .iter()
-        .map(|&(k, i)| {
-            let e = 3 * (k * n + i);
-            let p = &tracks.positions()[e..e + 3];
-            [p[0], p[1], p[2]]
-        })
-        .collect()
 }
 
 /// The file's extension, lower-case ("" if none).

@@ -16,13 +16,16 @@
 
 use super::Trajectories;
 use crate::gaps::Marked;
-use crate::knn::PointTree;
+use crate::numeric::knn::PointTree;
 use crate::{DomaError, Result};
 
 /// The neighbours whose motion places an unseen track's canonical position.
 pub const PLACEMENT_NEIGHBOURS: usize = 8;
 
-/// Positions with an observed mask; unobserved entries are never read.
+/// Positions with an observed mask; unobserved entries are never read. A file's tracks
+/// as read, before a canonical frame is chosen; not [`super::Trajectories`], whose every
+/// entry must be finite for the trainer, nor [`crate::gaps::Marked`], the borrowed view
+/// that gap filling reads ([`Tracks::marked`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tracks {
     frames: usize,

@@ -6,23 +6,23 @@
 //!
 //! 1. from the gap's last observation, the track is moved frame by frame with the rigid
 //!    motion of three donors, from the frame where they were taken up (its position there
-//!    known, or already carried) to each frame where all three are still seen;
+//!    known, or already transported) to each frame where all three are still seen;
 //! 2. where one of them is lost, three others are taken up at the frame before, among the
-//!    [`CHAIN_POOL`] tracks nearest to the track's carried position there that are seen
-//!    at both frames: the [`SEGMENT_CANDIDATES`] most rigid (the least spread of their
+//!    [`CHAIN_POOL`] tracks nearest to the track's transported position there that are seen
+//!    at both frames: the [`SEGMENT_RANKED`] most rigid (the least spread of their
 //!    distance to the track over its observed frames around the gap, plus
 //!    [`NEARNESS`] times its mean: the segment fill's rank), and of those
-//!    the triple whose rigid motion best carries the track from the border the carry
+//!    the triple whose rigid motion best transports the track from the border the transport
 //!    started at to its observations around the gap (the segment fill's judge; the three
 //!    most rigid where no triple is seen at the border and at one of those frames). On
 //!    dense markers the three most rigid alone now and then took a triple whose motion
-//!    carries the track badly: on a 5 s excerpt at 200 Hz, 0.5 s gaps filled at 2.50 mm
+//!    transports the track badly: on a 5 s excerpt at 200 Hz, 0.5 s gaps filled at 2.50 mm
 //!    against 0.94 judged;
 //! 3. the same backwards from the gap's first observation after it, and the two blended
 //!    linearly in time, as the rigid-body fill blends its moves from both borders, so
 //!    that the fill meets both observations.
 //!
-//! Where fewer than three tracks are seen at a frame and the one before, the carried
+//! Where fewer than three tracks are seen at a frame and the one before, the transported
 //! position is held there. It is what a motion field knows, that nearby markers move
 //! together, asked of the observations through the gap rather than of a fitted field;
 //! each hand-over adds the donors' own error, which the blend from the other border
@@ -32,15 +32,15 @@
 use std::collections::HashMap;
 
 use super::donors::{RIGID_BODY_DONORS, rigid_motion};
-use super::fillers::Marked;
-use super::segment::{NEARNESS, SEGMENT_CANDIDATES, best_triple, sample, window};
+use super::marked::Marked;
+use super::segment::{NEARNESS, SEGMENT_RANKED, around, best_triple, sample};
 
-/// The tracks nearest to the carried position among which a hand-over ranks its donors.
+/// The tracks nearest to the transported position among which a hand-over ranks its donors.
 pub const CHAIN_POOL: usize = 12;
 
 impl Marked<'_> {
     /// The chained rigid-body fill at each entry `(k, i)` (module docs): an interior gap
-    /// is carried once from each border; an entry past a track's ends takes the linear
+    /// is transported once from each border; an entry past a track's ends takes the linear
     /// fill (held), as the other donor fillers give, and an entry of a track never
     /// observed is whatever its position holds.
     pub fn chain(&self, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
@@ -54,21 +54,21 @@ impl Marked<'_> {
 
 /// Track `i`'s gap between its observations at `a` and `b`, with what its hand-overs
 /// judge again and again, kept for the gap: each candidate's rank and each triple's error
-/// carried from each border (neither depends on the frame of the hand-over).
+/// transported from each border (neither depends on the frame of the hand-over).
 struct ChainGap<'t, 'a> {
     tracks: &'t Marked<'a>,
     i: usize,
     a: usize,
     b: usize,
-    /// The track's observed frames around the gap ([`window`]).
+    /// The track's observed frames around the gap ([`around`]).
     around: Vec<usize>,
     rank: HashMap<usize, f64>,
-    carried: HashMap<(usize, [usize; RIGID_BODY_DONORS]), Option<f64>>,
+    transported: HashMap<(usize, [usize; RIGID_BODY_DONORS]), Option<f64>>,
 }
 
 impl<'t, 'a> ChainGap<'t, 'a> {
     fn new(tracks: &'t Marked<'a>, i: usize, a: usize, b: usize) -> Self {
-        let w = window(a, b);
+        let w = around(a, b);
         let around = (a.saturating_sub(w)..=a)
             .chain(b..=(b + w).min(tracks.frames - 1))
             .filter(|&f| tracks.seen(f, i))
@@ -80,15 +80,15 @@ impl<'t, 'a> ChainGap<'t, 'a> {
             b,
             around,
             rank: HashMap::new(),
-            carried: HashMap::new(),
+            transported: HashMap::new(),
         }
     }
 
-    /// Frames `a + 1..b`: the carries from both borders blended linearly in time.
+    /// Frames `a + 1..b`: the transports from both borders blended linearly in time.
     fn fill(mut self) -> Vec<[f64; 3]> {
         let (a, b) = (self.a, self.b);
-        let forward = self.carry(a, b);
-        let backward = self.carry(b, a);
+        let forward = self.transport(a, b);
+        let backward = self.transport(b, a);
         (a + 1..b)
             .map(|k| {
                 let (p, q) = (forward[k - a - 1], backward[b - 1 - k]);
@@ -98,12 +98,12 @@ impl<'t, 'a> ChainGap<'t, 'a> {
             .collect()
     }
 
-    /// The track carried from its observation at `from` towards `to` (exclusive), one
+    /// The track transported from its observation at `from` towards `to` (exclusive), one
     /// frame at a time: its position at each frame strictly between, nearest `from` first.
-    fn carry(&mut self, from: usize, to: usize) -> Vec<[f64; 3]> {
+    fn transport(&mut self, from: usize, to: usize) -> Vec<[f64; 3]> {
         let tracks = self.tracks;
         let step = |f: usize| if to > from { f + 1 } else { f - 1 };
-        let mut carried = Vec::with_capacity(from.abs_diff(to).saturating_sub(1));
+        let mut transported = Vec::with_capacity(from.abs_diff(to).saturating_sub(1));
         // The donors and the frame they were taken up at, with the track's position there.
         let mut held: Option<([usize; RIGID_BODY_DONORS], usize, [f64; 3])> = None;
         let (mut previous, mut position) = (from, tracks.at64(from, self.i));
@@ -119,16 +119,16 @@ impl<'t, 'a> ChainGap<'t, 'a> {
                 position = rigid_motion(&at(start), &at(k)).apply(p);
             }
             held = taken;
-            carried.push(position);
+            transported.push(position);
             (previous, k) = (k, step(k));
         }
-        carried
+        transported
     }
 
     /// Three donors taken up at frame `from` (the track there at `p`) for frame `to`, in a
-    /// carry that started at the track's observation at `border`: of the [`CHAIN_POOL`]
+    /// transport that started at the track's observation at `border`: of the [`CHAIN_POOL`]
     /// tracks nearest to `p` seen at both frames, the triple of the most rigid that best
-    /// carries the track from `border` to its observations around the gap (module docs);
+    /// transports the track from `border` to its observations around the gap (module docs);
     /// `None` where fewer than three are seen at both frames.
     fn hand_over(
         &mut self,
@@ -165,12 +165,12 @@ impl<'t, 'a> ChainGap<'t, 'a> {
             })
             .collect();
         ranked.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
-        ranked.truncate(SEGMENT_CANDIDATES);
-        let carried = &mut self.carried;
+        ranked.truncate(SEGMENT_RANKED);
+        let transported = &mut self.transported;
         let best = best_triple(&ranked, |triple| {
-            *carried
+            *transported
                 .entry((border, triple))
-                .or_insert_with(|| tracks.carried_from(i, triple, border, around))
+                .or_insert_with(|| tracks.transported_from(i, triple, border, around))
         });
         Some(best.unwrap_or_else(|| std::array::from_fn(|d| ranked[d].1)))
     }
@@ -182,7 +182,7 @@ impl Marked<'_> {
     /// them, evenly spaced) to its position at `border` moved there with the donors' rigid
     /// motion (the segment fill's judge); `None` where the donors are unseen at `border`
     /// or at every such frame.
-    fn carried_from(
+    fn transported_from(
         &self,
         i: usize,
         donors: [usize; RIGID_BODY_DONORS],
@@ -200,7 +200,7 @@ impl Marked<'_> {
                 .filter(|&f| f != border && seen(f))
                 .collect(),
         );
-        let (total, count) = self.carry_error(i, donors, border, &frames);
+        let (total, count) = self.transport_error(i, donors, border, &frames);
         (count > 0).then(|| total / count as f64)
     }
 }
@@ -252,7 +252,7 @@ mod tests {
     }
 
     #[test]
-    fn donors_passed_on_carry_a_rigid_body_through_a_gap_none_is_seen_through() {
+    fn donors_passed_on_transport_a_rigid_body_through_a_gap_none_is_seen_through() {
         let (t, n, positions, observed) = handed_over();
         let tracks = Marked::new(t, n, &positions, &observed);
         let entries: Vec<(usize, usize)> = (20..40).map(|k| (k, 0)).collect();
@@ -270,7 +270,7 @@ mod tests {
     /// A rigid body rolling about the x axis: the three markers nearest to track 0 lie
     /// on that axis, so their motion says nothing of the roll; three further ones do not.
     #[test]
-    fn a_hand_over_takes_the_triple_that_carries_the_track_not_the_nearest() {
+    fn a_hand_over_takes_the_triple_that_transports_the_track_not_the_nearest() {
         let body = [
             [0.0, 0.3, 0.0],
             [-0.1, 0.0, 0.0],
@@ -302,11 +302,11 @@ mod tests {
         let entries: Vec<(usize, usize)> = (20..30).map(|k| (k, 0)).collect();
         let chain = worst(&tracks, &entries, &tracks.chain(&entries));
         assert!(chain < 1e-4, "{chain}");
-        // The three nearest, equally rigid, carry the track far off its observations.
+        // The three nearest, equally rigid, transport the track far off its observations.
         let around: Vec<usize> = (0..20).chain(30..t).collect();
-        let on_axis = tracks.carried_from(0, [1, 2, 3], 19, &around);
+        let on_axis = tracks.transported_from(0, [1, 2, 3], 19, &around);
         assert!(on_axis.is_some_and(|e| e > 0.05), "{on_axis:?}");
-        let off_axis = tracks.carried_from(0, [1, 4, 6], 19, &around);
+        let off_axis = tracks.transported_from(0, [1, 4, 6], 19, &around);
         assert!(off_axis.is_some_and(|e| e < 1e-4), "{off_axis:?}");
     }
 

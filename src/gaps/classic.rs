@@ -5,10 +5,10 @@
 //! et al. 2018). Each returns a copy of the positions (or values at given entries) with
 //! the gaps filled from the observed entries alone.
 
-use super::eigen::Eigensystem;
-use super::fillers::Marked;
-use super::linalg::{column_gram, natural_second_derivatives, spline_at};
+use super::marked::Marked;
 use super::spans::gaps;
+use crate::numeric::eigen::Eigensystem;
+use crate::numeric::linalg::{column_gram, natural_second_derivatives, spline_at};
 
 impl Marked<'_> {
     /// Each track's linear interpolation in frame index between the observations on
@@ -110,8 +110,8 @@ impl Marked<'_> {
     /// A low-rank reconstruction: the `[T, 3N]` matrix of the tracks (those observed
     /// somewhere), its unobserved entries started at [`Marked::linear`], then replaced by
     /// the projection of the centred matrix onto its principal components that hold
-    /// [`LOW_RANK_ENERGY`] of its variance, until they change by less than 10⁻⁶ of the
-    /// data's spread (at most [`LOW_RANK_ITERATIONS`] rounds): the iterative PCA fill of
+    /// [`ITERATIVE_PCA_ENERGY`] of its variance, until they change by less than 10⁻⁶ of the
+    /// data's spread (at most [`ITERATIVE_PCA_ITERATIONS`] rounds): the iterative PCA fill of
     /// the gap-filling literature.
     pub fn iterative_pca(&self) -> Vec<f32> {
         let (t, n) = (self.frames, self.points);
@@ -138,8 +138,8 @@ impl Marked<'_> {
             return out;
         }
         let spread = x.iter().fold(0f64, |m, v| m.max(v.abs())).max(1e-30);
-        for _ in 0..LOW_RANK_ITERATIONS {
-            let r = low_rank_projection(&x, t, d, LOW_RANK_ENERGY, &missing);
+        for _ in 0..ITERATIVE_PCA_ITERATIONS {
+            let r = pca_projection(&x, t, d, ITERATIVE_PCA_ENERGY, &missing);
             let mut change = 0f64;
             for (&e, &v) in missing.iter().zip(&r) {
                 change = change.max((v - x[e]).abs());
@@ -204,15 +204,15 @@ fn linear_between(
 pub const MOTION_NEIGHBOURS: usize = 4;
 
 /// The share of the variance kept by [`Marked::iterative_pca`].
-pub const LOW_RANK_ENERGY: f64 = 0.99;
+pub const ITERATIVE_PCA_ENERGY: f64 = 0.99;
 
 /// The most rounds of [`Marked::iterative_pca`].
-pub const LOW_RANK_ITERATIONS: usize = 100;
+pub const ITERATIVE_PCA_ITERATIONS: usize = 100;
 
 /// `x` (`[t, d]`, row-major) projected onto its column means plus the principal components
 /// that hold `energy` of its variance, at the entries `at` (row-major indices, increasing).
 /// A tall matrix is projected one row at a time, where `at` asks, and never copied.
-fn low_rank_projection(x: &[f64], t: usize, d: usize, energy: f64, at: &[usize]) -> Vec<f64> {
+fn pca_projection(x: &[f64], t: usize, d: usize, energy: f64, at: &[usize]) -> Vec<f64> {
     let mut mean = vec![0f64; d];
     for row in x.chunks(d) {
         for (m, v) in mean.iter_mut().zip(row) {
@@ -290,7 +290,7 @@ fn principal(g: Vec<f64>, n: usize, energy: f64) -> Vec<Vec<f64>> {
     system.vectors(&kept)
 }
 
-/// [`low_rank_projection`] of a wide matrix, centred (`c`, `[t, d]` with `t <= d`), from its
+/// [`pca_projection`] of a wide matrix, centred (`c`, `[t, d]` with `t <= d`), from its
 /// frames' Gram matrix: u uᵀ C, the row combination of the frames.
 fn projection_by_frames(
     c: &[f64],
@@ -435,7 +435,7 @@ mod tests {
             .map(|i| ((i * 7919 % 101) as f64 / 101.0 - 0.5) + 0.1 * (i % d) as f64)
             .collect();
         let every: Vec<usize> = (0..t * d).collect();
-        let tall = low_rank_projection(&x, t, d, 0.9, &every);
+        let tall = pca_projection(&x, t, d, 0.9, &every);
         let mut mean = vec![0f64; d];
         for row in x.chunks(d) {
             for (m, v) in mean.iter_mut().zip(row) {
@@ -450,7 +450,7 @@ mod tests {
         // Not the data itself: 0.9 of the variance leaves some of it out.
         assert!(tall.iter().zip(&x).any(|(p, v)| (p - v).abs() > 1e-3));
         let some = [3, 4, 17, 40, 69];
-        let picked = low_rank_projection(&x, t, d, 0.9, &some);
+        let picked = pca_projection(&x, t, d, 0.9, &some);
         assert_eq!(picked, some.map(|e| tall[e]));
     }
 

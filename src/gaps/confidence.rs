@@ -9,7 +9,7 @@
 //! spans of observations hidden on purpose (lengths drawn from the recording's own gaps),
 //! filled by the chain fill, the median of their true error over their spread. No capture
 //! package gives such an estimate; how well it ranks the true errors is measured in
-//! docs/results.md ("Expected error per gap").
+//! docs/gap-filling.md ("Expected error per gap").
 
 use std::ops::Range;
 
@@ -20,7 +20,7 @@ use rand_chacha::ChaCha8Rng;
 use super::{Filler, Marked};
 
 /// The donor fillers whose disagreement is the spread.
-pub const CANDIDATES: [Filler; 4] = [
+pub const DONOR_FILLERS: [Filler; 4] = [
     Filler::Chain,
     Filler::Segment,
     Filler::RigidBody,
@@ -43,14 +43,14 @@ pub struct Calibration {
     pub spans: usize,
 }
 
-/// The spread of the [`CANDIDATES`] over each gap of `gaps` (`(track, frames)`): the root
+/// The spread of the [`DONOR_FILLERS`] over each gap of `gaps` (`(track, frames)`): the root
 /// mean square distance of their fills from their mean, over the gap's entries.
 pub fn spreads(marked: &Marked, gaps: &[(usize, Range<usize>)]) -> Vec<f64> {
     let entries: Vec<(usize, usize)> = gaps
         .iter()
         .flat_map(|(i, frames)| frames.clone().map(move |k| (k, *i)))
         .collect();
-    let fills: Vec<Vec<[f32; 3]>> = CANDIDATES
+    let fills: Vec<Vec<[f32; 3]>> = DONOR_FILLERS
         .iter()
         .map(|f| f.fill_observed(marked, &entries).unwrap_or_default())
         .collect();

@@ -19,8 +19,8 @@
 
 use std::collections::HashMap;
 
-use super::eigen::symmetric_eigen;
-use super::fillers::Marked;
+use super::marked::Marked;
+use crate::numeric::eigen::symmetric_eigen;
 
 impl Marked<'_> {
     /// The pattern fill at each entry `(k, i)` (module docs); an entry of a track never

@@ -6,29 +6,25 @@
 //! sides of a gap (docs/design.md §7). Numbers in, numbers out: the field was evaluated
 //! before ([`FieldPrediction`]).
 
-use super::fillers::Marked;
-pub use super::prediction::FieldPrediction;
+use super::marked::Marked;
+use super::prediction::FieldPrediction;
 use super::spans::gaps;
 
 /// The longest gap (in frames) whose residual [`carry_residuals`] carries by a spline;
 /// longer gaps carry it linearly. Chosen among 9, 16 and no limit on five marker recordings
-/// (docs/results.md, real markers): the spline's carry is the better one in short gaps on
+/// (docs/gap-filling.md, real markers): the spline's carry is the better one in short gaps on
 /// every file, the linear one in long gaps (a cubic's slope carried that far overshoots),
 /// and 16 was the best of the three on all ten file and gap-length pairs.
 pub const SPLINE_CARRY_FRAMES: usize = 16;
 
 /// How many tracks, nearest by canonical position, lend a track their residual in
 /// [`field_fill`]. Chosen among 1–4 on five marker recordings, seed 0
-/// (docs/results.md, real markers): every choice beat the residual carried alone in all ten
+/// (docs/gap-filling.md, real markers): every choice beat the residual carried alone in all ten
 /// file and gap-length pairs, and 2 was within 11 % of the best everywhere. The same lenders
 /// at every frame, their residual carried where they are unseen too: lenders chosen frame by
 /// frame among those seen there were worse on the markers (nearby markers' residuals differ
 /// by offsets, which a change of lenders adds as jumps).
 pub const LENDERS: usize = 2;
-
-/// How many of a track's nearest tracks (by canonical position) may lend it their residual
-/// when the lenders are chosen frame by frame ([`Lending::FrameByFrame`]).
-pub const LENDER_CANDIDATES: usize = 8;
 
 /// Which tracks lend a track their residual in [`field_fill`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -37,7 +33,7 @@ pub enum Lending {
     /// are seen, their own residual carried across their gap where they are not. Smooth
     /// across a gap; what sparse markers need.
     Fixed,
-    /// At each frame, the [`LENDERS`] nearest of the [`LENDER_CANDIDATES`]
+    /// At each frame, the [`LENDERS`] nearest of the [`LENDER_POOL`](super::prediction::LENDER_POOL)
     /// nearest that are seen there (the nearest, carried, where none is). Where nearby tracks
     /// are occluded together (the far side of a surface), the fixed lenders are unseen
     /// exactly where the track is, and their carried residual is no better than its own.

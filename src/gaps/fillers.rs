@@ -1,80 +1,46 @@
-//! The words of gap filling in code: the one view of masked tracks that everything here
-//! reads ([`Marked`]), the fillers that doma's fill blends and is measured against
-//! ([`Filler`], one variant each), what they fill from ([`Sources`]), and one value per
-//! filler ([`PerFiller`], a blend's weights or a report's errors, keyed by name in JSON).
+//! The fillers that doma's fill blends and is measured against ([`Filler`], one variant
+//! each), what they fill from ([`Sources`]), and one value per filler ([`PerFiller`], a
+//! blend's weights or a report's errors, keyed by name in JSON).
 //!
 //! The classic fillers are in [`super::classic`], the field's fills in
 //! [`super::field_fill`]. Every filler sees only the observed entries (docs/design.md §7).
 
 use std::cell::OnceCell;
 use std::ops::{Index, IndexMut};
+use std::sync::OnceLock;
 
 use serde::de::{Deserializer, IgnoredAny, MapAccess, Visitor};
 use serde::ser::{SerializeMap, Serializer};
 use serde::{Deserialize, Serialize};
 
-use super::field_fill::{FieldPrediction, Lending, carry_residuals, field_fill_from_carry};
+use super::field_fill::{Lending, carry_residuals, field_fill_from_carry};
+use super::marked::Marked;
+use super::prediction::FieldPrediction;
 
-/// Tracks with a mask: `positions` `[T, N, 3]` and `observed` `[T, N]`, frame-major. What
-/// every filler, span and gap of this module reads.
-#[derive(Clone, Copy, Debug)]
-pub struct Marked<'a> {
-    /// Frames `T`.
-    pub frames: usize,
-    /// Tracks `N`.
-    pub points: usize,
-    /// `[T, N, 3]`; unobserved entries are never read.
-    pub positions: &'a [f32],
-    /// `[T, N]`.
-    pub observed: &'a [bool],
-}
-
-impl<'a> Marked<'a> {
-    /// The view of `positions` and `observed`; panics if their lengths are not `3·T·N` and
-    /// `T·N` (a caller's bug, not bad data).
-    pub fn new(frames: usize, points: usize, positions: &'a [f32], observed: &'a [bool]) -> Self {
-        assert_eq!(positions.len(), 3 * frames * points);
-        assert_eq!(observed.len(), frames * points);
-        Marked {
-            frames,
-            points,
-            positions,
-            observed,
+/// Defines [`Filler`] and its [`Filler::ALL`] and [`Filler::COUNT`] from one list of
+/// variants, so that a filler added to the enum is in both.
+macro_rules! fillers {
+    ($($(#[$doc:meta])* $variant:ident,)*) => {
+        /// A gap filler: one variant and one arm of [`Filler::fill_at`] each. Reports, `doma
+        /// complete`'s printout and the blend's weights list them by [`Filler::name`]; the
+        /// command line by [`Filler::flag`].
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+        pub enum Filler {
+            $($(#[$doc])* $variant,)*
         }
-    }
 
-    /// The same tracks seen through another mask (`[T, N]`).
-    pub fn with_observed(&self, observed: &'a [bool]) -> Self {
-        Marked::new(self.frames, self.points, self.positions, observed)
-    }
+        impl Filler {
+            /// The number of fillers.
+            pub const COUNT: usize = [$(Filler::$variant),*].len();
 
-    /// Whether track `i` is observed at frame `k`.
-    pub fn seen(&self, k: usize, i: usize) -> bool {
-        self.observed[k * self.points + i]
-    }
-
-    /// The tracks observed in at least one frame, in order: what the PCA fillers fill.
-    pub fn seen_tracks(&self) -> Vec<usize> {
-        (0..self.points)
-            .filter(|&i| (0..self.frames).any(|k| self.seen(k, i)))
-            .collect()
-    }
-
-    /// Track `i`'s position at frame `k` (whatever it holds there).
-    pub fn at(&self, k: usize, i: usize) -> [f32; 3] {
-        let e = 3 * (k * self.points + i);
-        [
-            self.positions[e],
-            self.positions[e + 1],
-            self.positions[e + 2],
-        ]
-    }
+            /// Every filler, in the order of a blend's weights: a tie in the blend goes to
+            /// the earlier (the field's fill first).
+            pub const ALL: [Filler; Filler::COUNT] = [$(Filler::$variant),*];
+        }
+    };
 }
 
-/// A gap filler: one variant and one arm of [`Filler::fill_at`] each. Reports, `doma
-/// complete`'s printout and the blend's weights list them by [`Filler::name`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Filler {
+fillers! {
     /// The field's fill: the field corrected by its neighbours' and the track's own
     /// residuals ([`super::field_fill::field_fill`], [`Lending::Fixed`]).
     FieldFill,
@@ -108,26 +74,6 @@ pub enum Filler {
 }
 
 impl Filler {
-    /// The number of fillers.
-    pub const COUNT: usize = 12;
-
-    /// Every filler, in the order of a blend's weights: a tie in the blend goes to the
-    /// earlier (the field's fill first).
-    pub const ALL: [Filler; Filler::COUNT] = [
-        Filler::FieldFill,
-        Filler::Spline,
-        Filler::Neighbours,
-        Filler::IterativePca,
-        Filler::Linear,
-        Filler::FieldFillFramewise,
-        Filler::Pattern,
-        Filler::RigidBody,
-        Filler::Kalman,
-        Filler::Gloersen,
-        Filler::Segment,
-        Filler::Chain,
-    ];
-
     /// Its place in [`Filler::ALL`].
     pub fn index(self) -> usize {
         self as usize
@@ -169,21 +115,38 @@ impl Filler {
         }
     }
 
-    /// The filler named `name` ([`Filler::name`], or the key reports written before these
-    /// names used: `carried`, `framewise` and `low_rank`).
-    pub fn from_name(name: &str) -> Option<Filler> {
-        match name {
-            "carried" => Some(Filler::FieldFill),
-            "framewise" => Some(Filler::FieldFillFramewise),
-            "low_rank" => Some(Filler::IterativePca),
-            _ => Filler::ALL.into_iter().find(|f| f.name() == name),
+    /// Its name on the command line: [`Filler::name`] in kebab case, as every other value
+    /// there is (`rigid-body`).
+    pub fn flag(self) -> &'static str {
+        static FLAGS: OnceLock<[&'static str; Filler::COUNT]> = OnceLock::new();
+        FLAGS.get_or_init(|| {
+            Filler::ALL.map(|f| &*Box::leak(f.name().replace('_', "-").into_boxed_str()))
+        })[self.index()]
+    }
+
+    /// The keys that reports written before today's names used for it.
+    pub fn former_names(self) -> &'static [&'static str] {
+        match self {
+            Filler::FieldFill => &["carried"],
+            Filler::FieldFillFramewise => &["framewise"],
+            Filler::IterativePca => &["low_rank"],
+            _ => &[],
         }
+    }
+
+    /// The filler named `name`: its [`Filler::name`] or [`Filler::flag`], or a key reports
+    /// written before these names used ([`Filler::former_names`]).
+    pub fn from_name(name: &str) -> Option<Filler> {
+        let name = name.replace('-', "_");
+        Filler::ALL
+            .into_iter()
+            .find(|f| f.name() == name || f.former_names().contains(&name.as_str()))
     }
 
     /// The filler named `name` ([`Filler::from_name`]), or a message listing the names.
     pub fn parse(name: &str) -> Result<Filler, String> {
         Filler::from_name(name).ok_or_else(|| {
-            let names: Vec<&str> = Filler::ALL.iter().map(|f| f.name()).collect();
+            let names: Vec<&str> = Filler::ALL.iter().map(|f| f.flag()).collect();
             format!("`{name}` is not a filler: {}", names.join(", "))
         })
     }
@@ -388,4 +351,46 @@ pub(super) fn worst_error(
                 .sqrt()
         })
         .fold(0f32, f32::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_fillers_keep_their_order_and_every_spelling_reads_back() {
+        // The order is the blend's: its weights are written by name, but a tie goes to the
+        // earlier filler, so a reordering would change fills.
+        let names: Vec<&str> = Filler::ALL.iter().map(|f| f.name()).collect();
+        assert_eq!(
+            names,
+            [
+                "field_fill",
+                "spline",
+                "neighbours",
+                "iterative_pca",
+                "linear",
+                "field_fill_framewise",
+                "pattern",
+                "rigid_body",
+                "kalman",
+                "gloersen",
+                "segment",
+                "chain",
+            ]
+        );
+        for (i, f) in Filler::ALL.into_iter().enumerate() {
+            assert_eq!(f.index(), i);
+            assert_eq!(Filler::from_name(f.name()), Some(f));
+            assert_eq!(Filler::from_name(f.flag()), Some(f));
+            assert!(!f.flag().contains('_'), "{}", f.flag());
+            for old in f.former_names() {
+                assert_eq!(Filler::from_name(old), Some(f));
+            }
+        }
+        assert_eq!(Filler::from_name("rigid-body"), Some(Filler::RigidBody));
+        assert_eq!(Filler::from_name("rigid_body"), Some(Filler::RigidBody));
+        assert_eq!(Filler::from_name("rigid body"), None);
+        assert!(Filler::parse("x").unwrap_err().contains("rigid-body"));
+    }
 }

@@ -25,8 +25,8 @@
 // Index loops over small matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
-use super::eigen::principal_spectrum;
-use super::fillers::Marked;
+use super::marked::Marked;
+use crate::numeric::eigen::principal_spectrum;
 
 /// `σ` of the distance weights, in millimetres (the MATLAB's `WeightScale`).
 pub const GLOERSEN_WEIGHT_SCALE_MM: f64 = 200.0;
@@ -58,17 +58,7 @@ impl Marked<'_> {
         }
         let unit = self.millimetres_per_unit();
         // Step 1: every coordinate relative to the anchors' mean at its frame.
-        let moving: Vec<[f64; 3]> = (0..t)
-            .map(|k| {
-                let mut m = [0f64; 3];
-                for &j in &anchors {
-                    for (a, p) in self.at(k, tracks[j]).into_iter().enumerate() {
-                        m[a] += p as f64;
-                    }
-                }
-                m.map(|s| s / anchors.len() as f64)
-            })
-            .collect();
+        let moving = self.anchor_mean(&tracks, &anchors);
         let relative =
             |k: usize, j: usize, a: usize| self.at(k, tracks[j])[a] as f64 - moving[k][a];
 
@@ -115,25 +105,7 @@ impl Marked<'_> {
                 })
                 .collect();
             let value = |k: usize, c: usize| relative(k, kept[c / 3], c % 3);
-            let rows = full.len() as f64;
-            let mean: Vec<f64> = (0..cols)
-                .map(|c| full.iter().map(|&k| value(k, c)).sum::<f64>() / rows)
-                .collect();
-            let deviation: Vec<f64> = (0..cols)
-                .map(|c| {
-                    let s = full
-                        .iter()
-                        .map(|&k| (value(k, c) - mean[c]).powi(2))
-                        .sum::<f64>();
-                    let d = (s / rows).sqrt();
-                    if d == 0.0 { 1.0 } else { d }
-                })
-                .collect();
-            let scaled: Vec<f64> = full
-                .iter()
-                .flat_map(|&k| (0..cols).map(move |c| (k, c)))
-                .map(|(k, c)| (value(k, c) - mean[c]) / deviation[c] * weight[c])
-                .collect();
+            let (mean, deviation, scaled) = standardised(&full, cols, &value, &weight);
             let gapped = 3 * p..3 * p + 3;
             // Only the components kept are found: on hundreds of columns the whole
             // eigenvector matrix would be most of the fill's cost.
@@ -142,30 +114,7 @@ impl Marked<'_> {
             let kept_components = reaching(&whole.singular).max(reaching(&without.singular));
             let v = &whole.vectors(kept_components);
             let v0 = aligned(&without.vectors(kept_components), v);
-            // Step 4: B = V₀ T V_gᵀ (`[cols, 3]`), with T = Vᵀ V₀ and V_g the gapped
-            // marker's rows of V, so that a frame's fill is its row of M₀ times B. T's
-            // first index meets V₀'s components, as the published product has it.
-            let mut transfer = vec![0f64; kept_components * kept_components];
-            for u in 0..kept_components {
-                for w in 0..kept_components {
-                    transfer[u * kept_components + w] = (0..cols).map(|c| v[u][c] * v0[w][c]).sum();
-                }
-            }
-            // y = T V_gᵀ (`[k, 3]`) first, then B = V₀ y.
-            let y: Vec<[f64; 3]> = (0..kept_components)
-                .map(|u| {
-                    std::array::from_fn(|a| {
-                        (0..kept_components)
-                            .map(|w| transfer[u * kept_components + w] * v[w][3 * p + a])
-                            .sum()
-                    })
-                })
-                .collect();
-            let back: Vec<[f64; 3]> = (0..cols)
-                .map(|c| {
-                    std::array::from_fn(|a| (0..kept_components).map(|u| v0[u][c] * y[u][a]).sum())
-                })
-                .collect();
+            let back = reconstruction(v, &v0, kept_components, cols, p);
             for &k in &gap_frames {
                 let mut filled = [0f64; 3];
                 for c in (0..cols).filter(|c| c / 3 != p) {
@@ -183,6 +132,22 @@ impl Marked<'_> {
             }
         }
         Some(out)
+    }
+
+    /// Step 1's moving frame: the mean of the `anchors` (places in `tracks`, the tracks
+    /// seen in every frame) at each frame.
+    fn anchor_mean(&self, tracks: &[usize], anchors: &[usize]) -> Vec<[f64; 3]> {
+        (0..self.frames)
+            .map(|k| {
+                let mut m = [0f64; 3];
+                for &j in anchors {
+                    for (a, p) in self.at(k, tracks[j]).into_iter().enumerate() {
+                        m[a] += p as f64;
+                    }
+                }
+                m.map(|s| s / anchors.len() as f64)
+            })
+            .collect()
     }
 
     /// Each of `tracks`' mean Euclidean distance to `tracks[g]` over the frames that see
@@ -236,6 +201,65 @@ fn aligned(vectors: &[Vec<f64>], reference: &[Vec<f64>]) -> Vec<Vec<f64>> {
             let sign = if dot < 0.0 { -1.0 } else { 1.0 };
             v.iter().map(|x| sign * x).collect()
         })
+        .collect()
+}
+
+/// Step 3 over the frames `full`: each of `cols` columns' mean and population deviation
+/// (1 where a column is constant), and the frames' rows `[full, cols]` centred, scaled by
+/// the deviation and weighted by `weight`.
+fn standardised(
+    full: &[usize],
+    cols: usize,
+    value: &dyn Fn(usize, usize) -> f64,
+    weight: &[f64],
+) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let rows = full.len() as f64;
+    let mean: Vec<f64> = (0..cols)
+        .map(|c| full.iter().map(|&k| value(k, c)).sum::<f64>() / rows)
+        .collect();
+    let deviation: Vec<f64> = (0..cols)
+        .map(|c| {
+            let s = full
+                .iter()
+                .map(|&k| (value(k, c) - mean[c]).powi(2))
+                .sum::<f64>();
+            let d = (s / rows).sqrt();
+            if d == 0.0 { 1.0 } else { d }
+        })
+        .collect();
+    let scaled: Vec<f64> = full
+        .iter()
+        .flat_map(|&k| (0..cols).map(move |c| (k, c)))
+        .map(|(k, c)| (value(k, c) - mean[c]) / deviation[c] * weight[c])
+        .collect();
+    (mean, deviation, scaled)
+}
+
+/// Step 4: B = V₀ T V_gᵀ (`[cols, 3]`), with T = Vᵀ V₀ and V_g the gapped marker's rows
+/// of V (the marker at place `p`), both of `k` components, so that a frame's fill is its
+/// row of M₀ times B. T's first index meets V₀'s components, as the published product has
+/// it.
+fn reconstruction(
+    v: &[Vec<f64>],
+    v0: &[Vec<f64>],
+    k: usize,
+    cols: usize,
+    p: usize,
+) -> Vec<[f64; 3]> {
+    let mut transfer = vec![0f64; k * k];
+    for u in 0..k {
+        for w in 0..k {
+            transfer[u * k + w] = (0..cols).map(|c| v[u][c] * v0[w][c]).sum();
+        }
+    }
+    // y = T V_gᵀ (`[k, 3]`) first, then B = V₀ y.
+    let y: Vec<[f64; 3]> = (0..k)
+        .map(|u| {
+            std::array::from_fn(|a| (0..k).map(|w| transfer[u * k + w] * v[w][3 * p + a]).sum())
+        })
+        .collect();
+    (0..cols)
+        .map(|c| std::array::from_fn(|a| (0..k).map(|u| v0[u][c] * y[u][a]).sum()))
         .collect()
 }
 

@@ -12,8 +12,8 @@
 // Index loops over small matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
-use super::eigen::principal_components;
-use super::fillers::Marked;
+use super::marked::Marked;
+use crate::numeric::eigen::principal_components;
 
 /// The share of the singular values' sum that the components leave out (pyCGM2's `tol`).
 pub const KALMAN_TOLERANCE: f64 = 1e-2;
@@ -47,58 +47,17 @@ impl Marked<'_> {
         }
         let unit = self.millimetres_per_unit();
         let value = |k: usize, c: usize| self.at(k, tracks[c / 3])[c % 3] as f64 * unit;
-        // The mean and principal components of the frames that see every track.
-        let mut mean = vec![0f64; cols];
-        for &k in &full {
-            for c in 0..cols {
-                mean[c] += value(k, c) / full.len() as f64;
-            }
-        }
-        let centred: Vec<f64> = full
-            .iter()
-            .flat_map(|&k| (0..cols).map(move |c| (k, c)))
-            .map(|(k, c)| value(k, c) - mean[c])
-            .collect();
-        // Householder and QL: to rounding (the components kept reach down to singular
-        // values ~10³ times smaller than the first), in a fraction of Jacobi's time on
-        // hundreds of columns. numpy's singular values: at most min(frames, columns).
-        let pca = principal_components(&centred, full.len(), cols, None);
-        let total: f64 = pca.singular.iter().sum();
-        let mut held = 0f64;
-        let d = pca.singular.iter().position(|s| {
-            held += s;
-            held / total > 1.0 - KALMAN_TOLERANCE
-        })?;
-        if d == 0 {
-            return None;
-        }
+        let (mean, v) = components(&full, cols, &value)?;
         // v[j][c]: component j's loading on column c.
-        let v = &pca.vectors[..d];
+        let (v, d) = (&v[..], v.len());
         let q = random_walk_covariance(&full, &value, v, cols);
         let sigma = KALMAN_OBSERVATION_NOISE_MM2;
 
         // Hᵀ H / σ of the coordinates seen at a frame: the same for a run of frames that
         // see the same tracks, so it is summed once per run.
         let seen_at = |k: usize| -> Vec<bool> { tracks.iter().map(|&i| self.seen(k, i)).collect() };
-        let information = |seen: &[bool]| -> Vec<f64> {
-            let mut h = vec![0f64; d * d];
-            for c in (0..cols).filter(|&c| seen[c / 3]) {
-                for i in 0..d {
-                    for j in 0..d {
-                        h[i * d + j] += v[i][c] * v[j][c] / sigma;
-                    }
-                }
-            }
-            h
-        };
-        // The covariance through one frame: the filtered `P` from the last one, and the
-        // inverse of the predicted `P⁻`. The gains depend on nothing else.
-        let step = |cov: &[f64], h: &[f64]| -> Option<(Vec<f64>, Vec<f64>)> {
-            let predicted: Vec<f64> = cov.iter().zip(&q).map(|(p, q)| p + q).collect();
-            let inverse = spd_inverse(&predicted, d)?;
-            let a: Vec<f64> = inverse.iter().zip(h).map(|(p, h)| p + h).collect();
-            Some((spd_inverse(&a, d)?, inverse))
-        };
+        let information = |seen: &[bool]| information(v, cols, seen, sigma);
+        let step = |cov: &[f64], h: &[f64]| covariance_step(cov, &q, h, d);
         // The smoother's gains, `d × d` a frame, would hold many times the data on a long
         // recording: the forward pass keeps the covariance every `block` frames, and the
         // backward pass recomputes a block's gains from it (the same operations, so the
@@ -165,11 +124,10 @@ impl Marked<'_> {
         for k in 0..t {
             for c in 0..cols {
                 let i = tracks[c / 3];
-                if self.seen(k, i) {
-                    continue;
+                if !self.seen(k, i) {
+                    let y = mean[c] + (0..d).map(|j| v[j][c] * smoothed[k][j]).sum::<f64>();
+                    out[3 * (k * n + i) + c % 3] = (y / unit) as f32;
                 }
-                let y = mean[c] + (0..d).map(|j| v[j][c] * smoothed[k][j]).sum::<f64>();
-                out[3 * (k * n + i) + c % 3] = (y / unit) as f32;
             }
         }
         Some(out)
@@ -280,6 +238,68 @@ fn spd_inverse(a: &[f64], d: usize) -> Option<Vec<f64>> {
         }
     }
     Some(inv)
+}
+
+/// `Hᵀ H / σ` (`[d, d]`) of the coordinates seen at a frame: the columns `c` of `cols`
+/// whose track `c / 3` is `seen`, `v` the `d` components' loadings.
+fn information(v: &[Vec<f64>], cols: usize, seen: &[bool], sigma: f64) -> Vec<f64> {
+    let d = v.len();
+    let mut h = vec![0f64; d * d];
+    for c in (0..cols).filter(|&c| seen[c / 3]) {
+        for i in 0..d {
+            for j in 0..d {
+                h[i * d + j] += v[i][c] * v[j][c] / sigma;
+            }
+        }
+    }
+    h
+}
+
+/// The covariance through one frame: the filtered `P` from the last one's `cov`, and the
+/// inverse of the predicted `P⁻ = P + Q`, with `h` the frame's information. The gains
+/// depend on nothing else.
+fn covariance_step(cov: &[f64], q: &[f64], h: &[f64], d: usize) -> Option<(Vec<f64>, Vec<f64>)> {
+    let predicted: Vec<f64> = cov.iter().zip(q).map(|(p, q)| p + q).collect();
+    let inverse = spd_inverse(&predicted, d)?;
+    let a: Vec<f64> = inverse.iter().zip(h).map(|(p, h)| p + h).collect();
+    Some((spd_inverse(&a, d)?, inverse))
+}
+
+/// The mean of the `cols` columns over the frames `full` that see every track, and the
+/// principal components kept: those whose singular values reach all but
+/// [`KALMAN_TOLERANCE`] of their sum (`None` where one component already does).
+fn components(
+    full: &[usize],
+    cols: usize,
+    value: &dyn Fn(usize, usize) -> f64,
+) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
+    let mut mean = vec![0f64; cols];
+    for &k in full {
+        for c in 0..cols {
+            mean[c] += value(k, c) / full.len() as f64;
+        }
+    }
+    let centred: Vec<f64> = full
+        .iter()
+        .flat_map(|&k| (0..cols).map(move |c| (k, c)))
+        .map(|(k, c)| value(k, c) - mean[c])
+        .collect();
+    // Householder and QL: to rounding (the components kept reach down to singular
+    // values ~10³ times smaller than the first), in a fraction of Jacobi's time on
+    // hundreds of columns. numpy's singular values: at most min(frames, columns).
+    let pca = principal_components(&centred, full.len(), cols, None);
+    let total: f64 = pca.singular.iter().sum();
+    let mut held = 0f64;
+    let d = pca.singular.iter().position(|s| {
+        held += s;
+        held / total > 1.0 - KALMAN_TOLERANCE
+    })?;
+    if d == 0 {
+        return None;
+    }
+    let mut vectors = pca.vectors;
+    vectors.truncate(d);
+    Some((mean, vectors))
 }
 
 #[cfg(test)]

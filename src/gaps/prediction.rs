@@ -6,8 +6,12 @@
 use std::ops::Range;
 use std::sync::OnceLock;
 
-use super::field_fill::LENDER_CANDIDATES;
-use crate::knn::PointTree;
+use crate::numeric::knn::PointTree;
+
+/// How many of a track's nearest tracks (by canonical position) may lend it their residual
+/// when the lenders are chosen frame by frame
+/// ([`Lending::FrameByFrame`](super::field_fill::Lending::FrameByFrame)).
+pub const LENDER_POOL: usize = 8;
 
 /// The field's prediction at the frames asked, `[F, N, 3]` for `F` frames: what
 /// `run/complete/` evaluates on the fill's behalf. Called from the windows' threads.
@@ -24,7 +28,7 @@ pub struct FieldPrediction<'a> {
     /// [`FieldPrediction::predicted`], kept until this prediction is dropped.
     predict: Option<&'a Predict<'a>>,
     computed: OnceLock<Vec<f32>>,
-    /// For each track, the [`LENDER_CANDIDATES`] other tracks nearest to it in the
+    /// For each track, the [`LENDER_POOL`] other tracks nearest to it in the
     /// canonical frame, among those observed somewhere, closest first.
     pub neighbours: Vec<Vec<usize>>,
 }
@@ -97,7 +101,7 @@ impl<'a> FieldPrediction<'a> {
     }
 }
 
-/// For each of `n` tracks, the [`LENDER_CANDIDATES`] others nearest by `canonical` among
+/// For each of `n` tracks, the [`LENDER_POOL`] others nearest by `canonical` among
 /// those observed somewhere in `observed` ([`FieldPrediction::new`]).
 fn neighbours(n: usize, frames: usize, canonical: &[f32], observed: &[bool]) -> Vec<Vec<usize>> {
     let at = |i: usize| [canonical[3 * i], canonical[3 * i + 1], canonical[3 * i + 2]];
@@ -112,12 +116,12 @@ fn neighbours(n: usize, frames: usize, canonical: &[f32], observed: &[bool]) -> 
                 if !finite(i) {
                     return Vec::new();
                 }
-                let want = (LENDER_CANDIDATES + 1).min(cloud.len());
+                let want = (LENDER_POOL + 1).min(cloud.len());
                 tree.nearest_k(&at(i), want)
                     .into_iter()
                     .map(|r| lenders[r])
                     .filter(|&j| j != i)
-                    .take(LENDER_CANDIDATES)
+                    .take(LENDER_POOL)
                     .collect()
             })
             .collect(),

@@ -2,18 +2,18 @@
 //! chosen by how they move, not by where they are. In Vicon Nexus the user picks the
 //! markers of the gapped marker's own segment; the three nearest at the gap's borders often
 //! are not on it (a knee marker beside the other knee, a wrist beside the hip). Here the
-//! donors are the triple that best carries the track through its own observations next to
+//! donors are the triple that best transports the track through its own observations next to
 //! the gap:
 //!
 //! 1. the candidates, the [`SEGMENT_POOL`] nearest of the other tracks seen through the
 //!    gap, are ranked by how rigidly they keep their distance to the track around it: the
-//!    standard deviation of that distance over the frames within the window ([`window`])
+//!    standard deviation of that distance over the frames around the gap ([`around`])
 //!    where both are seen, plus
 //!    [`NEARNESS`] times their mean distance at the gap's borders (a near marker's rigid
-//!    motion carries less lever error); the first [`SEGMENT_CANDIDATES`] are kept;
+//!    motion transports less lever error); the first [`SEGMENT_RANKED`] are kept;
 //! 2. every triple of them moves the track, as the rigid-body fill would, from the gap's
 //!    border to at most [`SEGMENT_SAMPLES`] of its observed frames on that side within
-//!    the window; the triple with the least mean distance to those observations fills the
+//!    those frames; the triple with the least mean distance to those observations fills the
 //!    gap, with the rigid-body fill's blend of the moves from both borders.
 //!
 //! A motion field learns which markers move together from every frame; this asks the
@@ -22,13 +22,13 @@
 //! three tracks are seen through the gap, the linear interpolation does.
 
 use super::donors::{DonorGap, RIGID_BODY_DONORS, rigid_motion};
-use super::fillers::Marked;
+use super::marked::Marked;
 
 /// The nearest tracks seen through a gap whose rigidity [`Marked::segment`] ranks.
 pub const SEGMENT_POOL: usize = 64;
 
 /// The candidates whose triples [`Marked::segment`] judges (6: 20 triples).
-pub const SEGMENT_CANDIDATES: usize = 6;
+pub const SEGMENT_RANKED: usize = 6;
 
 /// The observed frames on each side of a gap that a triple is judged on, at most.
 pub const SEGMENT_SAMPLES: usize = 16;
@@ -37,13 +37,13 @@ pub const SEGMENT_SAMPLES: usize = 16;
 /// that distance.
 pub const NEARNESS: f64 = 0.05;
 
-/// The shortest window, in frames.
-pub const MIN_WINDOW: usize = 20;
+/// The fewest frames on each side of a gap that its donors are judged on.
+pub const MIN_AROUND: usize = 20;
 
 /// The frames on each side of a gap between observations at `a` and `b` that its donors
-/// are ranked and judged on: as many as the gap spans, at least [`MIN_WINDOW`].
-pub fn window(a: usize, b: usize) -> usize {
-    (b - a).max(MIN_WINDOW)
+/// are ranked and judged on: as many as the gap spans, at least [`MIN_AROUND`].
+pub fn around(a: usize, b: usize) -> usize {
+    (b - a).max(MIN_AROUND)
 }
 
 impl Marked<'_> {
@@ -61,7 +61,7 @@ impl Marked<'_> {
     /// docs); `None` where fewer than three tracks are seen through it.
     fn segment_donors(&self, i: usize, a: usize, b: usize) -> Option<DonorGap> {
         let nearest = self.donors(i, a, b, RIGID_BODY_DONORS)?;
-        let w = window(a, b);
+        let w = around(a, b);
         let (lo, hi) = (a.saturating_sub(w), (b + w).min(self.frames - 1));
         let distance = |f: usize, j: usize| {
             let (p, q) = (self.at64(f, i), self.at64(f, j));
@@ -87,12 +87,12 @@ impl Marked<'_> {
             .filter(|(score, _)| !score.is_nan())
             .collect();
         ranked.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
-        ranked.truncate(SEGMENT_CANDIDATES);
+        ranked.truncate(SEGMENT_RANKED);
         let before = sample((lo..a).filter(|&f| self.seen(f, i)).collect());
         let after = sample((b + 1..=hi).filter(|&f| self.seen(f, i)).collect());
         let best = best_triple(&ranked, |triple| {
-            let (sa, na) = self.carry_error(i, triple, a, &before);
-            let (sb, nb) = self.carry_error(i, triple, b, &after);
+            let (sa, na) = self.transport_error(i, triple, a, &before);
+            let (sb, nb) = self.transport_error(i, triple, b, &after);
             (na + nb > 0).then(|| (sa + sb) / (na + nb) as f64)
         });
         Some(match best {
@@ -131,7 +131,7 @@ impl Marked<'_> {
     /// The summed distance from track `i`'s observations at `frames` to its position at
     /// frame `from` moved with `donors` (their rigid motion from `from` to that frame), and
     /// the number of frames summed: those where every donor is seen.
-    pub(super) fn carry_error(
+    pub(super) fn transport_error(
         &self,
         i: usize,
         donors: [usize; 3],
@@ -297,7 +297,7 @@ pub(super) mod tests {
         assert_eq!(judged.len(), SEGMENT_SAMPLES);
         let step = 64 / SEGMENT_SAMPLES;
         assert_eq!(&judged[..3], &[0, step, 2 * step]);
-        assert_eq!(window(10, 12), 20);
-        assert_eq!(window(10, 60), 50);
+        assert_eq!(around(10, 12), 20);
+        assert_eq!(around(10, 60), 50);
     }
 }

@@ -9,7 +9,7 @@ use std::ops::Range;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::fillers::Marked;
+use super::marked::Marked;
 
 /// A run of frames in which one track is unobserved, with the observed frames that border
 /// it (`None` past either end of the clip).

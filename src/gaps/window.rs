@@ -25,7 +25,8 @@ use std::ops::Range;
 
 use rayon::prelude::*;
 
-use super::fillers::{Marked, Sources};
+use super::fillers::Sources;
+use super::marked::Marked;
 use super::spans::{GapIndex, gaps};
 
 /// The entries (frames × tracks) of a window: 8,738 frames of 60 markers (44 s at

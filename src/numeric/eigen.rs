@@ -1,7 +1,7 @@
 //! The symmetric eigenproblem (Jacobi rotations; Householder and QL) and the principal
-//! components of a PCA, for the low-rank fill, the Kalman smoother and Gløersen's fill
-//! (which finds only the leading ones, [`principal_spectrum`]). Plain `f64` arithmetic on
-//! slices, no tensors.
+//! components of a PCA: for the iterative PCA fill, the Kalman smoother, Gløersen's fill
+//! (which finds only the leading ones, [`principal_spectrum`]) and SOAP's preconditioner
+//! basis. Plain `f64` arithmetic on slices, no tensors.
 
 // Index loops over small matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]

@@ -1,7 +1,6 @@
-//! Nearest neighbours on the host: a k-d tree over a point cloud. A leaf of the crate
-//! (it imports nothing of doma but the error type), so that the data layer (a track's
-//! neighbours), the losses (AIAP neighbourhoods) and the metrics (Chamfer) share it
-//! without importing one another.
+//! Nearest neighbours on the host: a k-d tree over a point cloud, shared by the data layer
+//! (a track's neighbours), the losses (AIAP neighbourhoods), the metrics (Chamfer) and the
+//! field's fill (its lenders).
 
 use crate::{DomaError, Result};
 

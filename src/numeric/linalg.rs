@@ -1,4 +1,4 @@
-//! The small solvers of gap filling: the natural cubic spline's tridiagonal system, the
+//! The small dense solvers: the natural cubic spline's tridiagonal system, the
 //! least squares on the simplex that weighs a blend, and the Gram matrix of a PCA (the
 //! eigenproblems are in `eigen.rs`). Plain `f64` arithmetic on slices and fixed-size
 //! arrays, no tensors.

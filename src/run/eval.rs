@@ -8,7 +8,6 @@ use burn::tensor::Device;
 use super::{Report, RunDir, gap_report};
 use crate::data::Trajectories;
 use crate::data::layout::TrackFile;
-use crate::data::mesh::as_points;
 use crate::data::sequence::{LoadOptions, load_sequence_with};
 use crate::field::MotionField;
 use crate::io::load_json;
@@ -41,34 +40,6 @@ pub fn evaluate(
         epe: None,
         units: None,
     })
-}
-
-/// The field's prediction `[T, N, 3]` of every track of `data` (from its canonical
-/// position) at every frame.
-pub fn field_everywhere(
-    field: &dyn MotionField,
-    data: &Trajectories,
-    device: &Device,
-) -> Result<Vec<f32>> {
-    let t = data.frames();
-    field_at_frames(field, &as_points(data.canonical()), 0..t, t, device)
-}
-
-/// The field's prediction `[F, N, 3]` of the tracks at `canonical` (`[N]`) at `frames` of
-/// a `total`-frame sequence: a window of [`field_everywhere`], the same to the bit.
-pub fn field_at_frames(
-    field: &dyn MotionField,
-    canonical: &[[f32; 3]],
-    frames: std::ops::Range<usize>,
-    total: usize,
-    device: &Device,
-) -> Result<Vec<f32>> {
-    let mut predicted = Vec::with_capacity(3 * frames.len() * canonical.len());
-    crate::warp::warp_frames(field, canonical, frames, total, device, |_, y| {
-        predicted.extend(y.iter().flatten());
-        Ok(())
-    })?;
-    Ok(predicted)
 }
 
 /// The metrics of the run in `run`: on its own held-out points, or on every point of

@@ -97,7 +97,14 @@ pub fn gap_report(
     let predicted = field_everywhere(field, &train, device)?;
     // doma's fill and its fillers (the field's fills and the classic ones) at the entries.
     let prediction = FieldPrediction::new(n, &predicted, train.canonical(), tracks.observed);
-    let fills = fills_at(&tracks, &prediction, config.fit.seed, &blind, &entries);
+    let fills = fills_at(
+        &tracks,
+        &prediction,
+        config.fit.seed,
+        &blind,
+        &entries,
+        &config.fit.validation(),
+    );
     let field_alone: Vec<[f32; 3]> = entries
         .iter()
         .map(|&(k, r)| {

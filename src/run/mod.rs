@@ -24,9 +24,11 @@ mod eval;
 mod fit;
 mod folder;
 mod gap_report;
+mod gap_table;
 mod info;
 mod lock;
 mod plot;
+mod prediction;
 mod recording;
 pub mod report;
 mod resume;
@@ -38,17 +40,20 @@ pub use complete::{
     CompletedTracks, Completion, FillPolicy, FilledGap, MaxGap, OutputKind, complete_run,
     complete_run_with, complete_tracks, complete_without_fit, output_kind_for,
 };
-pub use eval::{eval_run, eval_run_as, evaluate, field_at_frames, field_everywhere};
+pub use eval::{eval_run, eval_run_as, evaluate};
 pub use fit::{FitOutcome, fit_run, fit_run_locked};
 pub use folder::{OpenRun, RunDir};
 pub use gap_report::{GapErrors, GapReport, gap_report};
+pub use gap_table::{
+    GapRow, GapTable, filled_by, gap_rows, gaps_csv, gaps_csv_path, gaps_html_path, mm_per_unit,
+    names_and_rate,
+};
 pub use info::{RunInfo, info};
 pub use lock::RunLock;
 pub use plot::{GAP_FIGURES, plot_run};
-pub use recording::{
-    GapRow, GapTable, RecordingFill, fill_recording, filled_by, gap_rows, gaps_csv, gaps_csv_path,
-    gaps_html_path, mm_per_unit, names_and_rate, write_gap_report,
-};
+pub use prediction::{field_at_frames, field_everywhere};
+pub use recording::{RecordingFill, fill_recording};
+pub use report::write_gap_report;
 pub use spec::{
     GAP_FILLING_FRAMES_PER_ITERATION, GAP_FILLING_H_WEIGHT, GAP_FILLING_ITERATIONS, ModelChoice,
     NewFit, RunSpec, fraction,
@@ -126,7 +131,7 @@ pub struct RunConfig {
     /// each fitted as this one with the next seed, and so with its own initial weights,
     /// frame order, blind spans and validation draws. Each fill weighs its fillers on a few
     /// validation spans per class of gap length, and a fill that chose wrongly on them
-    /// costs the combination a half (two fits) or nothing (three); docs/results.md.
+    /// costs the combination a half (two fits) or nothing (three); docs/gap-filling.md.
     #[serde(default = "one_fit", skip_serializing_if = "is_one_fit")]
     pub fits: usize,
     /// A digest of the data as the fit read it ([`data_digest`]), so that a run whose data
@@ -292,6 +297,7 @@ impl RunConfig {
                     seed: self.fit.seed,
                 }),
                 blind_validation: self.blind_validation.then_some(self.fit.seed),
+                validation: self.fit.validation(),
             },
         )
     }

@@ -6,7 +6,10 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::recording::GapTable;
+use super::Completion;
+use super::gap_table::{
+    GapTable, gap_rows, gaps_csv, gaps_csv_path, gaps_html_path, names_and_rate,
+};
 use crate::Result;
 use crate::data::layout::TrackFile;
 use crate::data::sequence::read_points;
@@ -28,6 +31,22 @@ pub fn escape(text: &str) -> String {
         }
     }
     out
+}
+
+/// Writes the table ([`gaps_csv`]) and the page ([`gaps_html`]) of the
+/// gaps of `input` filled into `output`, beside it; returns the table.
+pub fn write_gap_report(
+    input: &Path,
+    output: &Path,
+    c: &Completion,
+    flag_above_mm: f64,
+) -> Result<GapTable> {
+    let table = gap_rows(input, c, flag_above_mm)?;
+    let (_, rate) = names_and_rate(input)?;
+    let html = gaps_html(input, output, &table, rate)?;
+    crate::io::write_atomic(&gaps_csv_path(output), gaps_csv(&table).as_bytes())?;
+    crate::io::write_atomic(&gaps_html_path(output), html.as_bytes())?;
+    Ok(table)
 }
 
 /// The page for the recording `input` filled into `output`, whose gaps are `table`.
@@ -72,28 +91,7 @@ pub fn gaps_html(
         }
         None => page.push_str("<p>Too few observations to calibrate an expected error.</p>"),
     }
-    page.push_str(
-        "<table><tr><th>marker</th><th>first frame</th><th>last frame</th><th>start (s)</th>\
-         <th>length (s)</th><th>past ends</th><th>filled by</th><th>expected error</th></tr>",
-    );
-    for r in &table.rows {
-        let time = |t: Option<f64>| t.map_or(String::new(), |t| format!("{t:.3}"));
-        let expected = r
-            .expected_error
-            .map_or(String::new(), |e| format!("{e:.2} {}", escape(units)));
-        let _ = write!(
-            page,
-            "<tr{}><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{expected}</td></tr>",
-            if r.flagged { " class=\"flag\"" } else { "" },
-            escape(&r.marker),
-            r.first_frame,
-            r.last_frame,
-            time(r.start_s),
-            time(r.length_s),
-            r.past_ends,
-            r.filled_by,
-        );
-    }
+    gap_rows_html(&mut page, table, units);
     page.push_str("</table><h2>The gaps to check</h2>");
     let (t, positions_before, seen) = (
         before.tracks.frames(),
@@ -144,6 +142,32 @@ pub fn gaps_html(
     }
     page.push_str("</body></html>\n");
     Ok(page)
+}
+
+/// The table of `table`'s gaps, one row each, the flagged ones marked.
+fn gap_rows_html(page: &mut String, table: &GapTable, units: &str) {
+    page.push_str(
+        "<table><tr><th>marker</th><th>first frame</th><th>last frame</th><th>start (s)</th>\
+         <th>length (s)</th><th>past ends</th><th>filled by</th><th>expected error</th></tr>",
+    );
+    for r in &table.rows {
+        let time = |t: Option<f64>| t.map_or(String::new(), |t| format!("{t:.3}"));
+        let expected = r
+            .expected_error
+            .map_or(String::new(), |e| format!("{e:.2} {}", escape(units)));
+        let _ = write!(
+            page,
+            "<tr{}><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{expected}</td></tr>",
+            if r.flagged { " class=\"flag\"" } else { "" },
+            escape(&r.marker),
+            r.first_frame,
+            r.last_frame,
+            time(r.start_s),
+            time(r.length_s),
+            r.past_ends,
+            r.filled_by,
+        );
+    }
 }
 
 /// One coordinate against time, as an inline SVG: the observations as dots, the fill as a

@@ -101,7 +101,7 @@ pub struct RunSpec {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub step: Option<crate::train::StepKind>,
     /// The optimiser: `adam` (the default, the paper's) or `soap` (Adam in the eigenbasis
-    /// of Shampoo's factors; the fused step only; docs/speed.md, "Fourth round").
+    /// of Shampoo's factors; the fused step only; docs/speed.md, "What was tried").
     #[arg(long, help_heading = "Training")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub optimizer: Option<crate::train::OptimizerKind>,
@@ -321,17 +321,17 @@ pub fn fraction(s: &str) -> std::result::Result<f64, String> {
 }
 
 /// The `L_H` weight (Eq. 13) of a fit of tracks with gaps whose options set none: the
-/// best of 0, 0.1 and 0.3 for the fill on the shared marker recordings (docs/results.md).
+/// best of 0, 0.1 and 0.3 for the fill on the shared marker recordings (docs/gap-filling.md).
 pub const GAP_FILLING_H_WEIGHT: f64 = 0.1;
 
 /// The iterations of a fit of tracks with gaps whose options set neither a budget nor a
 /// schedule (`--iters`, `--config`, `--recipe`, `--until-converged`): on the shared marker
 /// recordings the fill at 300 iterations was as good as at the paper's 1000 or better, in
-/// under a third of the time (docs/results.md, real markers).
+/// under a third of the time (docs/gap-filling.md, real markers).
 pub const GAP_FILLING_ITERATIONS: usize = 300;
 
 /// The frames per iteration of a fit of tracks with gaps whose options set none: the
-/// 100-frame clips of docs/results.md are fitted as before, and a recording at its native
+/// 100-frame clips of docs/gap-filling.md are fitted as before, and a recording at its native
 /// rate (thousands of frames) costs the same budget of steps, not an epoch per frame
 /// (docs/speed.md, native rate).
 pub const GAP_FILLING_FRAMES_PER_ITERATION: usize = 100;

@@ -10,6 +10,7 @@ use serde_json::Value;
 use super::schedule::{Convergence, ScheduleConfig, default_adam};
 use crate::field::model::ModelConfig;
 use crate::field::{DomaFieldConfig, Variant};
+use crate::gaps::blend::Validation;
 use crate::io::{merge, read_object, unknown_field};
 use crate::jacobian::JacobianKind;
 use crate::loss::{DataPenalty, SmoothnessNorm};
@@ -187,6 +188,10 @@ pub struct FitConfig {
     /// The name of the recipe the settings came from ([`super::Recipe`]); a label only:
     /// the settings themselves are the other fields.
     pub recipe: Option<super::Recipe>,
+    /// How doma's fill validates its weights, and which spans a fit of tracks with gaps
+    /// hides from the field (`None`: [`Validation::default`], today's choices; a config
+    /// file may set any of its fields: [`FitConfig::validation`]).
+    pub validation: Option<Validation>,
 }
 
 impl FitConfig {
@@ -195,6 +200,11 @@ impl FitConfig {
     pub fn doma(field: DomaFieldConfig) -> Self {
         let sampling = SmoothnessSampling::authors(field.variant);
         FitConfig::new(ModelConfig::Doma(field)).with_smoothness_sampling(sampling)
+    }
+
+    /// The validation of doma's fill this config asks for: its own, or the defaults.
+    pub fn validation(&self) -> Validation {
+        self.validation.clone().unwrap_or_default()
     }
 
     /// Sets the weight `w_H` of `L_H`.
@@ -240,6 +250,9 @@ impl FitConfig {
                     "SOAP is computed by the fused step only: use --step fused (or auto)".into(),
                 ));
             }
+        }
+        if let Some(v) = &self.validation {
+            v.check().map_err(DomaError::InvalidConfig)?;
         }
         self.model.validate()?;
         self.model.check_jacobian(self.jacobian)

@@ -19,11 +19,12 @@ mod rows;
 mod samples;
 mod schedule;
 pub mod select;
+mod step;
 mod trainer;
 mod trajectory;
 
 pub use config::{FitConfig, LossConfig, SmoothnessSampling, WithSchedule, check_weights};
-pub use fused::{OptimizerKind, SoapConfig, StepKind};
+pub use fused::{OptimizerKind, SoapConfig};
 pub use hooks::{EachFn, Hooks, Progress};
 pub use objective::Objective;
 pub use recipe::{
@@ -32,6 +33,7 @@ pub use recipe::{
 };
 pub use record::{Fitted, IterationRecord, Outcome, RngState, TrainerSnapshot, gaussian};
 pub use schedule::{Convergence, Decay, ScheduleConfig, default_adam};
+pub use step::StepKind;
 pub use trainer::Trainer;
 pub use trajectory::TrajectoryObjective;
 

@@ -160,7 +160,7 @@ impl<'a> TrajectoryObjective<'a> {
     /// `L_T` at frame `k`, unweighted ([`loss::acceleration`]): at every fitted track's
     /// canonical position (at most [`TEMPORAL_POINTS`] of them, drawn afresh), observed in
     /// frame `k` or not: the fill carries a track's residual across its gap, which is smooth
-    /// only where the field's path is smooth on the seen frames too (docs/results.md).
+    /// only where the field's path is smooth on the seen frames too (docs/gap-filling.md).
     /// The three times are centred on `k`, moved inwards at the first and last frames.
     fn temporal_term<M: MotionField>(
         &self,

@@ -62,7 +62,7 @@ fn bad_flags_are_refused_with_a_message() {
         ),
         (
             vec!["complete", "r", "--out", "f.npz", "--method", "nearest"],
-            "rigid_body",
+            "rigid-body",
         ),
     ] {
         let (ok, _, err) = doma(&args);
@@ -954,4 +954,49 @@ fn a_motion_capture_fit_reports_its_error_in_millimetres_and_quiet_is_quiet() {
         epe > 0.0 && (100.0..10_000.0).contains(&scale),
         "{epe} {x1e4}"
     );
+}
+
+/// Every filler is listed by `complete --help` and `fill --help` under its command-line
+/// name, and in docs/usage.md's table under both its names: the lists are held to
+/// `Filler::ALL`, not kept by hand.
+#[test]
+fn every_filler_is_listed_in_the_help_and_the_docs() {
+    use doma::gaps::Filler;
+    let docs = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/usage.md"))
+        .expect("docs/usage.md");
+    let table: Vec<&str> = docs
+        .split("## The fillers")
+        .nth(1)
+        .expect("a section on the fillers")
+        .lines()
+        .filter(|l| l.starts_with("| `"))
+        .collect();
+    assert_eq!(table.len(), Filler::COUNT, "{table:?}");
+    for (row, f) in table.iter().zip(Filler::ALL) {
+        let want = format!("| `{}` | `{}` |", f.flag(), f.name());
+        assert!(row.starts_with(&want), "{row} is not {want}");
+    }
+    for command in ["complete", "fill"] {
+        let (ok, out, err) = doma(&[command, "-h"]);
+        assert!(ok, "{err}");
+        let values = out
+            .split("--method <FILLER>")
+            .nth(1)
+            .and_then(|m| m.split("[possible values: ").nth(1))
+            .and_then(|v| v.split(']').next())
+            .unwrap_or_else(|| panic!("{command} -h lists no fillers:\n{out}"));
+        let listed: Vec<&str> = values.split(", ").collect();
+        let all: Vec<&str> = Filler::ALL.iter().map(|f| f.flag()).collect();
+        assert_eq!(listed, all, "{command} -h");
+    }
+    // The old spelling still reads.
+    let (_, _, err) = doma(&[
+        "complete",
+        "no-such-run",
+        "--out",
+        "x.npz",
+        "--method",
+        "rigid_body",
+    ]);
+    assert!(!err.contains("invalid value"), "{err}");
 }

@@ -310,4 +310,27 @@ fn a_config_file_with_a_field_no_fit_config_has_is_refused_naming_it() {
     );
     let config = FitConfig::load_partial(&path).unwrap();
     assert_eq!(config.schedule.iterations, 200);
+    // The fill's validation is a part of the config like the schedule: one field set, the
+    // others today's defaults; an unknown one or one that cannot run refused by name.
+    let path = write("validation.json", r#"{"validation": {"max_draws": 12}}"#);
+    let config = FitConfig::load_partial(&path).unwrap();
+    let defaults = doma::gaps::blend::Validation::default();
+    assert_eq!(config.validation().max_draws, 12);
+    assert_eq!(config.validation().min_draws, defaults.min_draws);
+    assert_eq!(config.validation().lean_shares, defaults.lean_shares);
+    // A config saved before the field existed reads as today's defaults.
+    let none = FitConfig::load_partial(&write("none.json", "{}")).unwrap();
+    assert_eq!(none.validation(), defaults);
+    for (name, text, needle) in [
+        ("folds.json", r#"{"validation": {"folds": 3}}"#, "`folds`"),
+        (
+            "fraction.json",
+            r#"{"validation": {"fraction": 1.5}}"#,
+            "validation.fraction",
+        ),
+    ] {
+        let path = write(name, text);
+        let err = FitConfig::load_partial(&path).unwrap_err().to_string();
+        assert!(err.contains(name) && err.contains(needle), "{name}: {err}");
+    }
 }

@@ -136,50 +136,7 @@ impl Layout {
         let record = if by_params == by_header || by_header.points == 0 {
             by_params
         } else {
-            // Every mix of the two: the one the file's length confirms, or none. One that
-            // merely fits is no evidence (a file cut short fits a smaller record).
-            let mut mixes = Vec::new();
-            for points in [by_params.points, by_header.points] {
-                for analog in [by_params.analog, by_header.analog] {
-                    for float in [by_params.float, by_header.float] {
-                        let r = Record {
-                            points,
-                            analog,
-                            float,
-                        };
-                        if r.points > 0 && !mixes.contains(&r) {
-                            mixes.push(r);
-                        }
-                    }
-                }
-            }
-            let confirmed: Vec<Record> = mixes
-                .into_iter()
-                .filter(|r| r.bytes().is_some_and(|b| counts.confirms(b)))
-                .collect();
-            let [chosen] = confirmed[..] else {
-                return Err(format!(
-                    "the header and the parameters disagree: the header says {}, the \
-                     parameters {}, and the file's length ({len} bytes) confirms {} \
-                     (header words 2, 3 and 7 against POINT:USED, ANALOG:USED × ANALOG:RATE \
-                     / POINT:RATE and the sign of POINT:SCALE)",
-                    by_header.describe(),
-                    by_params.describe(),
-                    if confirmed.is_empty() {
-                        "neither"
-                    } else {
-                        "more than one layout"
-                    }
-                ));
-            };
-            notes.push(format!(
-                "the header says {} where the parameters say {}: read as {}, which the file's \
-                 length confirms",
-                by_header.describe(),
-                by_params.describe(),
-                chosen.describe()
-            ));
-            chosen
+            reconciled(by_params, by_header, &counts, &mut notes)?
         };
         let record_bytes = record.bytes().ok_or_else(|| {
             format!(
@@ -213,6 +170,60 @@ impl Layout {
             notes,
         })
     }
+}
+
+/// The record of a file whose header (`by_header`) and parameters (`by_params`)
+/// disagree: of every mix of the two, the one the file's length confirms, with a note;
+/// refused where none or several are. One that merely fits is no evidence (a file cut
+/// short fits a smaller record).
+fn reconciled(
+    by_params: Record,
+    by_header: Record,
+    counts: &Counts,
+    notes: &mut Vec<String>,
+) -> Result<Record, String> {
+    let mut mixes = Vec::new();
+    for points in [by_params.points, by_header.points] {
+        for analog in [by_params.analog, by_header.analog] {
+            for float in [by_params.float, by_header.float] {
+                let r = Record {
+                    points,
+                    analog,
+                    float,
+                };
+                if r.points > 0 && !mixes.contains(&r) {
+                    mixes.push(r);
+                }
+            }
+        }
+    }
+    let confirmed: Vec<Record> = mixes
+        .into_iter()
+        .filter(|r| r.bytes().is_some_and(|b| counts.confirms(b)))
+        .collect();
+    let [chosen] = confirmed[..] else {
+        return Err(format!(
+            "the header and the parameters disagree: the header says {}, the parameters {}, \
+             and the file's length ({} bytes) confirms {} (header words 2, 3 and 7 against \
+             POINT:USED, ANALOG:USED × ANALOG:RATE / POINT:RATE and the sign of POINT:SCALE)",
+            by_header.describe(),
+            by_params.describe(),
+            counts.len,
+            if confirmed.is_empty() {
+                "neither"
+            } else {
+                "more than one layout"
+            }
+        ));
+    };
+    notes.push(format!(
+        "the header says {} where the parameters say {}: read as {}, which the file's \
+         length confirms",
+        by_header.describe(),
+        by_params.describe(),
+        chosen.describe()
+    ));
+    Ok(chosen)
 }
 
 /// The analog words per frame the parameters say: `ANALOG:USED` channels of

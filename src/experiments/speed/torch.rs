@@ -9,7 +9,7 @@ use crate::backend::BackendKind;
 use crate::data::synthetic::{Motion, benchmark_sequence};
 use crate::error::{DomaError, Result};
 use crate::jacobian::JacobianKind;
-use crate::train::{FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, Recipe, StepKind};
+use crate::train::{FAST_POINTS_PER_STEP, FAST_SMOOTHNESS_POINTS, FitConfig, Recipe, StepKind};
 
 /// The PyTorch side of a comparison: `benches/torch_step.py` in the crate.
 pub fn torch_script() -> std::path::PathBuf {
@@ -144,6 +144,72 @@ pub fn compare_torch(
     let device = BackendKind::Flex.device()?;
     let seq = benchmark_sequence(Motion::Rotation, 0)?;
     let n = seq.train.points();
+    let (protocol, fast, cases) = comparison_cases(n);
+    let mut trainers = Vec::new();
+    let mut rows = Vec::new();
+    for (step, doma, config, torch, size, target) in cases {
+        trainers.push(FitStep::new(&config, &seq.train, &device)?);
+        rows.push(Comparison {
+            step,
+            doma,
+            doma_ms: Vec::new(),
+            torch,
+            size,
+            torch_ms: Vec::new(),
+            target,
+        });
+    }
+    for round in 0..rounds.max(1) {
+        let times = steps_in_turn(&mut trainers, warmup, steps)?;
+        for (c, t) in rows.iter_mut().zip(times) {
+            let ms = median(t);
+            progress(&format!(
+                "round {round}: doma {} {}: {ms:.2} ms",
+                c.step, c.doma
+            ));
+            c.doma_ms.push(ms);
+        }
+        for size in [protocol, fast] {
+            let modes = if size == protocol {
+                "none,jvp,dual,jacrev"
+            } else {
+                "jvp,dual,jacrev"
+            };
+            let torch = torch_rows(python, modes, size, warmup, steps, threads)?;
+            let ms = |mode: &str| torch.iter().find(|t| t.mode == mode).map(|t| t.ms_median);
+            for c in rows.iter_mut().filter(|c| c.size == size) {
+                let v = match c.torch {
+                    "fastest" => ["dual", "jvp", "jacrev"]
+                        .iter()
+                        .filter_map(|m| ms(m))
+                        .fold(f64::INFINITY, f64::min),
+                    mode => ms(mode).unwrap_or(f64::NAN),
+                };
+                progress(&format!(
+                    "round {round}: pytorch {} at {} points: {v:.2} ms",
+                    c.torch, size.points
+                ));
+                c.torch_ms.push(v);
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// One line of the comparison: doma's step and method, its config, PyTorch's mode, the
+/// size both run at, and the ratio aimed at.
+type Case = (
+    &'static str,
+    &'static str,
+    FitConfig,
+    &'static str,
+    TorchSize,
+    Option<f64>,
+);
+
+/// The sizes of the protocol's step and `fast`'s on `n` training points, and the lines of
+/// [`compare_torch`].
+fn comparison_cases(n: usize) -> (TorchSize, TorchSize, [Case; 6]) {
     let protocol = TorchSize {
         points: n,
         h_points: n,
@@ -202,55 +268,7 @@ pub fn compare_torch(
         ),
         ("fast", "fused", fast_config, "fastest", fast, None),
     ];
-    let mut trainers = Vec::new();
-    let mut rows = Vec::new();
-    for (step, doma, config, torch, size, target) in cases {
-        trainers.push(FitStep::new(&config, &seq.train, &device)?);
-        rows.push(Comparison {
-            step,
-            doma,
-            doma_ms: Vec::new(),
-            torch,
-            size,
-            torch_ms: Vec::new(),
-            target,
-        });
-    }
-    for round in 0..rounds.max(1) {
-        let times = steps_in_turn(&mut trainers, warmup, steps)?;
-        for (c, t) in rows.iter_mut().zip(times) {
-            let ms = median(t);
-            progress(&format!(
-                "round {round}: doma {} {}: {ms:.2} ms",
-                c.step, c.doma
-            ));
-            c.doma_ms.push(ms);
-        }
-        for size in [protocol, fast] {
-            let modes = if size == protocol {
-                "none,jvp,dual,jacrev"
-            } else {
-                "jvp,dual,jacrev"
-            };
-            let torch = torch_rows(python, modes, size, warmup, steps, threads)?;
-            let ms = |mode: &str| torch.iter().find(|t| t.mode == mode).map(|t| t.ms_median);
-            for c in rows.iter_mut().filter(|c| c.size == size) {
-                let v = match c.torch {
-                    "fastest" => ["dual", "jvp", "jacrev"]
-                        .iter()
-                        .filter_map(|m| ms(m))
-                        .fold(f64::INFINITY, f64::min),
-                    mode => ms(mode).unwrap_or(f64::NAN),
-                };
-                progress(&format!(
-                    "round {round}: pytorch {} at {} points: {v:.2} ms",
-                    c.torch, size.points
-                ));
-                c.torch_ms.push(v);
-            }
-        }
-    }
-    Ok(rows)
+    (protocol, fast, cases)
 }
 
 /// The side-by-side table: each line's medians over rounds (min–max), the ratio and its

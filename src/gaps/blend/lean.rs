@@ -1,13 +1,15 @@
-//! A track's own lean from its class's weights ([`TrackLean`]), learned on its own
-//! validation spans.
+//! Between the stages: a track's own lean from its class's weights ([`TrackLean`]),
+//! learned on its own validation spans of stage 1.
 
 use std::collections::BTreeMap;
 
-use super::learn::{CLASSES, Classes, Residual};
-use super::{Blend, LENGTH_CLASSES, M, Weights, classic_fillers, span_class};
-use crate::gaps::SPLINE_CARRY_FRAMES;
-use crate::gaps::fillers::{Filler, PerFiller};
 use serde::{Deserialize, Serialize};
+
+use super::class::{GapClass, Pool};
+use super::residual::{Pools, Residual};
+use super::validation::Validation;
+use super::{Blend, M, Weights, classic_fillers};
+use crate::gaps::fillers::{Filler, PerFiller};
 
 /// A track's lean, for its short gaps or for its longer ones: this share of its classic
 /// fillers' weight moved to one filler in each class of gap length. A motion-capture
@@ -19,8 +21,8 @@ use serde::{Deserialize, Serialize};
 pub struct TrackLean {
     /// The track.
     pub track: usize,
-    /// The gaps it holds for: 0 for the short ones (at most
-    /// [`SPLINE_CARRY_FRAMES`] frames), 1 for the longer ones.
+    /// The gaps it holds for: 0 for the short ones ([`GapClass::Short`]), 1 for the long
+    /// ones, every length class ([`lean_key`]).
     pub class: usize,
     /// The filler leaned to, with the share moved to it (the other fillers' zero).
     pub toward: Weights,
@@ -50,34 +52,28 @@ impl TrackLean {
     }
 }
 
-/// The key of a gap of `len` frames in [`TrackLean::class`]: 0 for the short gaps (at
-/// most [`SPLINE_CARRY_FRAMES`] frames), 1 for the longer ones.
-pub(super) fn class_key(len: usize) -> usize {
-    usize::from(len > SPLINE_CARRY_FRAMES)
+/// The key of a gap of `len` frames in [`TrackLean::class`]: 0 for a short gap, 1 for a
+/// long one. A track's spans are too few to lean each length class apart.
+pub fn lean_key(len: usize) -> usize {
+    usize::from(GapClass::of(len).is_long())
 }
 
-/// The draws that must hold a track's validation spans of a class for it to lean there
-/// (fewer give no measure of the gain's spread).
-const LEAN_DRAWS: usize = 3;
-
-/// The shares of a track's classic weight that its lean may move to one filler.
-const LEAN_SHARES: [f64; 4] = [0.25, 0.5, 0.75, 1.0];
-
 /// Each track's lean for its short gaps and for its longer ones ([`TrackLean`]): of every
-/// classic filler and [`LEAN_SHARES`], the one with the least cost on the track's own
-/// validation entries of those gaps in `folds`, each judged by `blend`'s weights for its
-/// class leaned so; kept where its gain cross-fitted (the lean chosen on the other draws,
-/// judged on each draw in turn) is above two standard errors, over the draws that hold
-/// such entries, [`LEAN_DRAWS`] at least. Short and long gaps lean apart: the fillers
-/// that suit a gap of a few frames (the spline) are not those of a second (the donors).
-/// By track, then class.
-pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean> {
+/// classic filler and [`Validation::lean_shares`], the one with the least cost on the
+/// track's own validation entries of those gaps in `folds`, each judged by `blend`'s
+/// weights for its class leaned so; kept where its gain cross-fitted (the lean chosen on
+/// the other draws, judged on each draw in turn) is clear
+/// ([`Validation::clearly_positive`]), over the draws that hold such entries,
+/// [`Validation::lean_draws`] at least. Short and long gaps lean apart: the fillers that
+/// suit a gap of a few frames (the spline) are not those of a second (the donors). By
+/// track, then class.
+pub(super) fn track_leans(folds: &[Pools<M>], blend: &Blend, v: &Validation) -> Vec<TrackLean> {
     let classic = classic_fillers();
     let leans: Vec<TrackLean> = Filler::ALL
         .into_iter()
         .filter(|f| classic & f.bit() != 0)
         .flat_map(|f| {
-            LEAN_SHARES.map(|share| TrackLean {
+            v.lean_shares.iter().map(move |&share| TrackLean {
                 track: 0,
                 class: 0,
                 toward: PerFiller::from_fn(|g| if g == f { share } else { 0.0 }),
@@ -85,21 +81,21 @@ pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean>
             })
         })
         .collect();
-    // Each entry once, with its draw: the short gaps and each length class, not the
-    // pooled long gaps that repeat them.
+    // Each entry once, with its draw: each class's pool, not the pooled long gaps that
+    // repeat them.
     let mut by_track: BTreeMap<(usize, usize), Vec<(usize, &Residual<M>)>> = BTreeMap::new();
     for (d, fold) in folds.iter().enumerate() {
-        for class in std::iter::once(0).chain(2..CLASSES) {
-            for r in &fold[class] {
+        for class in GapClass::all() {
+            for r in &fold[Pool::Class(class).index()] {
                 by_track
-                    .entry((r.track, class_key(r.len)))
+                    .entry((r.track, lean_key(r.len)))
                     .or_default()
                     .push((d, r));
             }
         }
     }
-    // Per class of gap length ([`span_class`]), its weights with no lean, then with each.
-    let leaned: Vec<Vec<Weights>> = (0..=LENGTH_CLASSES)
+    // Per class of gap length, its weights with no lean, then with each.
+    let leaned: Vec<Vec<Weights>> = GapClass::all()
         .map(|class| {
             let w = *blend.class_weights(class);
             std::iter::once(w)
@@ -113,14 +109,14 @@ pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean>
         let mut cost = vec![vec![0f64; 1 + leans.len()]; folds.len()];
         for &(d, r) in &entries {
             let weight = r.weight();
-            for (c, w) in leaned[span_class(r.len)].iter().enumerate() {
+            for (c, w) in leaned[GapClass::of(r.len).index()].iter().enumerate() {
                 cost[d][c] += weight * r.distance(&w.0);
             }
         }
         let drawn: Vec<usize> = (0..folds.len())
             .filter(|&d| entries.iter().any(|e| e.0 == d))
             .collect();
-        if drawn.len() < LEAN_DRAWS {
+        if drawn.len() < v.lean_draws {
             continue;
         }
         let total = |c: usize, without: Option<usize>| -> f64 {
@@ -141,17 +137,13 @@ pub(super) fn track_leans(folds: &[Classes<M>], blend: &Blend) -> Vec<TrackLean>
                 .unwrap_or(0)
         };
         let chosen = best(None);
-        // The gain of the lean chosen on the other draws, draw by draw: kept where its mean
-        // is above two standard errors, as stage 2 keeps the field's share.
+        // The gain of the lean chosen on the other draws, draw by draw: kept where it is
+        // clear, as stage 2 keeps the field's share.
         let gains: Vec<f64> = drawn
             .iter()
             .map(|&d| cost[d][0] - cost[d][best(Some(d))])
             .collect();
-        let n = gains.len() as f64;
-        let mean = gains.iter().sum::<f64>() / n;
-        let spread = (gains.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-        let clear = mean > 2.0 * spread / n.sqrt();
-        if chosen > 0 && clear {
+        if chosen > 0 && v.clearly_positive(&gains) {
             // Judged only as deep into a gap as its validation entries reach (a span that
             // ran into a real gap is judged near that gap's border), a lean holds for gaps
             // no longer than that depth on both sides: deeper, the spline drifts off and
@@ -173,7 +165,7 @@ mod tests {
     use std::sync::Arc;
 
     use super::*;
-    use crate::gaps::blend::learn::empty_classes;
+    use crate::gaps::blend::residual::empty_pools;
 
     #[test]
     fn a_lean_moves_a_share_of_the_classic_weight_and_keeps_the_field_s() {
@@ -232,7 +224,7 @@ mod tests {
         // 3 + 1 + 1, a gain of −2. Track 4: Gløersen's fill better in every draw, by 10,
         // 0.1 and 0.1: a mean gain of 3.4 whose standard error is 3.3, not clear.
         let blend = Blend::only(Filler::Spline);
-        let mut folds: Vec<Classes<M>> = (0..3).map(|_| empty_classes()).collect();
+        let mut folds: Vec<Pools<M>> = (0..3).map(|_| empty_pools()).collect();
         for (d, fold) in folds.iter_mut().enumerate() {
             let short = &mut fold[0];
             short.push(entry(0, 0.0, 1.0));
@@ -246,7 +238,7 @@ mod tests {
                 short.push(entry(4, 0.1, 0.0));
             }
         }
-        let leans = track_leans(&folds, &blend);
+        let leans = track_leans(&folds, &blend, &Validation::default());
         assert_eq!(leans.len(), 1, "{leans:?}");
         assert_eq!((leans[0].track, leans[0].class), (1, 0));
         assert_eq!(leans[0].toward[Filler::Gloersen], 1.0);
@@ -266,14 +258,14 @@ mod tests {
         // Every class on the linear fill. In each of three draws, track 0's spline is
         // exact 3 frames deep in a gap, and track 1's Gløersen fill 5 frames deep.
         let mut blend = Blend::only(Filler::Linear);
-        let folds: Vec<Classes<M>> = (0..3)
+        let folds: Vec<Pools<M>> = (0..3)
             .map(|_| {
-                let mut fold = empty_classes();
+                let mut fold = empty_pools();
                 fold[0].extend([entry_in(0, 3, 0.0, 1.0), entry_in(1, 5, 1.0, 0.0)]);
                 fold
             })
             .collect();
-        blend.leans = track_leans(&folds, &blend);
+        blend.leans = track_leans(&folds, &blend, &Validation::default());
         let reach: Vec<_> = blend.leans.iter().map(|l| (l.track, l.reach)).collect();
         assert_eq!(reach, [(0, Some(6)), (1, Some(10))]);
         assert_eq!(blend.weights_at(6, 0)[Filler::Spline], 1.0);

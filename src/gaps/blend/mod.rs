@@ -5,78 +5,82 @@
 //! No filler wins everywhere. On sparse markers the field's fill beats every baseline in
 //! most cases, but a cubic spline wins short gaps of a fast, densely sampled motion; on
 //! hundreds or thousands of tracks of one skinned surface the neighbours' motion does
-//! better, and on dense marker sets the donors' rigid motion (docs/results.md, gap
-//! filling). So the weights are learned per data set, in two stages (`learn.rs`).
+//! better, and on dense marker sets the donors' rigid motion (docs/gap-filling.md, gap
+//! filling). So the weights are learned on the data itself, per [`GapClass`] of gap
+//! length, in the order the files tell it:
 //!
-//! First the classic fillers: in each of at least [`VALIDATION_FOLDS`] draws (more, up to
-//! [`MAX_VALIDATION_DRAWS`], until each class of gap length to fill holds
-//! [`VALIDATION_SPANS`] spans), [`VALIDATION_FRACTION`] of the observations of the tracks
-//! with gaps are hidden again, in the pattern of the data's own gaps moved in time
-//! ([`validation_spans`]: as long as they are, and as many tracks at once; the tracks
-//! without a gap stay whole, as for the real gaps, since the donor fillers and Gløersen's
-//! depend on them); every filler fills them from what is left, and the convex combination
-//! with the least mean distance over the draws (each span counted once, as the literature
-//! counts each gap) is found: one for gaps of at most
-//! [`SPLINE_CARRY_FRAMES`](super::SPLINE_CARRY_FRAMES) frames, one for longer gaps pooled,
-//! and one for each [`length_class`] of the longer ones seen in two draws or more (the
-//! pooled one serves the others). Each is used only if it also beats every filler alone
-//! cross-fitted (weights learned on the other draws, judged on the rest in turn): a blend
-//! that won by chance on a few spans is not used, and the filler that did best alone fills
-//! that class instead.
+//! 1. **Stage 1** (`stage_one.rs`): the classic fillers, on validation draws. Spans of
+//!    the observations are hidden in the pattern of the data's own gaps, every classic
+//!    filler fills them from the rest, and per class the convex combination with the
+//!    least mean distance is kept where it beats every filler alone cross-fitted.
+//! 2. **The leans** (`lean.rs`): a track may move a share of its classic weight to one
+//!    filler, where its own validation spans say so clearly.
+//! 3. **Stage 2** (`stage_two.rs`): the field's two fills, on the blind spans, observations
+//!    the field was fitted without ([`blind_spans`]): stage 1's blend and the field's fills
+//!    are blended again per class, kept where the gain is clear.
 //!
-//! Then the field's fills, on spans the field was not fitted to. The field was fitted to
-//! every observation, the validation spans of the first stage included: judged there it
-//! has seen the answer and looks far better than inside a gap (on the shared motion-capture
-//! recordings, by up to twice). A fit with blind validation hides one draw of validation
-//! spans from the field itself ([`blind_spans`]); on those spans alone, split into
-//! [`VALIDATION_FOLDS`] folds by span, the first stage's blend and the field's two fills
-//! are blended per class the same way. Without blind spans the field's fills take no
-//! weight (its fill alone is still `--method field_fill`). The real gaps are then filled
-//! from every observation (docs/design.md §7). On a recording longer than a window of time
-//! ([`super::window`]) each validation draw hides its spans in one window, and every filler
-//! fills each gap in the window that holds it.
+//! What both stages share, the residuals and the objective, is `residual.rs`; how many
+//! spans, draws and folds, and how clear a gain must be, is [`Validation`]
+//! (`validation.rs`). The real gaps are then filled from every observation
+//! ([`doma_fill`]); on a recording longer than a window of time ([`super::window`])
+//! each validation draw hides its spans in one window, and every filler fills each gap in
+//! the window that holds it (docs/design.md §7).
 
 // Index loops over 6 × 6 matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
-use super::field_fill::FieldPrediction;
-use super::fillers::{Filler, Marked, PerFiller, Sources};
+use super::fillers::{Filler, PerFiller, Sources};
+use super::marked::Marked;
+use super::prediction::FieldPrediction;
 use super::spans::{GapIndex, validation_spans};
 use super::window::windowed;
-use learn::learn;
 use serde::{Deserialize, Serialize};
 
-/// The share of the observations of the tracks with gaps hidden in each validation draw.
-pub const VALIDATION_FRACTION: f64 = 0.1;
+mod class;
+mod lean;
+mod residual;
+mod stage_one;
+mod stage_two;
+mod validation;
 
-/// The validation draws at least, and the groups of draws that cross-fitting holds out in
-/// turn.
-pub const VALIDATION_FOLDS: usize = 6;
-
-/// The validation draws at most: past [`VALIDATION_FOLDS`], draws are added until every
-/// class of gap length that has a gap to fill holds [`VALIDATION_SPANS`] validation spans.
-/// A short recording hides only a few spans per draw (a tenth of a 2-second clip is a
-/// couple of one-second gaps), too few to weigh the fillers by.
-pub const MAX_VALIDATION_DRAWS: usize = 30;
-
-/// The validation spans wanted in each class of gap length with a gap to fill.
-pub const VALIDATION_SPANS: usize = 24;
+pub use class::{GapClass, LENGTH_CLASSES, Pool};
+pub use lean::{TrackLean, lean_key};
+pub use validation::Validation;
 
 /// Keeps the seed of the spans hidden from a fit ([`blind_spans`]) apart from the draws'.
 const BLIND_SEED: u64 = 0x5851_f42d_4c95_7f2d;
 
-/// The validation spans hidden from a fit with blind validation: [`VALIDATION_FRACTION`]
+/// The validation spans hidden from a fit with blind validation: [`Validation::fraction`]
 /// of the observations of the tracks of `tracks` with gaps, in spans as long as its own
-/// gaps ([`validation_spans`]), drawn with `seed`; none where no span fits.
-/// `(frame, track)`, sorted.
-pub fn blind_spans(tracks: &Marked, seed: u64) -> Vec<(usize, usize)> {
-    validation_spans(tracks, VALIDATION_FRACTION, seed ^ BLIND_SEED, span_class).unwrap_or_default()
+/// gaps ([`validation_spans`], stratified by [`GapClass`]), drawn with `seed`; none where
+/// no span fits. `(frame, track)`, sorted.
+pub fn blind_spans(tracks: &Marked, seed: u64, validation: &Validation) -> Vec<(usize, usize)> {
+    let stratum = |len: usize| GapClass::of(len).index();
+    validation_spans(tracks, validation.fraction, seed ^ BLIND_SEED, stratum).unwrap_or_default()
 }
 
-/// The class of a gap of `len` frames among the short gaps (0) and the [`LENGTH_CLASSES`]
-/// of the long ones (1 on): the strata of the validation spans.
-fn span_class(len: usize) -> usize {
-    length_class(len).map_or(0, |c| c + 1)
+/// The weights (module docs): stage 1 on validation draws with `seed`, the leans, stage 2
+/// on the observed entries of `blind`, observations the field was fitted without.
+fn learn(
+    tracks: &Marked,
+    field: &FieldPrediction,
+    seed: u64,
+    blind: &[(usize, usize)],
+    validation: &Validation,
+) -> Blend {
+    if tracks.frames < 3 || tracks.observed.iter().all(|&o| o) {
+        return Blend::only(Filler::FieldFill);
+    }
+    let Some((mut blend, draws)) = stage_one::stage_one(tracks, field, seed, validation) else {
+        // Nothing to validate on: the field's fill, as it is fitted.
+        return Blend::only(Filler::FieldFill);
+    };
+    blend.leans = lean::track_leans(&draws, &blend, validation);
+    // Stage 1's residuals (up to a window's tenth per draw) are spent: not held through
+    // stage 2's fills.
+    drop(draws);
+    stage_two::stage_two(&mut blend, tracks, field, blind, validation);
+    blend
 }
 
 /// The number of fillers blended.
@@ -92,32 +96,6 @@ impl Weights {
     }
 }
 
-/// The classes of long gaps by length: more than
-/// [`SPLINE_CARRY_FRAMES`](super::SPLINE_CARRY_FRAMES) frames up to twice that, then each
-/// up to twice the last, the last one unbounded. A convex blend tuned on two-second gaps
-/// is not the one for quarter-second ones: rigid-body fill's error grows with the gap, a
-/// spline's much faster, and the squared errors of the longest gaps would set the weights
-/// of all of them.
-pub const LENGTH_CLASSES: usize = 5;
-
-/// The class of a gap of `len` frames among [`LENGTH_CLASSES`]; `None` for a short gap.
-pub fn length_class(len: usize) -> Option<usize> {
-    let carry = super::SPLINE_CARRY_FRAMES;
-    (len > carry).then(|| {
-        let (mut class, mut top) = (0, 2 * carry);
-        while len > top && class + 1 < LENGTH_CLASSES {
-            class += 1;
-            top *= 2;
-        }
-        class
-    })
-}
-
-/// The longest gap of length class `class`, in frames (`None`: no bound).
-pub fn class_longest(class: usize) -> Option<usize> {
-    (class + 1 < LENGTH_CLASSES).then(|| super::SPLINE_CARRY_FRAMES << (class + 1))
-}
-
 /// The weights a fill used, and the validation entries that chose them.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Blend {
@@ -131,8 +109,8 @@ pub struct Blend {
     /// Whether each class's blend beat every filler alone cross-fitted; where not, that
     /// class fills with the filler that did best alone (its weights all on it).
     pub cross_fitted: [bool; 2],
-    /// The long gaps by length ([`LENGTH_CLASSES`]; empty where there was no long
-    /// validation entry, and in reports written before).
+    /// The long gaps by length, one per [`GapClass::Long`] ([`LENGTH_CLASSES`]; empty
+    /// where there was no long validation entry, and in reports written before).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub by_length: Vec<LengthBlend>,
     /// The blind validation entries that weighed the field's fills against the classic
@@ -150,7 +128,7 @@ fn is_zero(v: &usize) -> bool {
     *v == 0
 }
 
-/// The weights of one length class of long gaps ([`length_class`]).
+/// The weights of one length class of long gaps ([`GapClass::Long`]).
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 pub struct LengthBlend {
     /// The longest gap of the class, in frames (`None`: no bound).
@@ -172,11 +150,12 @@ pub struct LengthBlend {
 /// drawn with `seed`, or on `blind`, observed entries of `tracks` that the field was fitted
 /// without ([`blind_spans`]), where there are any (module docs). Observed entries are
 /// returned as observed; a track never observed is left as it is.
-pub fn blended_fill(
+pub fn doma_fill(
     tracks: &Marked,
     field: &FieldPrediction,
     seed: u64,
     blind: &[(usize, usize)],
+    validation: &Validation,
 ) -> (Vec<f32>, Blend) {
     let n = tracks.points;
     let seen = tracks.seen_tracks();
@@ -184,7 +163,7 @@ pub fn blended_fill(
         .flat_map(|k| seen.iter().map(move |&i| (k, i)))
         .filter(|&(k, i)| !tracks.seen(k, i))
         .collect();
-    let (fills, blend) = blended_fill_at(tracks, field, seed, blind, &entries);
+    let (fills, blend) = doma_fill_at(tracks, field, seed, blind, &entries, validation);
     let mut out = tracks.positions.to_vec();
     for (&(k, i), v) in entries.iter().zip(fills) {
         let e = 3 * (k * n + i);
@@ -193,23 +172,24 @@ pub fn blended_fill(
     (out, blend)
 }
 
-/// [`blended_fill`]'s values at `entries` `(frame, track)` alone, unobserved entries of
+/// [`doma_fill`]'s values at `entries` `(frame, track)` alone, unobserved entries of
 /// tracks observed somewhere: what a long recording's completion holds instead of a second
 /// copy of it.
-pub fn blended_fill_at(
+pub fn doma_fill_at(
     tracks: &Marked,
     field: &FieldPrediction,
     seed: u64,
     blind: &[(usize, usize)],
     entries: &[(usize, usize)],
+    validation: &Validation,
 ) -> (Vec<[f32; 3]>, Blend) {
-    let blend = learn(tracks, field, seed, blind);
+    let blend = learn(tracks, field, seed, blind, validation);
     let fills = if blend.is_field_only() {
         fill_with(tracks, field, Filler::FieldFill, entries)
     } else {
         let (entries, used) = (with_gap_lengths(tracks, entries), blend.in_use());
         windowed(&Sources::new(*tracks, field), &entries, |s, local| {
-            combined(&blend, &candidates_in(s, local, used), local)
+            combined(&blend, &filler_values_in(s, local, used), local)
         })
     };
     (fills, blend)
@@ -246,7 +226,7 @@ fn blend_at(
     blend: &Blend,
     entries: &[(usize, usize, usize)],
 ) -> (Vec<[f32; 3]>, Vec<[[f32; 3]; M]>) {
-    let values = candidates(sources, entries, EVERY_FILLER);
+    let values = filler_values(sources, entries, EVERY_FILLER);
     (combined(blend, &values, entries), values)
 }
 
@@ -265,18 +245,18 @@ fn combined(
 /// Every filler's value at `entries` `(frame, track, gap length)`, in the order of
 /// [`Filler::ALL`], computed for the fillers whose bits are set in `fillers` (the others'
 /// are NaN): in windows of time on a long recording ([`windowed`]).
-fn candidates(
+fn filler_values(
     sources: &Sources,
     entries: &[(usize, usize, usize)],
     fillers: u32,
 ) -> Vec<[[f32; 3]; M]> {
     windowed(sources, entries, |s, local| {
-        candidates_in(s, local, fillers)
+        filler_values_in(s, local, fillers)
     })
 }
 
-/// [`candidates`] from `sources` as they are.
-fn candidates_in(
+/// [`filler_values`] from `sources` as they are.
+fn filler_values_in(
     sources: &Sources,
     entries: &[(usize, usize, usize)],
     fillers: u32,
@@ -306,10 +286,10 @@ fn classic_fillers() -> u32 {
 }
 
 /// doma's fill and every filler's value at `entries` `(frame, track)`, gaps of the tracks:
-/// what [`blended_fill`] gives there, without filling the other gaps. For measuring a fill
+/// what [`doma_fill`] gives there, without filling the other gaps. For measuring a fill
 /// on held-out entries beside its parts.
 pub struct FillsAt {
-    /// The weights, as [`blended_fill`] learns them.
+    /// The weights, as [`doma_fill`] learns them.
     pub blend: Blend,
     /// doma's fill at each entry.
     pub doma: Vec<[f32; 3]>,
@@ -324,15 +304,16 @@ impl FillsAt {
     }
 }
 
-/// [`FillsAt`] of the same arguments as [`blended_fill`] and the entries to measure.
+/// [`FillsAt`] of the same arguments as [`doma_fill`] and the entries to measure.
 pub fn fills_at(
     tracks: &Marked,
     field: &FieldPrediction,
     seed: u64,
     blind: &[(usize, usize)],
     entries: &[(usize, usize)],
+    validation: &Validation,
 ) -> FillsAt {
-    let blend = learn(tracks, field, seed, blind);
+    let blend = learn(tracks, field, seed, blind, validation);
     let entries = with_gap_lengths(tracks, entries);
     let (doma, fillers) = blend_at(&Sources::new(*tracks, field), &blend, &entries);
     FillsAt {
@@ -373,17 +354,17 @@ impl Blend {
         })
     }
 
-    /// The weights for a gap of `len` frames.
+    /// The weights for a gap of `len` frames: its [`GapClass`]'s.
     pub fn weights_for(&self, len: usize) -> &Weights {
-        self.class_weights(span_class(len))
+        self.class_weights(GapClass::of(len))
     }
 
-    /// The weights of class `class` ([`span_class`]: 0 for the short gaps, `c + 1` for
-    /// length class `c`).
-    fn class_weights(&self, class: usize) -> &Weights {
+    /// The weights of `class`: the short gaps', or a length class's own (the pooled long
+    /// ones' where it has none).
+    fn class_weights(&self, class: GapClass) -> &Weights {
         match class {
-            0 => &self.short,
-            c => self.by_length.get(c - 1).map_or(&self.long, |b| &b.weights),
+            GapClass::Short => &self.short,
+            GapClass::Long(c) => self.by_length.get(c).map_or(&self.long, |b| &b.weights),
         }
     }
 
@@ -400,7 +381,7 @@ impl Blend {
     /// track's lean where it has one.
     pub fn weights_at(&self, len: usize, track: usize) -> Weights {
         let w = self.weights_for(len);
-        let key = (track, lean::class_key(len));
+        let key = (track, lean_key(len));
         match self
             .leans
             .binary_search_by_key(&key, |l| (l.track, l.class))
@@ -422,12 +403,6 @@ impl Blend {
         })
     }
 }
-
-mod blind;
-mod lean;
-mod learn;
-
-pub use lean::TrackLean;
 
 #[cfg(test)]
 mod tests;

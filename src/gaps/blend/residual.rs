@@ -1,17 +1,7 @@
-//! Learning a blend's weights, in two stages.
-//!
-//! 1. **The classic fillers** (every filler but the field's two fills), on validation
-//!    draws: spans of the observations hidden, every filler filling them from the rest;
-//!    per class of gap length, the convex combination with the least mean distance, kept
-//!    where it beats every filler alone cross-fitted. These fillers see nothing but the
-//!    observations left, so a span hidden from them is a gap to them.
-//! 2. **The field's fills** (`blind.rs`), on the blind spans alone, where there are any:
-//!    observations the field was fitted without ([`super::blind_spans`]). The field was
-//!    fitted to every other observation, so judged on a validation span of stage 1 it
-//!    would be judged where it has seen the answer; there it looks far better than inside
-//!    a gap. Per class, stage 1's blend and the field's two fills are blended again, three
-//!    weights learned and cross-fitted the same way on the blind spans. Without blind
-//!    spans the field's fills take no weight: nothing measured them as they fill a gap.
+//! What both stages of a blend's learning share: a validation entry's errors, one per
+//! candidate ([`Residual`]), gathered per [`Pool`]; the objective ([`cost`]) and its
+//! minimiser over the simplex ([`mean_distance`]); and the choice between a blend and the
+//! best candidate alone, cross-fitted ([`solve`]).
 //!
 //! The objective is the literature's: the mean Euclidean distance of each gap, averaged
 //! over the gaps ([`Residual::weight`]: every validation span counts once, whatever its
@@ -25,24 +15,11 @@
 use std::ops::Range;
 use std::sync::Arc;
 
-use rayon::prelude::*;
-
-use super::blind::{blind_residuals, judge_field};
-use super::lean::track_leans;
-use super::{
-    Blend, LENGTH_CLASSES, LengthBlend, M, MAX_VALIDATION_DRAWS, VALIDATION_FOLDS,
-    VALIDATION_FRACTION, VALIDATION_SPANS, Weights, candidates, class_longest, classic_fillers,
-    length_class, span_class,
-};
-use crate::gaps::field_fill::FieldPrediction;
-use crate::gaps::fillers::{Filler, Marked, PerFiller, Sources};
-use crate::gaps::linalg::simplex_least_squares;
-use crate::gaps::spans::{GapIndex, gaps, validation_spans};
-use crate::gaps::window::DrawWindows;
-
-/// The classes whose weights [`learn`] solves for: short gaps, long gaps pooled, then each
-/// length class of the long ones.
-pub(super) const CLASSES: usize = 2 + LENGTH_CLASSES;
+use super::class::Pool;
+use super::{M, filler_values};
+use crate::gaps::fillers::{Filler, Sources};
+use crate::gaps::spans::GapIndex;
+use crate::numeric::linalg::simplex_least_squares;
 
 /// The reweighting steps of [`mean_distance`] after its least-squares start.
 const REWEIGHTS: usize = 16;
@@ -51,16 +28,6 @@ const REWEIGHTS: usize = 16;
 /// capture holds hundreds of thousands per class, each solve builds a Gram matrix of
 /// them per step, and a span's neighbouring entries say nearly the same.
 const SOLVED_ENTRIES: usize = 1 << 14;
-
-/// The classes a validation entry in a gap of `len` frames counts in.
-pub(super) fn classes_of(len: usize) -> impl Iterator<Item = usize> {
-    match length_class(len) {
-        None => [Some(0), None],
-        Some(c) => [Some(1), Some(2 + c)],
-    }
-    .into_iter()
-    .flatten()
-}
 
 /// One validation entry: each of `K` candidates' error there, `p − y` (in `f32`, as the
 /// fills are: a long recording's draws hold millions), the length of its gap and its track.
@@ -75,9 +42,17 @@ pub(super) struct Residual<const K: usize> {
     pub(super) depth: usize,
 }
 
-/// A draw's residuals per class: an entry counts in two (its length class and the pooled
-/// long gaps, or the short gaps alone), held once.
-pub(super) type Classes<const K: usize> = [Vec<Arc<Residual<K>>>; CLASSES];
+/// A draw's residuals per [`Pool`] (by [`Pool::index`]): a long gap's entry counts in
+/// two (its class and the pooled long gaps), held once.
+pub(super) type Pools<const K: usize> = [Vec<Arc<Residual<K>>>; Pool::COUNT];
+
+/// One validation draw's hidden entries, `(frame, track)`.
+pub(super) type Hidden = Vec<(usize, usize)>;
+
+/// No residual in any pool.
+pub(super) fn empty_pools<const K: usize>() -> Pools<K> {
+    std::array::from_fn(|_| Vec::new())
+}
 
 impl<const K: usize> Residual<K> {
     /// Its weight in the objective: one over the length of its gap, so that each gap
@@ -165,17 +140,18 @@ pub(super) fn one_hot<const K: usize>(k: usize) -> [f64; K] {
     std::array::from_fn(|m| if m == k { 1.0 } else { 0.0 })
 }
 
-/// One class's weights over `draws` (each draw's residuals per class), on the
-/// candidates of `allowed`: the blend with the least mean distance if it beats every
-/// allowed candidate alone cross-fitted (each group of draws, draw `d` in group
-/// `d % groups`, judged with the weights of the others), else the candidate that did
-/// best alone; and whether the blend won.
+/// One pool's weights over `draws` (each draw's residuals per pool), on the candidates
+/// of `allowed`: the blend with the least mean distance if it beats every allowed
+/// candidate alone cross-fitted (draw `d` in group `d % groups`, at most `groups` groups,
+/// each judged with the weights of the others), else the candidate that did best alone;
+/// and whether the blend won.
 pub(super) fn solve<const K: usize>(
-    draws: &[Classes<K>],
-    class: usize,
+    draws: &[Pools<K>],
+    pool: Pool,
     allowed: u32,
+    groups: usize,
 ) -> ([f64; K], bool) {
-    let groups = draws.len().min(VALIDATION_FOLDS);
+    let (class, groups) = (pool.index(), draws.len().min(groups));
     let of = |group: Option<usize>, held: bool| -> Vec<&Residual<K>> {
         draws
             .iter()
@@ -207,175 +183,6 @@ pub(super) fn solve<const K: usize>(
     }
 }
 
-/// The weights (module docs): stage 1 on validation draws with `seed`, stage 2 on the
-/// observed entries of `blind`, observations the field was fitted without.
-pub(super) fn learn(
-    tracks: &Marked,
-    field: &FieldPrediction,
-    seed: u64,
-    blind: &[(usize, usize)],
-) -> Blend {
-    let (t, n) = (tracks.frames, tracks.points);
-    if t < 3 || tracks.observed.iter().all(|&o| o) {
-        return Blend::only(Filler::FieldFill);
-    }
-    // Per draw and class, the validation entries' residuals; the draws are independent,
-    // so they run on every core (in order: the result does not depend on the split).
-    let folds: Vec<Classes<M>> = draws(tracks, seed)
-        .into_par_iter()
-        .map(|(frames, hidden)| {
-            let (tracks, field) = (tracks.window(frames.clone()), field.window(frames));
-            let mut left = tracks.observed.to_vec();
-            for &(k, i) in &hidden {
-                left[k * n + i] = false;
-            }
-            let left_tracks = tracks.with_observed(&left);
-            // Stage 1 weighs the classic fillers alone: the field's fills are not computed.
-            residuals(
-                &Sources::new(left_tracks, &field),
-                &hidden,
-                classic_fillers(),
-            )
-            .into_iter()
-            .flatten()
-            .fold(empty_classes(), |mut classes, r| {
-                for class in classes_of(r.len) {
-                    classes[class].push(Arc::clone(&r));
-                }
-                classes
-            })
-        })
-        .collect();
-    let Some(mut blend) = classic_blend(&folds) else {
-        // Nothing to validate on: the field's fill, as it is fitted.
-        return Blend::only(Filler::FieldFill);
-    };
-    blend.leans = track_leans(&folds, &blend);
-    // Stage 1's residuals (up to a window's tenth per draw) are spent: not held through
-    // stage 2's fills.
-    drop(folds);
-    let blind_folds = blind_residuals(tracks, field, blind, &blend);
-    if !blind_folds.is_empty() {
-        judge_field(&mut blend, &blind_folds);
-    }
-    blend
-}
-
-pub(super) fn empty_classes<const K: usize>() -> Classes<K> {
-    std::array::from_fn(|_| Vec::new())
-}
-
-/// Stage 1: the blend of the classic fillers on `folds`, per class; `None` where no draw
-/// holds a validation entry.
-fn classic_blend(folds: &[Classes<M>]) -> Option<Blend> {
-    let classic = classic_fillers();
-    let counts: [usize; CLASSES] = std::array::from_fn(|c| folds.iter().map(|f| f[c].len()).sum());
-    // The draws in which each class has a validation entry.
-    let drawn: [usize; CLASSES] =
-        std::array::from_fn(|c| folds.iter().filter(|f| !f[c].is_empty()).count());
-    let solved = |class: usize| {
-        let (w, beat) = solve(folds, class, classic);
-        (PerFiller(w), beat)
-    };
-    let mut weights = [Weights::only(Filler::FieldFill); 2];
-    let mut cross_fitted = [false; 2];
-    for class in 0..2 {
-        if counts[class] > 0 {
-            (weights[class], cross_fitted[class]) = solved(class);
-        }
-    }
-    // A class with no validation entry takes the other's weights.
-    match [counts[0], counts[1]] {
-        [0, 0] => return None,
-        [0, _] => (weights[0], cross_fitted[0]) = (weights[1], cross_fitted[1]),
-        [_, 0] => (weights[1], cross_fitted[1]) = (weights[0], cross_fitted[0]),
-        _ => {}
-    }
-    let by_length = if counts[1] == 0 {
-        Vec::new()
-    } else {
-        (0..LENGTH_CLASSES)
-            .map(|c| {
-                let class = 2 + c;
-                let own = drawn[class] >= 2;
-                let (w, beat) = if own {
-                    solved(class)
-                } else {
-                    (weights[1], false)
-                };
-                LengthBlend {
-                    longest: class_longest(c),
-                    weights: w,
-                    validated: counts[class],
-                    own,
-                    cross_fitted: beat,
-                }
-            })
-            .collect()
-    };
-    Some(Blend {
-        short: weights[0],
-        long: weights[1],
-        validated: [counts[0], counts[1]],
-        cross_fitted,
-        by_length,
-        field_validated: 0,
-        leans: Vec::new(),
-    })
-}
-
-/// One validation draw's hidden entries, `(frame, track)`.
-pub(super) type Hidden = Vec<(usize, usize)>;
-
-/// Stage 1's validation draws, each its window of frames ([`DrawWindows`]: the whole
-/// recording unless it is long) and its hidden entries in the window's frames: at least
-/// [`VALIDATION_FOLDS`], then more until every class of gap length with a gap to fill
-/// holds [`VALIDATION_SPANS`] validation spans, at most [`MAX_VALIDATION_DRAWS`].
-pub(super) fn draws(tracks: &Marked, seed: u64) -> Vec<(Range<usize>, Hidden)> {
-    // The classes of the gaps to fill, and the validation spans drawn in each.
-    let mut wanted = [false; 1 + LENGTH_CLASSES];
-    for g in gaps(tracks).filter(|g| g.is_interior()) {
-        wanted[span_class(g.len())] = true;
-    }
-    let mut spans = [0usize; 1 + LENGTH_CLASSES];
-    let windows = DrawWindows::new(tracks);
-    let (mut out, mut failed) = (Vec::new(), 0);
-    for draw in 0..MAX_VALIDATION_DRAWS {
-        let enough = (0..spans.len()).all(|c| !wanted[c] || spans[c] >= VALIDATION_SPANS);
-        if draw >= VALIDATION_FOLDS && enough || failed == VALIDATION_FOLDS {
-            break;
-        }
-        let draw_seed = seed ^ 0x9e37_79b9_7f4a_7c15u64.wrapping_mul(draw as u64 + 1);
-        let frames = windows.at(draw);
-        let window = tracks.window(frames.clone());
-        let Ok(hidden) = validation_spans(&window, VALIDATION_FRACTION, draw_seed, span_class)
-        else {
-            failed += 1;
-            continue;
-        };
-        for len in span_lengths(&hidden) {
-            spans[span_class(len)] += 1;
-        }
-        out.push((frames, hidden));
-    }
-    out
-}
-
-/// The lengths of the spans of `hidden` `(frame, track)`: each track's runs of
-/// consecutive frames.
-fn span_lengths(hidden: &[(usize, usize)]) -> Vec<usize> {
-    let mut by_track: Vec<(usize, usize)> = hidden.iter().map(|&(k, i)| (i, k)).collect();
-    by_track.sort_unstable();
-    let mut out: Vec<usize> = Vec::new();
-    for (r, &(i, k)) in by_track.iter().enumerate() {
-        match out.last_mut() {
-            Some(last) if r > 0 && by_track[r - 1] == (i, k.wrapping_sub(1)) => *last += 1,
-            _ => out.push(1),
-        }
-    }
-    out
-}
-
 /// Every filler's error at `hidden` `(frame, track)`, entries observed in `tracks` that
 /// `sources` lacks, filled from the observations of `sources`, each with the length of
 /// its gap there and its depth in it: one per entry of `hidden`, in its order, `None`
@@ -393,7 +200,7 @@ pub(super) fn residuals(
         .zip(&gaps)
         .filter_map(|(&(k, i), gap)| gap.as_ref().map(|g| (k, i, g.len())))
         .collect();
-    let mut filled = candidates(sources, &entries, fillers)
+    let mut filled = filler_values(sources, &entries, fillers)
         .into_iter()
         .zip(&entries);
     hidden

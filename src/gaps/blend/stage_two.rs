@@ -1,34 +1,54 @@
-//! Stage 2 of a blend's learning (`learn.rs`): the field's two fills weighed against the
-//! classic fillers' blend on the blind spans, observations the field was fitted without,
-//! and kept only where they gain clearly.
+//! Stage 2 of a blend's learning: the field's two fills weighed against stage 1's blend
+//! (and the leans) on the blind spans, observations the field was fitted without
+//! ([`super::blind_spans`]), and kept only where they gain clearly.
+//!
+//! The field was fitted to every other observation, so judged on a validation span of
+//! stage 1 it would be judged where it has seen the answer; there it looks far better than
+//! inside a gap. Per class, stage 1's blend and the field's two fills are blended again,
+//! three weights learned and cross-fitted the same way on the blind spans. Without blind
+//! spans the field's fills take no weight: nothing measured them as they fill a gap.
 
 use std::sync::Arc;
 
-use super::learn::{
-    CLASSES, Classes, Hidden, Residual, classes_of, cost, empty_classes, one_hot, residuals, solve,
-};
-use super::{Blend, VALIDATION_FOLDS, Weights};
-use crate::gaps::field_fill::FieldPrediction;
-use crate::gaps::fillers::{Filler, Marked, PerFiller, Sources};
+use super::class::{GapClass, Pool};
+use super::residual::{Hidden, Pools, Residual, cost, empty_pools, one_hot, residuals, solve};
+use super::validation::Validation;
+use super::{Blend, Weights};
+use crate::gaps::fillers::{Filler, PerFiller, Sources};
+use crate::gaps::marked::Marked;
+use crate::gaps::prediction::FieldPrediction;
 use crate::gaps::window::WINDOW_ENTRIES;
 
-/// The blind folds with entries of a class that stage 2 needs to weigh the field's fills
-/// there (fewer give no measure of the gain's spread).
-const FIELD_FOLDS: usize = 3;
+/// Stage 2 on the observed entries of `blind`: `blend`'s classes that gain clearly from
+/// the field's fills take them in ([`judge_field`]); nothing changes where `blind` holds
+/// no observed entry.
+pub(super) fn stage_two(
+    blend: &mut Blend,
+    tracks: &Marked,
+    field: &FieldPrediction,
+    blind: &[(usize, usize)],
+    validation: &Validation,
+) {
+    let folds = blind_residuals(tracks, field, blind, blend, validation.blind_folds);
+    if !folds.is_empty() {
+        judge_field(blend, &folds, validation);
+    }
+}
 
 /// The candidates of stage 2: stage 1's blend, the field's fill with fixed lenders and
 /// with lenders chosen frame by frame.
 const STAGE_TWO: usize = 3;
 
-/// The blind spans' residuals for stage 2, split into [`VALIDATION_FOLDS`] folds span by
-/// span: stage 1's blend by `blend`'s weights for each entry's gap, and the field's two
-/// fills. Empty where `blind` holds no observed entry.
-pub(super) fn blind_residuals(
+/// The blind spans' residuals for stage 2, split into `folds` folds span by span: stage
+/// 1's blend by `blend`'s weights for each entry's gap, and the field's two fills. Empty
+/// where `blind` holds no observed entry.
+fn blind_residuals(
     tracks: &Marked,
     field: &FieldPrediction,
     blind: &[(usize, usize)],
     blend: &Blend,
-) -> Vec<Classes<STAGE_TWO>> {
+    folds: usize,
+) -> Vec<Pools<STAGE_TWO>> {
     let (fixed, framewise) = (
         Filler::FieldFill.index(),
         Filler::FieldFillFramewise.index(),
@@ -38,7 +58,7 @@ pub(super) fn blind_residuals(
     let n = tracks.points;
     // One mask for every fold: the fold's spans hidden, then seen again.
     let mut left = tracks.observed.to_vec();
-    blind_draws(tracks, blind)
+    blind_draws(tracks, blind, folds)
         .iter()
         .map(|fold| {
             // The fold's spans hidden, the other folds' seen: each filler fills them from
@@ -47,7 +67,7 @@ pub(super) fn blind_residuals(
             let sources = Sources::new(tracks.with_observed(&left), field);
             let found = residuals(&sources, fold, fillers);
             fold.iter().for_each(|&(k, i)| left[k * n + i] = true);
-            let mut classes = empty_classes();
+            let mut pools = empty_pools();
             for r in found.into_iter().flatten() {
                 // Stage 1's blend of the values, less the truth: its blend of the errors.
                 let three = Arc::new(Residual {
@@ -60,50 +80,54 @@ pub(super) fn blind_residuals(
                     track: r.track,
                     depth: r.depth,
                 });
-                for class in classes_of(r.len) {
-                    classes[class].push(Arc::clone(&three));
+                for pool in Pool::of(r.len) {
+                    pools[pool.index()].push(Arc::clone(&three));
                 }
             }
-            classes
+            pools
         })
         .collect()
 }
 
-/// Stage 2: each class's weights become the blend of its stage-1 weights and the field's
-/// two fills learned on the blind spans (`folds`), where the class has blind entries in
-/// [`FIELD_FOLDS`] folds or more and that blend, cross-fitted, beats the first stage's by
-/// more than two standard errors of its gain per fold. A blind draw holds few spans on a
-/// short recording: a share that wins on some folds and loses on others by as much is
-/// the spans' noise. A class that does not qualify keeps its stage-1 weights (the pooled
-/// long gaps' share of the field would be judged on gaps of other lengths).
-pub(super) fn judge_field(blend: &mut Blend, folds: &[Classes<STAGE_TWO>]) {
-    let counts: [usize; CLASSES] = std::array::from_fn(|c| folds.iter().map(|f| f[c].len()).sum());
-    let drawn: [usize; CLASSES] =
+/// Each class's weights become the blend of its stage-1 weights and the field's two fills
+/// learned on the blind spans (`folds`), where the class has blind entries in
+/// [`Validation::field_folds`] folds or more and that blend, cross-fitted, beats the first
+/// stage's clearly ([`Validation::clearly_positive`] of its gain per fold). A blind draw
+/// holds few spans on a short recording: a share that wins on some folds and loses on
+/// others by as much is the spans' noise. A class that does not qualify keeps its stage-1
+/// weights (the pooled long gaps' share of the field would be judged on gaps of other
+/// lengths).
+fn judge_field(blend: &mut Blend, folds: &[Pools<STAGE_TWO>], v: &Validation) {
+    let counts: [usize; Pool::COUNT] =
+        std::array::from_fn(|c| folds.iter().map(|f| f[c].len()).sum());
+    let drawn: [usize; Pool::COUNT] =
         std::array::from_fn(|c| folds.iter().filter(|f| !f[c].is_empty()).count());
-    let share = |class: usize| -> Option<[f64; STAGE_TWO]> {
-        if drawn[class] < FIELD_FOLDS {
+    let groups = v.cross_fit_groups;
+    let share = |pool: Pool| -> Option<[f64; STAGE_TWO]> {
+        let class = pool.index();
+        if drawn[class] < v.field_folds {
             return None;
         }
         let classic = one_hot::<STAGE_TWO>(0);
-        let (s, _) = solve(folds, class, u32::MAX);
+        let (s, _) = solve(folds, pool, u32::MAX, groups);
         // Each fold judged with the weights the others choose, against the first stage's
         // blend: the field's share holds only where it gains by more than two standard
         // errors of the folds' gains.
         let gains: Vec<f64> = (0..folds.len())
             .filter(|&d| !folds[d][class].is_empty())
             .map(|d| {
-                let others: Vec<Classes<STAGE_TWO>> = folds
+                let others: Vec<Pools<STAGE_TWO>> = folds
                     .iter()
                     .enumerate()
                     .filter(|&(e, _)| e != d)
                     .map(|(_, f)| f.clone())
                     .collect();
-                let (w, _) = solve(&others, class, u32::MAX);
+                let (w, _) = solve(&others, pool, u32::MAX, groups);
                 let judged = || folds[d][class].iter().map(|r| &**r);
                 cost(judged(), &classic) - cost(judged(), &w)
             })
             .collect();
-        (s != classic && clearly_positive(&gains)).then_some(s)
+        (s != classic && v.clearly_positive(&gains)).then_some(s)
     };
     let with_field = |classic: &Weights, s: [f64; STAGE_TWO]| -> Weights {
         PerFiller::from_fn(|f| {
@@ -115,29 +139,19 @@ pub(super) fn judge_field(blend: &mut Blend, folds: &[Classes<STAGE_TWO>]) {
                 }
         })
     };
-    if let Some(s) = share(0) {
+    if let Some(s) = share(Pool::Class(GapClass::Short)) {
         blend.short = with_field(&blend.short, s);
     }
     for (c, class) in blend.by_length.iter_mut().enumerate() {
-        if let Some(s) = share(2 + c) {
+        if let Some(s) = share(Pool::Class(GapClass::Long(c))) {
             class.weights = with_field(&class.weights, s);
         }
     }
-    if let Some(s) = share(1) {
+    if let Some(s) = share(Pool::AllLong) {
         blend.long = with_field(&blend.long, s);
     }
-    blend.field_validated = counts[0] + counts[1];
-}
-
-/// Whether the mean of `gains` exceeds two of its standard errors (so is positive).
-fn clearly_positive(gains: &[f64]) -> bool {
-    let n = gains.len() as f64;
-    if gains.len() < 2 {
-        return false;
-    }
-    let mean = gains.iter().sum::<f64>() / n;
-    let variance = gains.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    mean > 0.0 && mean > 2.0 * (variance / n).sqrt()
+    blend.field_validated =
+        counts[Pool::Class(GapClass::Short).index()] + counts[Pool::AllLong.index()];
 }
 
 /// The blind entries that stage 2 weighs at most, about: an eighth of a window of time
@@ -145,15 +159,15 @@ fn clearly_positive(gains: &[f64]) -> bool {
 /// observations, [`blind_spans`](super::blind_spans)). A long recording's blind spans grow
 /// with it; its stage 2 weighs a stretch of them, as its fill's memory and time must not
 /// grow.
-pub(super) const BLIND_ENTRIES: usize = WINDOW_ENTRIES / 8;
+const BLIND_ENTRIES: usize = WINDOW_ENTRIES / 8;
 
-/// The observed entries of `blind`, split into [`VALIDATION_FOLDS`] folds span by span
-/// (none where `blind` holds no observed entry). Past [`BLIND_ENTRIES`] of them, the
+/// The observed entries of `blind`, split into `folds` folds span by span (none where
+/// `blind` holds no observed entry). Past [`BLIND_ENTRIES`] of them, the
 /// spans of one stretch of time in the recording's middle, as many as fit in
 /// [`BLIND_ENTRIES`]: each fold is filled on its own, in the windows of time that hold
 /// its spans, so spans spread over a long recording would have every fold fill every
 /// window.
-pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> Vec<Hidden> {
+pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)], folds: usize) -> Vec<Hidden> {
     let (n, observed) = (tracks.points, tracks.observed);
     let mut blind: Vec<(usize, usize)> = blind
         .iter()
@@ -181,12 +195,12 @@ pub(super) fn blind_draws(tracks: &Marked, blind: &[(usize, usize)]) -> Vec<Hidd
         spans = spans[from..to].to_vec();
         spans.sort_by_key(|span| (span[0].1, span[0].0));
     }
-    let mut folds = vec![Vec::new(); VALIDATION_FOLDS];
+    let mut out = vec![Vec::new(); folds];
     for (s, span) in spans.iter().enumerate() {
-        folds[s % VALIDATION_FOLDS].extend_from_slice(span);
+        out[s % folds].extend_from_slice(span);
     }
-    folds.retain(|f| !f.is_empty());
-    folds
+    out.retain(|f| !f.is_empty());
+    out
 }
 
 #[cfg(test)]
@@ -205,7 +219,7 @@ mod tests {
             .flat_map(|i| (0..t).filter(|k| k % 4 < 2).map(move |k| (k, i)))
             .collect();
         assert!(blind.len() > BLIND_ENTRIES);
-        let folds = blind_draws(&tracks, &blind);
+        let folds = blind_draws(&tracks, &blind, Validation::default().blind_folds);
         let weighed: Vec<(usize, usize)> = folds.concat();
         assert!(
             weighed.len() <= BLIND_ENTRIES && weighed.len() > BLIND_ENTRIES - 16,
@@ -241,25 +255,11 @@ mod tests {
         let tracks = Marked::new(t, n, &positions, &observed);
         let field = FieldPrediction::new(n, &positions, &positions[..3 * n], &observed);
         let blind = [(10, 0), (11, 0), (13, 0), (14, 0)];
-        let folds = blind_residuals(&tracks, &field, &blind, &Blend::only(Filler::Linear));
+        let folds = blind_residuals(&tracks, &field, &blind, &Blend::only(Filler::Linear), 6);
         assert_eq!(folds.len(), 2);
         for fold in &folds {
             let lens: Vec<usize> = fold.iter().flatten().map(|r| r.len).collect();
             assert_eq!(lens, [3, 3]);
         }
-    }
-
-    #[test]
-    fn a_gain_is_clear_past_two_standard_errors() {
-        // Every fold gains the same: no spread, clear.
-        assert!(clearly_positive(&[1.0, 1.0, 1.0]));
-        // Mean 1/3, standard deviation √(4/3), standard error 2/3: 1/3 < 4/3.
-        assert!(!clearly_positive(&[1.0, -1.0, 1.0]));
-        // Mean 3, standard deviation 0.1, standard error 0.1/√3: clear.
-        assert!(clearly_positive(&[2.9, 3.0, 3.1]));
-        // A loss is never clear, however steady; one fold gives no spread.
-        assert!(!clearly_positive(&[-1.0, -1.0, -1.0]));
-        assert!(!clearly_positive(&[5.0]));
-        assert!(!clearly_positive(&[]));
     }
 }

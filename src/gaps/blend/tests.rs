@@ -2,6 +2,9 @@
 //! its length classes and its blind spans.
 
 use super::*;
+
+/// Today's validation, as every fit has it by default.
+static V: std::sync::LazyLock<Validation> = std::sync::LazyLock::new(Validation::default);
 use crate::gaps::field_fill::{Lending, field_fill};
 
 /// `[T, N, 3]`: a grid of `n` tracks, five to a row, translated by an irregular jump
@@ -40,7 +43,7 @@ fn where_nothing_can_be_validated_the_fill_is_the_carried_one() {
     }
     let canonical: Vec<f32> = (0..3 * n).map(|v| v as f32).collect();
     let field = FieldPrediction::new(n, &predicted, &canonical, &observed);
-    let (filled, blend) = blended_fill(&Marked::new(t, n, &truth, &observed), &field, 3, &[]);
+    let (filled, blend) = doma_fill(&Marked::new(t, n, &truth, &observed), &field, 3, &[], &V);
     assert_eq!(blend.short, Weights::only(Filler::FieldFill));
     assert_eq!(blend.validated, [0, 0]);
     assert_eq!(
@@ -70,7 +73,7 @@ fn a_jittering_translation_with_a_wrong_field_is_filled_by_the_neighbours() {
     }
     let predicted = vec![0f32; 3 * t * n];
     let field = FieldPrediction::new(n, &predicted, &[f32::NAN; 3].repeat(n), &observed);
-    let (filled, blend) = blended_fill(&Marked::new(t, n, &truth, &observed), &field, 7, &[]);
+    let (filled, blend) = doma_fill(&Marked::new(t, n, &truth, &observed), &field, 7, &[], &V);
     assert!(blend.validated[0] > 0, "{blend:?}");
     // The neighbours' motion, pattern, rigid-body, segment and chain fill are all exact for a
     // translation: the weight goes to them, to one alone where no blend of them beats it.
@@ -150,7 +153,7 @@ fn blind_spans_judge_a_field_that_only_memorised_what_it_saw() {
     let memorised = FieldPrediction::new(n, &memorised, &[f32::NAN; 3].repeat(n), &observed);
     // Judged on the validation spans it was fitted to, it would look exact and take the
     // weight: without blind spans its fills take none.
-    let (seen, unjudged) = blended_fill(&tracks, &memorised, 7, &[]);
+    let (seen, unjudged) = doma_fill(&tracks, &memorised, 7, &[], &V);
     assert_eq!(unjudged.field_validated, 0);
     for weights in [unjudged.short, unjudged.long] {
         assert_eq!(
@@ -161,8 +164,8 @@ fn blind_spans_judge_a_field_that_only_memorised_what_it_saw() {
     assert!(worst(&seen) < 0.1, "{}", worst(&seen));
 
     // Each blind span lands whole in one fold.
-    let folds = blind::blind_draws(&tracks, &blind);
-    assert_eq!(folds.len(), VALIDATION_FOLDS);
+    let folds = stage_two::blind_draws(&tracks, &blind, V.blind_folds);
+    assert_eq!(folds.len(), V.blind_folds);
     let mut all: Vec<(usize, usize)> = folds.concat();
     all.sort_unstable();
     assert_eq!(all, blind);
@@ -175,7 +178,7 @@ fn blind_spans_judge_a_field_that_only_memorised_what_it_saw() {
         }
     }
 
-    let (filled, blend) = blended_fill(&tracks, &field, 7, &blind);
+    let (filled, blend) = doma_fill(&tracks, &field, 7, &blind, &V);
     assert_eq!(blend.field_validated, blind.len(), "{blend:?}");
     let exact = [
         Filler::Neighbours,
@@ -197,26 +200,6 @@ fn blind_spans_judge_a_field_that_only_memorised_what_it_saw() {
             );
         }
     }
-}
-
-#[test]
-fn length_classes_double_from_the_spline_carry() {
-    let c = crate::gaps::SPLINE_CARRY_FRAMES;
-    assert_eq!(length_class(c), None);
-    assert_eq!(length_class(c + 1), Some(0));
-    assert_eq!(length_class(2 * c), Some(0));
-    assert_eq!(length_class(2 * c + 1), Some(1));
-    assert_eq!(length_class(16 * c), Some(3));
-    assert_eq!(length_class(16 * c + 1), Some(4));
-    assert_eq!(length_class(usize::MAX), Some(LENGTH_CLASSES - 1));
-    for class in 0..LENGTH_CLASSES - 1 {
-        let top = class_longest(class).unwrap();
-        assert_eq!(
-            (length_class(top), length_class(top + 1)),
-            (Some(class), Some(class + 1))
-        );
-    }
-    assert_eq!(class_longest(LENGTH_CLASSES - 1), None);
 }
 
 #[test]
@@ -255,8 +238,13 @@ fn each_length_class_learns_its_own_weights() {
     let field = FieldPrediction::new(n, &predicted, &[f32::NAN; 3].repeat(n), &observed);
     let tracks = Marked::new(t, n, &truth, &observed);
     // The field judged where it was not fitted, as it is inside a gap.
-    let (filled, blend) = blended_fill(&tracks, &field, 5, &blind_spans(&tracks, 5));
-    let of = |len: usize| blend.by_length[length_class(len).unwrap()];
+    let (filled, blend) = doma_fill(&tracks, &field, 5, &blind_spans(&tracks, 5, &V), &V);
+    let of = |len: usize| {
+        blend.by_length[match GapClass::of(len) {
+            GapClass::Long(c) => c,
+            GapClass::Short => unreachable!("a long gap"),
+        }]
+    };
     let (medium, long) = (of(24), of(100));
     assert!(medium.own && long.own, "{blend:?}");
     assert!(medium.weights[Filler::Spline] > 0.5, "{blend:?}");
@@ -314,9 +302,9 @@ fn an_exact_field_keeps_the_whole_weight() {
     }
     let field = FieldPrediction::new(n, &truth, &truth[..3 * n], &observed);
     let tracks = Marked::new(t, n, &truth, &observed);
-    let blind = blind_spans(&tracks, 1);
+    let blind = blind_spans(&tracks, 1, &V);
     assert!(!blind.is_empty());
-    let (filled, blend) = blended_fill(&tracks, &field, 1, &blind);
+    let (filled, blend) = doma_fill(&tracks, &field, 1, &blind, &V);
     assert_eq!(blend.short, Weights::only(Filler::FieldFill), "{blend:?}");
     assert_eq!(blend.field_validated, blind.len());
     for (a, b) in filled.iter().zip(&truth) {
@@ -330,7 +318,13 @@ fn nothing_to_fill_is_returned_as_given() {
     let positions: Vec<f32> = (0..3 * t * n).map(|v| v as f32).collect();
     let observed = vec![true; t * n];
     let field = FieldPrediction::new(n, &positions, &positions[..3 * n], &observed);
-    let (filled, blend) = blended_fill(&Marked::new(t, n, &positions, &observed), &field, 0, &[]);
+    let (filled, blend) = doma_fill(
+        &Marked::new(t, n, &positions, &observed),
+        &field,
+        0,
+        &[],
+        &V,
+    );
     assert_eq!(filled, positions);
     assert_eq!(blend.validated, [0, 0]);
 }

@@ -14,7 +14,7 @@ use crate::data::mesh::as_points;
 use crate::data::sequence::{Sequence, read_points, read_tracks};
 use crate::data::tracks::Tracks;
 use crate::data::trc::{read_trc, trc_tracks};
-use crate::gaps::blend::{Blend, blended_fill_at, fill_with};
+use crate::gaps::blend::{Blend, doma_fill_at, fill_with};
 use crate::gaps::window::window_frames;
 use crate::gaps::{FieldPrediction, Filler, Marked};
 use crate::{DomaError, Result};
@@ -104,7 +104,7 @@ pub fn complete_run_with(
 
 /// The recording `data` completed into `out` without a fit: the gaps that `policy` asks
 /// for filled by its filler alone (by default [`Filler::Chain`], the best fill that needs
-/// no field on the recordings of docs/results.md), written as [`complete_run_with`]
+/// no field on the recordings of docs/gap-filling.md), written as [`complete_run_with`]
 /// writes a fitted run's. A C3D file's model outputs are left as they are, as a fit
 /// leaves them. An entry the filler cannot fill (no marker to carry it) is left unfilled.
 pub fn complete_without_fit(
@@ -426,7 +426,14 @@ fn fill_one(
     let (mut values, blend) = match policy.method {
         None => {
             let blind = blind.as_deref().unwrap_or(&[]);
-            blended_fill_at(&tracks, &field, config.fit.seed, blind, &entries)
+            doma_fill_at(
+                &tracks,
+                &field,
+                config.fit.seed,
+                blind,
+                &entries,
+                &config.fit.validation(),
+            )
         }
         Some(filler) => (
             fill_with(&tracks, &field, filler, &entries),

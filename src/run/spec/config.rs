@@ -264,7 +264,7 @@ impl RunSpec {
             c.time_scale = crate::field::time_scale_for(sequence.trajectories.frames());
         }
         // Sparse tracks with gaps: the gap-filling defaults where the options set nothing
-        // (docs/results.md, real markers: without L_H the field strays inside gaps, and
+        // (docs/gap-filling.md, real markers: without L_H the field strays inside gaps, and
         // more iterations did not fill them better).
         let gaps = matches!(config.fit.model, ModelConfig::Doma(_))
             && sequence

@@ -40,7 +40,6 @@ pub use soap::{SoapConfig, SoapState};
 
 use burn::optim::AdamConfig;
 use burn::tensor::Device;
-use serde::{Deserialize, Serialize};
 
 use super::config::FitConfig;
 use crate::field::Variant;
@@ -53,22 +52,7 @@ use crate::{DomaError, Result};
 use loss::{data_term, smoothness};
 use params::read_params;
 
-/// How a training step is computed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum StepKind {
-    /// Burn's operations around the Jacobian method, differentiated by Burn's autodiff:
-    /// every model, backend and loss.
-    Composed,
-    /// The whole step as one operation on the CPU (docs/design.md §2.4): a DOMA field, the
-    /// analytic Jacobian, flex or ndarray, the trajectory loss and `L_H`; refused, with
-    /// the reason, for any other fit.
-    Fused,
-    /// The fused step where it applies, the composed step elsewhere.
-    Auto,
-}
-
-crate::names::value_names!(StepKind);
+pub use crate::train::step::StepKind;
 
 /// The float operations the step needs beyond the network's ([`Real`]).
 pub(crate) trait Float: Real + std::ops::Div<Output = Self> + PartialOrd {

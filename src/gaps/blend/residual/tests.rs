@@ -1,4 +1,7 @@
 use super::*;
+use crate::gaps::blend::stage_one::span_lengths;
+use crate::gaps::marked::Marked;
+use crate::gaps::prediction::FieldPrediction;
 
 /// Residuals of 1-D errors: filler 0's `a`, filler 1's `b`, every other filler far off.
 fn residuals_of(a: &[f32], b: &[f32]) -> Vec<Residual<M>> {

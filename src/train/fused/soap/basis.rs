@@ -1,10 +1,10 @@
-//! SOAP's eigenbases: the first found exactly (Householder and QL, `gaps/eigen.rs`), then
+//! SOAP's eigenbases: the first found exactly (Householder and QL, `numeric/eigen.rs`), then
 //! refreshed by one power iteration and a Householder QR, sorted by the estimated
 //! eigenvalues.
 
 use super::Float;
-use crate::gaps::eigen::symmetric_eigen_householder;
 use crate::jacobian::analytic::cpu::{Mat, gemm};
+use crate::numeric::eigen::symmetric_eigen_householder;
 
 /// The eigenvectors (columns) of the symmetric `f` (`[n, n]`), by descending eigenvalue.
 pub(super) fn eigenbasis<E: Float>(f: &[E], n: usize) -> Vec<E> {

@@ -1,0 +1,178 @@
+//! Stage 1 of a blend's learning: the classic fillers (every filler but the field's two
+//! fills) weighed on validation draws.
+//!
+//! In each draw, spans of the observations are hidden in the pattern of the data's own
+//! gaps ([`validation_spans`]) and every classic filler fills them from the rest: these
+//! fillers see nothing but the observations left, so a span hidden from them is a gap to
+//! them. The draws go on until each class of gap length with a gap to fill holds its
+//! spans ([`draws`]). Then, per [`GapClass`], the convex combination with the least mean
+//! distance, kept where it beats every filler alone cross-fitted ([`solve`]); a class
+//! whose entries are in fewer than two draws takes the pooled long gaps' weights.
+
+use std::ops::Range;
+use std::sync::Arc;
+
+use rayon::prelude::*;
+
+use super::class::{GapClass, LENGTH_CLASSES, Pool};
+use super::residual::{Hidden, Pools, empty_pools, residuals, solve};
+use super::validation::Validation;
+use super::{Blend, LengthBlend, M, Weights, classic_fillers};
+use crate::gaps::fillers::{Filler, PerFiller, Sources};
+use crate::gaps::marked::Marked;
+use crate::gaps::prediction::FieldPrediction;
+use crate::gaps::spans::{gaps, validation_spans};
+use crate::gaps::window::DrawWindows;
+
+/// Stage 1 on `tracks` with draws seeded by `seed`: the classic fillers' blend, and each
+/// draw's residuals per pool (what the leans are learned on); `None` where no draw holds a
+/// validation entry.
+pub(super) fn stage_one(
+    tracks: &Marked,
+    field: &FieldPrediction,
+    seed: u64,
+    validation: &Validation,
+) -> Option<(Blend, Vec<Pools<M>>)> {
+    let n = tracks.points;
+    // Per draw and pool, the validation entries' residuals; the draws are independent,
+    // so they run on every core (in order: the result does not depend on the split).
+    let draws: Vec<Pools<M>> = draws(tracks, seed, validation)
+        .into_par_iter()
+        .map(|(frames, hidden)| {
+            let (tracks, field) = (tracks.window(frames.clone()), field.window(frames));
+            let mut left = tracks.observed.to_vec();
+            for &(k, i) in &hidden {
+                left[k * n + i] = false;
+            }
+            let left_tracks = tracks.with_observed(&left);
+            // Stage 1 weighs the classic fillers alone: the field's fills are not computed.
+            residuals(
+                &Sources::new(left_tracks, &field),
+                &hidden,
+                classic_fillers(),
+            )
+            .into_iter()
+            .flatten()
+            .fold(empty_pools(), |mut pools, r| {
+                for pool in Pool::of(r.len) {
+                    pools[pool.index()].push(Arc::clone(&r));
+                }
+                pools
+            })
+        })
+        .collect();
+    let blend = classic_blend(&draws, validation.cross_fit_groups)?;
+    Some((blend, draws))
+}
+
+/// Stage 1's validation draws, each its window of frames ([`DrawWindows`]: the whole
+/// recording unless it is long) and its hidden entries in the window's frames: at least
+/// [`Validation::min_draws`], then more until every class of gap length with a gap to fill
+/// holds [`Validation::spans_per_class`] validation spans, at most
+/// [`Validation::max_draws`].
+pub(super) fn draws(tracks: &Marked, seed: u64, v: &Validation) -> Vec<(Range<usize>, Hidden)> {
+    let stratum = |len: usize| GapClass::of(len).index();
+    // The classes of the gaps to fill, and the validation spans drawn in each.
+    let mut wanted = [false; GapClass::COUNT];
+    for g in gaps(tracks).filter(|g| g.is_interior()) {
+        wanted[stratum(g.len())] = true;
+    }
+    let mut spans = [0usize; GapClass::COUNT];
+    let windows = DrawWindows::new(tracks);
+    let (mut out, mut failed) = (Vec::new(), 0);
+    for draw in 0..v.max_draws {
+        let enough = (0..spans.len()).all(|c| !wanted[c] || spans[c] >= v.spans_per_class);
+        if draw >= v.min_draws && enough || failed == v.max_failed_draws {
+            break;
+        }
+        let draw_seed = seed ^ 0x9e37_79b9_7f4a_7c15u64.wrapping_mul(draw as u64 + 1);
+        let frames = windows.at(draw);
+        let window = tracks.window(frames.clone());
+        let Ok(hidden) = validation_spans(&window, v.fraction, draw_seed, stratum) else {
+            failed += 1;
+            continue;
+        };
+        for len in span_lengths(&hidden) {
+            spans[stratum(len)] += 1;
+        }
+        out.push((frames, hidden));
+    }
+    out
+}
+
+/// The lengths of the spans of `hidden` `(frame, track)`: each track's runs of
+/// consecutive frames.
+pub(super) fn span_lengths(hidden: &[(usize, usize)]) -> Vec<usize> {
+    let mut by_track: Vec<(usize, usize)> = hidden.iter().map(|&(k, i)| (i, k)).collect();
+    by_track.sort_unstable();
+    let mut out: Vec<usize> = Vec::new();
+    for (r, &(i, k)) in by_track.iter().enumerate() {
+        match out.last_mut() {
+            Some(last) if r > 0 && by_track[r - 1] == (i, k.wrapping_sub(1)) => *last += 1,
+            _ => out.push(1),
+        }
+    }
+    out
+}
+
+/// The blend of the classic fillers on `draws`, per class, cross-fitted over at most
+/// `groups` groups of draws; `None` where no draw holds a validation entry.
+fn classic_blend(draws: &[Pools<M>], groups: usize) -> Option<Blend> {
+    let classic = classic_fillers();
+    let counts: [usize; Pool::COUNT] =
+        std::array::from_fn(|c| draws.iter().map(|f| f[c].len()).sum());
+    // The draws in which each pool has a validation entry.
+    let drawn: [usize; Pool::COUNT] =
+        std::array::from_fn(|c| draws.iter().filter(|f| !f[c].is_empty()).count());
+    let solved = |pool: Pool| {
+        let (w, beat) = solve(draws, pool, classic, groups);
+        (PerFiller(w), beat)
+    };
+    let (short, long) = (Pool::Class(GapClass::Short), Pool::AllLong);
+    let mut weights = [Weights::only(Filler::FieldFill); 2];
+    let mut cross_fitted = [false; 2];
+    for (slot, pool) in [short, long].into_iter().enumerate() {
+        if counts[pool.index()] > 0 {
+            (weights[slot], cross_fitted[slot]) = solved(pool);
+        }
+    }
+    // A class with no validation entry takes the other's weights.
+    match [counts[short.index()], counts[long.index()]] {
+        [0, 0] => return None,
+        [0, _] => (weights[0], cross_fitted[0]) = (weights[1], cross_fitted[1]),
+        [_, 0] => (weights[1], cross_fitted[1]) = (weights[0], cross_fitted[0]),
+        _ => {}
+    }
+    let by_length = if counts[long.index()] == 0 {
+        Vec::new()
+    } else {
+        (0..LENGTH_CLASSES)
+            .map(|c| {
+                let class = GapClass::Long(c);
+                let pool = Pool::Class(class);
+                let own = drawn[pool.index()] >= 2;
+                let (w, beat) = if own {
+                    solved(pool)
+                } else {
+                    (weights[1], false)
+                };
+                LengthBlend {
+                    longest: class.longest(),
+                    weights: w,
+                    validated: counts[pool.index()],
+                    own,
+                    cross_fitted: beat,
+                }
+            })
+            .collect()
+    };
+    Some(Blend {
+        short: weights[0],
+        long: weights[1],
+        validated: [counts[short.index()], counts[long.index()]],
+        cross_fitted,
+        by_length,
+        field_validated: 0,
+        leans: Vec::new(),
+    })
+}
