@@ -70,7 +70,7 @@ def main():
         subset.mkdir()
         for f in sorted(folder.glob("*.c3d"))[:k]:
             (subset / f.name).symlink_to(f)
-        seconds = run(a.doma, [subset, "--out", work / "fit", "--jobs", str(a.jobs), "--quiet"])
+        seconds = run(a.doma, [subset, "--out", work / "fit", "--fit", "--jobs", str(a.jobs), "--quiet"])
         print(f"with a fit: {k} trials in {seconds:.1f} s, {60 * k / seconds:.2f} trials per minute")
 
 

@@ -10,12 +10,17 @@ sets as they fit (a marker's events in one set at least 0.5 s apart, at most 20 
 entries hidden), and each set is fitted once, at `doma fit`'s defaults. Every method fills
 the same set's mask: doma's fill (`Field.complete()`), the field's fill alone, and the
 classic fillers (`doma.fill`): spline, linear, pattern and rigid-body fill (Vicon Nexus's),
-the Kalman smoother (Burke & Lasenby, as pyCGM2 runs it), Gløersen & Federolf's PCA fill
+relational fill (Qualisys's), the Kalman smoother (Burke & Lasenby, as pyCGM2 runs it), Gløersen & Federolf's PCA fill
 (strategy R2), iterative PCA, and doma's segment and chain fills (the rigid-body fill with
 its donors judged on the track's own observations around the gap, and with its donors
 handed over where they are lost; not named fillers). The error of an
 event is the mean Euclidean distance over its hidden entries, in the file's units (mm);
-a case's figure is the mean over its events.
+a case's figure is the mean over its events. With `--imputer` (scikit-learn installed), its
+IterativeImputer (frames as samples, coordinates as features: a spatial-only imputer) is one
+more reference column. The summary below the table gives the cases met, the worst ratio and
+the geometric mean against the best named filler; doma's fill (with a fit) beside the
+fit-free chain fill (`doma fill --no-fit`) and the field's fill alone on gaps of 1 s and
+longer; and the worst of doma's fill over the best of its own parts measured here.
 
     python scripts/native_rate_gaps.py MOCAP_DIR [--draws 20] [--recordings A,B] [--out DIR]
         [--add FILLER,...] [--fit-option KEY=VALUE] [--no-blind-validation] [--fits DIR]
@@ -44,12 +49,20 @@ import doma
 
 LENGTHS = [0.1, 0.25, 0.5, 1.0, 2.0]
 COUNTS = [1, 3]
-METHODS = ["spline", "linear", "pattern", "rigid_body", "kalman", "gloersen", "iterative_pca", "segment", "chain"]
+METHODS = ["spline", "linear", "pattern", "rigid_body", "relational", "kalman", "gloersen", "iterative_pca", "segment",
+           "chain"]
 # "segment" and "chain" are doma's own: the rigid-body fill with its donors judged around
 # the gap, and with its donors handed over where they are lost.
 # The named fillers of the literature, and those that give the linear fill where they cannot
 # run (Kalman: no two frames see every marker; Gløersen: every marker has a gap).
-NAMED = ["spline", "pattern", "rigid_body", "kalman", "gloersen"]
+NAMED = ["spline", "pattern", "rigid_body", "relational", "kalman", "gloersen"]
+# The spatial-only imputer users reach for first: scikit-learn's IterativeImputer on the
+# frames as samples and the coordinates as features (no time). A reference column, where
+# scikit-learn is installed.
+IMPUTER = "iterative_imputer"
+# The field's fills beside the donors' (`field_chain`, `field_segment`): each alone, as
+# `field_fill` is, where the wheel has them.
+FIELD_DESIGNS = ["field_chain", "field_segment"]
 FALLS_BACK = ["kalman", "gloersen"]
 RECORDINGS = ["85_12", "Qualisys", "right_knee", "codamotion_gaitwands_20150204", "Walking_Hybrid_1_5"]
 MARGIN_S = 0.5
@@ -141,7 +154,9 @@ def add_fillers(path, report, methods, draws, seed):
         assert (fit["markers_at_once"], fit["events"]) == (count, len(events_of_set)), "not the report's draws"
         for m in methods:
             started = time.time()
-            filled = doma.fill(tracks, mask, m)
+            filled = iterative_imputer(tracks, mask) if m == IMPUTER else doma.fill(tracks, mask, m)
+            if filled is None:
+                raise SystemExit("--add iterative_imputer: scikit-learn is not installed")
             fit["filler_s"][m] = round(time.time() - started, 2)
             for e in events_of_set:
                 errors.setdefault(f"{count}x{e[0]}", {}).setdefault(m, []).append(event_errors(filled, truth, e))
@@ -152,7 +167,7 @@ def add_fillers(path, report, methods, draws, seed):
     return report
 
 
-def run_recording(path, draws, seed, blind=True, fits=None, fit_options=None):
+def run_recording(path, draws, seed, blind=True, fits=None, fit_options=None, imputer=False):
     seq = doma.read_tracks(path)
     tracks, observed = seq.tracks, seq.observed
     truth = tracks.astype(np.float64)
@@ -177,11 +192,20 @@ def run_recording(path, draws, seed, blind=True, fits=None, fit_options=None):
         fills = {"doma": done.tracks}
         complete_s = time.time() - started
         fills["field_fill"] = field.complete(method="field_fill").tracks
+        for design in FIELD_DESIGNS:
+            try:
+                fills[design] = in_input_order(field.complete(method=design).tracks, done.kept, tracks.shape)
+            except ValueError:
+                pass  # a wheel without that design
         filler_s = {}
         for m in METHODS:
             started = time.time()
             fills[m] = doma.fill(tracks, mask, m)
             filler_s[m] = time.time() - started
+        if imputer:
+            imputed = iterative_imputer(tracks, mask)
+            if imputed is not None:
+                fills[IMPUTER] = imputed
         fills["field_fill"] = in_input_order(fills["field_fill"], done.kept, tracks.shape)
         fills["doma"] = in_input_order(fills["doma"], done.kept, tracks.shape)
         for e in events_of_set:
@@ -196,6 +220,25 @@ def run_recording(path, draws, seed, blind=True, fits=None, fit_options=None):
     for key, per in errors.items():
         out["cases"][key] = {name: float(np.mean(v)) for name, v in per.items()}
         out["cases"][key]["events"] = len(per["doma"])
+    return out
+
+
+def iterative_imputer(tracks, mask):
+    """scikit-learn's IterativeImputer of `tracks` [T, N, 3] where `mask` hides them (its
+    defaults: BayesianRidge, 10 rounds, seed 0), or None without scikit-learn. Markers never
+    seen under the mask are left out of its matrix and come back NaN."""
+    try:
+        from sklearn.experimental import enable_iterative_imputer  # noqa: F401
+        from sklearn.impute import IterativeImputer
+    except ImportError:
+        return None
+    t, n, _ = tracks.shape
+    seen = mask.any(axis=0)
+    x = tracks[:, seen].astype(np.float64).copy()
+    x[~mask[:, seen]] = np.nan
+    filled = IterativeImputer(random_state=0).fit_transform(x.reshape(t, -1)).reshape(t, -1, 3)
+    out = np.full(tracks.shape, np.nan, np.float32)
+    out[:, seen] = filled
     return out
 
 
@@ -217,7 +260,10 @@ def runs(case, method):
 
 
 def table(results):
-    cols = ["doma", "field_fill"] + [m for m in METHODS if all(m in c for r in results for c in r["cases"].values())]
+    extra = [IMPUTER] if all(IMPUTER in c for r in results for c in r["cases"].values()) else []
+    designs = [d for d in FIELD_DESIGNS if all(d in c for r in results for c in r["cases"].values())]
+    cols = ["doma", "field_fill"] + designs + [m for m in METHODS + extra
+                                               if all(m in c for r in results for c in r["cases"].values())]
     lines = ["| recording | rate | at once | gap | " + " | ".join(cols) + " | doma / best named |",
              "|---" * (5 + len(cols)) + "|"]
     named = [m for m in NAMED if m in cols]
@@ -236,6 +282,38 @@ def table(results):
     return "\n".join(lines)
 
 
+def summary(results):
+    """The acceptance (below the best named filler at 0.5 s and beyond, within 5 % below),
+    the ratios' worst and geometric mean; with a fit against fit-free on gaps of 1 s and
+    longer; and doma's fill over the best of its parts measured here."""
+    ratios, met, long_fit, long_field, parts = [], 0, [], [], []
+    part_cols = ["field_fill"] + FIELD_DESIGNS + METHODS
+    named_all = [m for m in NAMED]
+    for r in results:
+        for key, case in r["cases"].items():
+            length = float(key.split("x")[1])
+            named = [c for c in named_all if c in case and runs(case, c)]
+            ratio = case["doma"] / min(case[c] for c in named)
+            ratios.append(ratio)
+            met += ratio < 1.0 if length >= 0.5 else ratio <= 1.05
+            if length >= 1.0:
+                long_fit.append(case["doma"] / case["chain"])
+                long_field.append({d: case[d] / case["chain"] for d in ["field_fill"] + FIELD_DESIGNS if d in case})
+            best_part = min((case[c], c) for c in part_cols if c in case)
+            parts.append((case["doma"] / best_part[0], r["recording"], key, best_part[1]))
+    geo = lambda v: float(np.exp(np.mean(np.log(v)))) if v else float("nan")
+    worst_part = max(parts)
+    return "\n".join([
+        f"met {met} of {len(ratios)}, worst {max(ratios):.2f}, geometric mean {geo(ratios):.2f} (against the best named filler)",
+        f"gaps of 1 s and longer, {len(long_fit)} cases: with a fit / fit-free (chain) geometric mean {geo(long_fit):.3f}, "
+        f"range {min(long_fit):.2f}-{max(long_fit):.2f}; alone / fit-free: "
+        + ", ".join(f"{d} {geo([c[d] for c in long_field if d in c]):.2f}"
+                    for d in ["field_fill"] + FIELD_DESIGNS if all(d in c for c in long_field)),
+        f"doma / best of its parts measured: worst {worst_part[0]:.2f} ({worst_part[1]} {worst_part[2]}, {worst_part[3]}), "
+        f"geometric mean {geo([p[0] for p in parts]):.2f}, above 1.05 in {sum(p[0] > 1.05 for p in parts)} cases",
+    ])
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("mocap_dir", type=pathlib.Path)
@@ -247,6 +325,9 @@ def main():
     p.add_argument("--fits", type=pathlib.Path,
                    help="keep each fitted run here, and load it instead of fitting where it is already there "
                         "(the blend's weights are learned by complete(), so a change to the blend reruns in minutes)")
+    p.add_argument("--imputer", action="store_true",
+                   help="add scikit-learn's IterativeImputer as a reference column (minutes a draw set on a long "
+                        "recording; or later, --add iterative_imputer)")
     p.add_argument("--no-blind-validation", dest="blind_validation", action="store_false",
                    help="fit with blind_validation=False: every observation fitted, the field's fills left out of the blend")
     p.add_argument("--fit-option", action="append", default=[], metavar="KEY=VALUE",
@@ -258,8 +339,8 @@ def main():
         fit_options[key] = json.loads(value)
     added = [m for m in args.add.split(",") if m]
     for m in added:
-        if m not in METHODS:
-            raise SystemExit(f"--add {m}: not one of {', '.join(METHODS)}")
+        if m not in METHODS + [IMPUTER]:
+            raise SystemExit(f"--add {m}: not one of {', '.join(METHODS + [IMPUTER])}")
     args.out.mkdir(parents=True, exist_ok=True)
     results = []
     for name in args.recordings.split(","):
@@ -272,12 +353,14 @@ def main():
                 report.write_text(json.dumps(r, indent=1))
             results.append(r)
             continue
-        r = run_recording(path, args.draws, args.seed, args.blind_validation, args.fits, fit_options)
+        r = run_recording(path, args.draws, args.seed, args.blind_validation, args.fits, fit_options, args.imputer)
         r["blind_validation"] = args.blind_validation
         r["fit_options"] = fit_options
         report.write_text(json.dumps(r, indent=1))
         results.append(r)
     print(table(results))
+    print()
+    print(summary(results))
 
 
 if __name__ == "__main__":

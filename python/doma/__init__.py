@@ -544,7 +544,7 @@ def fill(
     time_axis: Optional[int] = None,
 ) -> np.ndarray:
     """Fills the gaps of ``tracks`` ([T, N, 3]) that ``observed`` ([T, N] bool) leaves by
-    one of the classic fillers, without a fit, with ``doma fill --no-fit``'s defaults: the
+    one of the classic fillers, without a fit, with ``doma fill``'s defaults: the
     gaps with observations on both sides, of any length unless ``max_gap`` (frames, or
     ``"0.5s"`` at ``rate`` frames per second), and nothing before a track's first
     observation or after its last unless ``extrapolate``. ``tracks`` may be the
@@ -592,7 +592,7 @@ def fill_file(
     path: PathLike,
     out: PathLike,
     *,
-    fit: bool = True,
+    fit: bool = False,
     max_gap: Union[None, int, str] = None,
     extrapolate: bool = False,
     method: Optional[str] = None,
@@ -600,8 +600,9 @@ def fill_file(
     flag_above_mm: float = 5.0,
 ) -> dict:
     """Fills the gaps of the recording at ``path`` (.c3d, .trc, or any format
-    :func:`read_tracks` reads) into ``out``, as ``doma fill`` does: fitted and completed in
-    one go (``fit=False``: the chain fill alone, or ``method``), written in the format of
+    :func:`read_tracks` reads) into ``out``, as ``doma fill`` does: without a fit, rigid
+    clusters first and then the chain fill (or ``method`` alone); ``fit=True`` fits a field
+    and fills with doma's fill, the validated blend (``doma fill --fit``). Written in the format of
     ``out``'s extension (a ``.c3d`` is the C3D input with only its gaps written; ``.trc``;
     ``.npz``), and the table of filled gaps written beside it (``NAME.gaps.csv``).
 

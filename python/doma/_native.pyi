@@ -75,7 +75,7 @@ def fill_into(
 def fill_file(
     path: str,
     out: str,
-    fit: bool = True,
+    fit: bool = False,
     max_gap: Optional[str] = None,
     extrapolate: bool = False,
     method: Optional[str] = None,

@@ -85,7 +85,7 @@ def folder(tmp_path):
 def test_a_folder_is_filled_in_one_command(cli, folder, tmp_path):
     ezc3d = pytest.importorskip("ezc3d")
     out = tmp_path / "filled"
-    args = [cli, "fill", folder, "--out", out, "--iters", "20", "--jobs", "2"]
+    args = [cli, "fill", folder, "--out", out, "--fit", "--iters", "20", "--jobs", "2"]
     done = subprocess.run(args, capture_output=True, text=True)
     # The broken file fails the command, named; the others are written.
     assert done.returncode == 1, done.stderr

@@ -1,6 +1,7 @@
 """The gap fillers of capture software, without a fit (`doma.fill`), checked against an
-independent implementation: `gapfill` (PyPI, Moon Ki Jung's transcription of Vicon Nexus's
-rigid-body fill) on a gap hidden in the shipped right-knee recording."""
+independent implementation: `gapfill` (PyPI, Moon Ki Jung's transcriptions of Vicon Nexus's
+rigid-body fill and Qualisys's relational fill) on a gap hidden in the shipped right-knee
+recording."""
 
 import pathlib
 
@@ -55,6 +56,27 @@ def test_rigid_body_fill_is_gapfill_s_to_float32_rounding():
     rigid_error = np.linalg.norm(ours[gap, i] - truth, axis=1).mean()
     linear_error = np.linalg.norm(linear - truth, axis=1).mean()
     assert rigid_error < 0.5 * linear_error, (rigid_error, linear_error)
+
+
+def test_relational_fill_is_gapfill_s_to_float32_rounding():
+    gapfill = pytest.importorskip("gapfill.gapfill")
+    tracks, observed, i, a, b = hidden_gap()
+    ours = doma.fill(tracks, observed, "relational")
+    target = tracks[:, i].astype(np.float64)
+    target[~observed[:, i]] = np.nan
+    # The same donors in the same order: the nearest is the frame's origin, the next its
+    # x axis, the third its xy plane.
+    cluster = np.stack([tracks[:, j].astype(np.float64) for j in donors(tracks, observed, i, a, b, 3)])
+    updated, _ = gapfill.recover_marker_rel(target, cluster)
+    assert updated
+    gap = slice(a + 1, b)
+    np.testing.assert_array_max_ulp(ours[gap, i], target[gap].astype(np.float32), maxulp=1)
+    assert np.array_equal(ours[observed], tracks[observed])
+    truth = doma.read_tracks(RIGHT_KNEE).tracks[gap, i]
+    linear = doma.fill(tracks, observed, "linear")[gap, i]
+    relational_error = np.linalg.norm(ours[gap, i] - truth, axis=1).mean()
+    linear_error = np.linalg.norm(linear - truth, axis=1).mean()
+    assert relational_error < 0.5 * linear_error, (relational_error, linear_error)
 
 
 def test_every_method_fills_every_gap_and_refuses_what_it_cannot_read():
@@ -134,7 +156,7 @@ def test_three_fits_complete_with_the_median_of_their_fills(tmp_path):
 
 def test_fillers_are_the_command_line_s_less_the_field_s(cli):
     """`doma.FILLERS` is every filler of `doma fill -h` (made from `Filler::ALL`) but the
-    field's two fills, which need a fit."""
+    field's fills, which need a fit."""
     import re
     import subprocess
 
@@ -142,5 +164,5 @@ def test_fillers_are_the_command_line_s_less_the_field_s(cli):
     listed = re.search(r"--method <FILLER>.*?\[possible values: ([^\]]*)\]", help_text, re.S).group(1)
     flags = [v.strip() for v in listed.split(",")]
     assert "field-fill" in flags and "field-fill-framewise" in flags
-    want = [f.replace("-", "_") for f in flags if not f.startswith("field-fill")]
+    want = [f.replace("-", "_") for f in flags if not f.startswith("field-")]
     assert list(doma.FILLERS) == want

@@ -312,7 +312,7 @@ pub struct FillPolicyArgs {
     #[arg(long)]
     pub extrapolate: bool,
     /// Fill with one filler alone instead of doma's fill (the blend); `chain` is the
-    /// default of `doma fill --no-fit`, and the field's two fills need a fit. The
+    /// default of `doma fill`, and the field's fills need a fit. The
     /// snake_case names of reports and Python are accepted too.
     #[arg(long, value_name = "FILLER")]
     pub method: Option<crate::gaps::Filler>,

@@ -82,6 +82,7 @@ pub fn run(args: &BatchArgs) -> Result<()> {
             inputs: vec![path.clone()],
             out: out.clone(),
             format: None,
+            fit: false,
             no_fit: false,
             fill: Default::default(),
             iterations: None,

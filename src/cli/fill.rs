@@ -35,15 +35,21 @@ pub struct FillArgs {
     /// .c3d stays .c3d, a .trc .trc, any other .npz).
     #[arg(long, value_enum)]
     pub format: Option<Format>,
-    /// Fill without a fit: the chain fill alone (or `--method`), in a fraction of a second
-    /// per recording instead of a fit's 15–30 s.
+    /// Fit a field to each recording first and fill with doma's fill, the validated blend of
+    /// every filler the field's included (15–30 s a recording). Without it, the fill needs no
+    /// fit: rigid clusters first, then the chain fill (or `--method`), a fraction of a second
+    /// a recording; on the native-rate protocol a fit took gaps of 1 s and longer only a few
+    /// per cent lower (docs/gap-filling.md).
+    #[arg(long, conflicts_with = "no_fit")]
+    pub fit: bool,
+    /// Fill without a fit (the default; kept for scripts written when a fit was).
     #[arg(long)]
     pub no_fit: bool,
     /// Which gaps are filled, and by what.
     #[command(flatten)]
     pub fill: crate::cli::FillPolicyArgs,
     /// The fit's iterations (default: `doma fit`'s for tracks with gaps).
-    #[arg(long = "iters", value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long = "iters", value_name = "N", value_parser = clap::value_parser!(u64).range(1..), requires = "fit")]
     pub iterations: Option<u64>,
     /// Recordings filled at once.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
@@ -57,7 +63,7 @@ pub struct FillArgs {
     pub overwrite: bool,
     /// Keep each fit's run folder under this folder (one per recording, by its name)
     /// instead of removing it (`--overwrite` replaces a run kept before).
-    #[arg(long, value_name = "DIR")]
+    #[arg(long, value_name = "DIR", requires = "fit")]
     pub keep_runs: Option<PathBuf>,
     /// Fill shard I of N of the recordings (in name order: I, I+N, I+2N, …), for an array
     /// of jobs on Slurm or Kubernetes (default: the scheduler's, as `doma batch`'s).
@@ -349,7 +355,7 @@ fn fill_one(
     }
     let started = Instant::now();
     let how = RecordingFill {
-        fit: !args.no_fit,
+        fit: args.fit,
         policy,
         spec: crate::run::RunSpec {
             iterations: args.iterations.map(|i| i as usize),

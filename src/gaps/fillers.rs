@@ -71,6 +71,15 @@ fillers! {
     /// The rigid-body fill with its donors passed on where they are lost, for gaps that
     /// no three markers are seen through ([`Marked::chain`]).
     Chain,
+    /// Qualisys's relational fill: the track's coordinates in three donors' frame,
+    /// interpolated across the gap ([`Marked::relational`]).
+    Relational,
+    /// The chain fill plus the field's motion away from what the chain fill makes of the
+    /// field itself: what the donors' rigid transport cannot see, from the field
+    /// ([`Sources::field_beside`]).
+    FieldChain,
+    /// The same beside the segment fill ([`Sources::field_beside`]).
+    FieldSegment,
 }
 
 impl Filler {
@@ -94,6 +103,9 @@ impl Filler {
             Filler::Gloersen => "gloersen",
             Filler::Segment => "segment",
             Filler::Chain => "chain",
+            Filler::Relational => "relational",
+            Filler::FieldChain => "field_chain",
+            Filler::FieldSegment => "field_segment",
         }
     }
 
@@ -112,6 +124,9 @@ impl Filler {
             Filler::Gloersen => "Gløersen PCA",
             Filler::Segment => "segment (rigid body, donors judged)",
             Filler::Chain => "chain (rigid body, donors passed on)",
+            Filler::Relational => "relational (Qualisys)",
+            Filler::FieldChain => "field beside the chain fill",
+            Filler::FieldSegment => "field beside the segment fill",
         }
     }
 
@@ -158,16 +173,27 @@ impl Filler {
 
     /// Whether it is one of the field's fills (the others are the classic fillers).
     pub fn is_field(self) -> bool {
-        matches!(self, Filler::FieldFill | Filler::FieldFillFramewise)
+        Filler::FIELD.contains(&self)
     }
+
+    /// The field's fills, in the order of [`Filler::ALL`]: what stage 2 of a blend weighs
+    /// against the classic fillers' blend.
+    pub const FIELD: [Filler; 4] = [
+        Filler::FieldFill,
+        Filler::FieldFillFramewise,
+        Filler::FieldChain,
+        Filler::FieldSegment,
+    ];
 
     /// This filler's value at each of `entries` `(frame, track)`, filled from the
     /// observations of `sources`. An entry of a track never observed is whatever the
     /// positions hold there (NaN for the neighbours' motion).
     pub fn fill_at(self, sources: &Sources, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
-        match self.fill_observed(&sources.marked, entries) {
-            Some(values) => values,
-            None => {
+        match (self.fill_observed(&sources.marked, entries), self) {
+            (Some(values), _) => values,
+            (None, Filler::FieldChain) => sources.field_beside(Filler::Chain, entries),
+            (None, Filler::FieldSegment) => sources.field_beside(Filler::Segment, entries),
+            (None, _) => {
                 let lending = match self {
                     Filler::FieldFillFramewise => Lending::FrameByFrame,
                     _ => Lending::Fixed,
@@ -185,7 +211,10 @@ impl Filler {
         entries: &[(usize, usize)],
     ) -> Option<Vec<[f32; 3]>> {
         let whole = match self {
-            Filler::FieldFill | Filler::FieldFillFramewise => return None,
+            Filler::FieldFill
+            | Filler::FieldFillFramewise
+            | Filler::FieldChain
+            | Filler::FieldSegment => return None,
             Filler::Spline => marked.spline(),
             Filler::IterativePca => marked.iterative_pca(),
             Filler::Kalman => marked.kalman().unwrap_or_else(|| marked.linear()),
@@ -196,6 +225,7 @@ impl Filler {
             Filler::RigidBody => return Some(marked.rigid_body(entries)),
             Filler::Segment => return Some(marked.segment(entries)),
             Filler::Chain => return Some(marked.chain(entries)),
+            Filler::Relational => return Some(marked.relational(entries)),
         };
         Some(pick(&whole, entries, marked.points))
     }
@@ -230,6 +260,37 @@ impl<'a> Sources<'a> {
             field,
             carried: OnceCell::new(),
         }
+    }
+
+    /// `donor`'s fill of the tracks at `entries` plus the field's motion away from what
+    /// `donor` makes of the field's own prediction under the same mask: `d(y) + (f − d(f))`,
+    /// the donors' transport of the observations corrected by what the field says the
+    /// transport misses (skin sliding, joints bending inside the gap). Where the field is
+    /// exact it is the field; where the field moves as rigidly as the donors, it is `donor`.
+    pub fn field_beside(&self, donor: Filler, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
+        let predicted = self.field.predicted();
+        let of_field = Marked::new(
+            self.marked.frames,
+            self.marked.points,
+            predicted,
+            self.marked.observed,
+        );
+        let (y, f) = (
+            donor.fill_observed(&self.marked, entries),
+            donor.fill_observed(&of_field, entries),
+        );
+        let (Some(y), Some(f)) = (y, f) else {
+            return vec![[f32::NAN; 3]; entries.len()];
+        };
+        let n = self.marked.points;
+        entries
+            .iter()
+            .zip(y.iter().zip(&f))
+            .map(|(&(k, i), (y, f))| {
+                let e = 3 * (k * n + i);
+                std::array::from_fn(|c| y[c] + (predicted[e + c] - f[c]))
+            })
+            .collect()
     }
 
     /// The field's fill of every gap with `lending`.
@@ -377,6 +438,9 @@ mod tests {
                 "gloersen",
                 "segment",
                 "chain",
+                "relational",
+                "field_chain",
+                "field_segment",
             ]
         );
         for (i, f) in Filler::ALL.into_iter().enumerate() {
@@ -392,5 +456,72 @@ mod tests {
         assert_eq!(Filler::from_name("rigid_body"), Some(Filler::RigidBody));
         assert_eq!(Filler::from_name("rigid body"), None);
         assert!(Filler::parse("x").unwrap_err().contains("rigid-body"));
+    }
+
+    /// Three markers of a rigid body and a fourth bending away from them inside its gap.
+    fn bending() -> (usize, usize, Vec<f32>, Vec<bool>) {
+        let (t, n) = (30, 4);
+        let mut positions = Vec::new();
+        for k in 0..t {
+            let x = 0.1 * k as f32;
+            let bend = 0.3 * (std::f32::consts::PI * k as f32 / (t - 1) as f32).sin();
+            for p in [
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.5, 0.5, bend],
+            ] {
+                positions.extend([p[0] + x, p[1], p[2]]);
+            }
+        }
+        let mut observed = vec![true; t * n];
+        for k in 8..22 {
+            observed[k * n + 3] = false;
+        }
+        (t, n, positions, observed)
+    }
+
+    #[test]
+    fn beside_an_exact_field_the_donors_fill_is_the_field_and_beside_a_still_one_the_donors() {
+        let (t, n, truth, observed) = bending();
+        let marked = Marked::new(t, n, &truth, &observed);
+        let entries: Vec<(usize, usize)> = (8..22).map(|k| (k, 3)).collect();
+        // An exact field: the donors' fill of the field is their fill of the observations,
+        // so what is added is the field's own motion there: the truth.
+        let exact = FieldPrediction::new(n, &truth, &truth[..3 * n], &observed);
+        let sources = Sources::new(marked, &exact);
+        for donor in [Filler::Chain, Filler::Segment] {
+            for (p, &(k, i)) in sources.field_beside(donor, &entries).iter().zip(&entries) {
+                let want = marked.at(k, i);
+                assert!(
+                    (0..3).all(|c| (p[c] - want[c]).abs() < 1e-5),
+                    "{donor:?} {k}"
+                );
+            }
+        }
+        // A field that moves every track rigidly with the body (no bend): it adds nothing
+        // to the chain fill, whose donors move the same way.
+        let rigid: Vec<f32> = (0..t * n)
+            .flat_map(|e| {
+                let (k, i) = (e / n, e % n);
+                let p = [
+                    [0.0, 0.0, 0.0],
+                    [1.0, 0.0, 0.0],
+                    [0.0, 1.0, 0.0],
+                    [0.5, 0.5, 0.0],
+                ][i];
+                [p[0] + 0.1 * k as f32, p[1], p[2]]
+            })
+            .collect();
+        let still = FieldPrediction::new(n, &rigid, &rigid[..3 * n], &observed);
+        let sources = Sources::new(marked, &still);
+        let chain = marked.chain(&entries);
+        for (p, q) in sources
+            .field_beside(Filler::Chain, &entries)
+            .iter()
+            .zip(&chain)
+        {
+            assert!((0..3).all(|c| (p[c] - q[c]).abs() < 1e-5), "{p:?} {q:?}");
+        }
     }
 }

@@ -21,7 +21,7 @@
 //! - A **filler** ([`Filler`]) fills every gap: the classic ones fill from the
 //!   observations alone (linear, spline, the neighbours' motion, iterative PCA, the Kalman
 //!   smoother, Gløersen & Federolf's PCA fill), the **donor** fillers move other markers'
-//!   motion into the gap (pattern, rigid-body, and doma's segment and chain fills, whose
+//!   motion into the gap (pattern, rigid-body, relational, and doma's segment and chain fills, whose
 //!   donors *transport* the track), and the field's two fills read a fitted field.
 //! - The **field's fill** ([`field_fill::field_fill`]) is the field's prediction corrected
 //!   by the residual of the track's nearest tracks at that frame (its **lenders**), then by
@@ -51,6 +51,8 @@
 //! | `donors.rs` | pattern and rigid-body fill: methods of [`Marked`] |
 //! | `segment.rs` | the segment fill: rigid-body fill from the donors that transport the track best around its gap |
 //! | `chain.rs` | the chain fill: donors passed on through a gap that no three markers are seen through |
+//! | `cluster.rs` | rigid clusters found in the data (a prop, a plate, a head band) and the fill from them |
+//! | `relational.rs` | Qualisys's relational fill: the track's coordinates in three donors' frame |
 //! | `prediction.rs` | [`FieldPrediction`]: the field's prediction, given or computed window by window, and each track's nearest tracks |
 //! | `field_fill.rs` | the field's fill: the lenders ([`Lending`]), the carry |
 //! | `spans.rs` | gaps, hidden and validation spans |
@@ -69,6 +71,7 @@
 pub mod blend;
 pub mod chain;
 pub mod classic;
+pub mod cluster;
 pub mod confidence;
 pub mod donors;
 pub mod field_fill;
@@ -77,6 +80,7 @@ pub mod gloersen;
 pub mod kalman;
 pub mod marked;
 pub mod prediction;
+pub mod relational;
 pub mod segment;
 pub mod spans;
 pub mod window;

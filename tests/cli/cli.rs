@@ -64,6 +64,15 @@ fn bad_flags_are_refused_with_a_message() {
             vec!["complete", "r", "--out", "f.npz", "--method", "nearest"],
             "rigid-body",
         ),
+        // A fit's settings without a fit are refused, not ignored.
+        (
+            vec!["fill", "a.c3d", "--out", "b.c3d", "--iters", "5"],
+            "--fit",
+        ),
+        (
+            vec!["fill", "a.c3d", "--out", "b.c3d", "--fit", "--no-fit"],
+            "--no-fit",
+        ),
     ] {
         let (ok, _, err) = doma(&args);
         assert!(!ok, "{args:?} was accepted");

@@ -29,6 +29,7 @@
 // Index loops over 6 × 6 matrices read as the algebra they implement.
 #![allow(clippy::needless_range_loop)]
 
+use super::cluster::RigidClusters;
 use super::fillers::{Filler, PerFiller, Sources};
 use super::marked::Marked;
 use super::prediction::FieldPrediction;
@@ -184,7 +185,7 @@ pub fn doma_fill_at(
     validation: &Validation,
 ) -> (Vec<[f32; 3]>, Blend) {
     let blend = learn(tracks, field, seed, blind, validation);
-    let fills = if blend.is_field_only() {
+    let mut fills = if blend.is_field_only() {
         fill_with(tracks, field, Filler::FieldFill, entries)
     } else {
         let (entries, used) = (with_gap_lengths(tracks, entries), blend.in_use());
@@ -192,7 +193,27 @@ pub fn doma_fill_at(
             combined(&blend, &filler_values_in(s, local, used), local)
         })
     };
+    clusters_first(tracks, entries, &mut fills);
     (fills, blend)
+}
+
+/// `fills` at `entries` with every entry of a track on a rigid cluster that its mates can
+/// carry there taken from them ([`RigidClusters`]): a marker on a prop or a plate moves
+/// exactly as its mates do, which no blend weighed on other markers beats.
+pub fn clusters_first(tracks: &Marked, entries: &[(usize, usize)], fills: &mut [[f32; 3]]) {
+    let clusters = RigidClusters::find(tracks);
+    if clusters.is_empty() {
+        return;
+    }
+    for (value, fill) in tracks
+        .cluster_fill(&clusters, entries)
+        .into_iter()
+        .zip(fills)
+    {
+        if let Some(v) = value {
+            *fill = v;
+        }
+    }
 }
 
 /// `filler`'s values at `entries` `(frame, track)`, unobserved entries of `tracks`, in
@@ -314,8 +335,13 @@ pub fn fills_at(
     validation: &Validation,
 ) -> FillsAt {
     let blend = learn(tracks, field, seed, blind, validation);
-    let entries = with_gap_lengths(tracks, entries);
-    let (doma, fillers) = blend_at(&Sources::new(*tracks, field), &blend, &entries);
+    let (doma, fillers) = blend_at(
+        &Sources::new(*tracks, field),
+        &blend,
+        &with_gap_lengths(tracks, entries),
+    );
+    let mut doma = doma;
+    clusters_first(tracks, entries, &mut doma);
     FillsAt {
         blend,
         doma,

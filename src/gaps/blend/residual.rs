@@ -140,6 +140,32 @@ pub(super) fn one_hot<const K: usize>(k: usize) -> [f64; K] {
     std::array::from_fn(|m| if m == k { 1.0 } else { 0.0 })
 }
 
+/// What [`solve`] chose for a pool, and what each held-out group of draws said of it.
+pub(super) struct Solved<const K: usize> {
+    /// The weights chosen.
+    pub weights: [f64; K],
+    /// Whether the blend beat every candidate alone.
+    pub beat: bool,
+    /// Per held-out group with entries: the cross-fitted blend's cost there and each
+    /// candidate's alone.
+    pub groups: Vec<(f64, [f64; K])>,
+}
+
+impl<const K: usize> Solved<K> {
+    /// The cost of the choice on each held-out group: the cross-fitted blend's where the
+    /// blend was chosen, the chosen candidate's alone otherwise.
+    pub fn chosen_costs(&self) -> Vec<f64> {
+        let single = (0..K).find(|&k| self.weights[k] == 1.0);
+        self.groups
+            .iter()
+            .map(|(blended, alone)| match (self.beat, single) {
+                (false, Some(k)) => alone[k],
+                _ => *blended,
+            })
+            .collect()
+    }
+}
+
 /// One pool's weights over `draws` (each draw's residuals per pool), on the candidates
 /// of `allowed`: the blend with the least mean distance if it beats every allowed
 /// candidate alone cross-fitted (draw `d` in group `d % groups`, at most `groups` groups,
@@ -151,6 +177,17 @@ pub(super) fn solve<const K: usize>(
     allowed: u32,
     groups: usize,
 ) -> ([f64; K], bool) {
+    let s = solve_judged(draws, pool, allowed, groups);
+    (s.weights, s.beat)
+}
+
+/// [`solve`], with what each held-out group said.
+pub(super) fn solve_judged<const K: usize>(
+    draws: &[Pools<K>],
+    pool: Pool,
+    allowed: u32,
+    groups: usize,
+) -> Solved<K> {
     let (class, groups) = (pool.index(), draws.len().min(groups));
     let of = |group: Option<usize>, held: bool| -> Vec<&Residual<K>> {
         draws
@@ -161,25 +198,34 @@ pub(super) fn solve<const K: usize>(
             .collect()
     };
     let (mut blended, mut alone) = (0f64, [0f64; K]);
+    let mut per_group = Vec::new();
     for group in 0..groups {
         let (rest, judged) = (of(Some(group), false), of(Some(group), true));
         if rest.is_empty() || judged.is_empty() {
             continue;
         }
-        blended += cost(judged.iter().copied(), &mean_distance(&rest, allowed));
+        let b = cost(judged.iter().copied(), &mean_distance(&rest, allowed));
+        let a: [f64; K] = std::array::from_fn(|k| cost(judged.iter().copied(), &one_hot::<K>(k)));
+        blended += b;
         for k in 0..K {
-            alone[k] += cost(judged.iter().copied(), &one_hot::<K>(k));
+            alone[k] += a[k];
         }
+        per_group.push((b, a));
     }
     // Ties go to the earlier candidate.
     let single = (0..K)
         .filter(|&k| allowed & (1 << k) != 0)
         .min_by(|&x, &y| alone[x].total_cmp(&alone[y]).then(x.cmp(&y)))
         .unwrap_or(0);
-    if blended < alone[single] {
+    let (weights, beat) = if blended < alone[single] {
         (mean_distance(&of(None, true), allowed), true)
     } else {
         (one_hot::<K>(single), false)
+    };
+    Solved {
+        weights,
+        beat,
+        groups: per_group,
     }
 }
 

@@ -15,7 +15,7 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::class::{GapClass, LENGTH_CLASSES, Pool};
-use super::residual::{Hidden, Pools, empty_pools, residuals, solve};
+use super::residual::{Hidden, Pools, cost, empty_pools, one_hot, residuals, solve_judged};
 use super::validation::Validation;
 use super::{Blend, LengthBlend, M, Weights, classic_fillers};
 use crate::gaps::fillers::{Filler, PerFiller, Sources};
@@ -61,7 +61,7 @@ pub(super) fn stage_one(
             })
         })
         .collect();
-    let blend = classic_blend(&draws, validation.cross_fit_groups)?;
+    let blend = classic_blend(&draws, validation)?;
     Some((blend, draws))
 }
 
@@ -116,17 +116,33 @@ pub(super) fn span_lengths(hidden: &[(usize, usize)]) -> Vec<usize> {
 }
 
 /// The blend of the classic fillers on `draws`, per class, cross-fitted over at most
-/// `groups` groups of draws; `None` where no draw holds a validation entry.
-fn classic_blend(draws: &[Pools<M>], groups: usize) -> Option<Blend> {
+/// [`Validation::cross_fit_groups`] groups of draws; `None` where no draw holds a validation
+/// entry. Where [`Validation::fall_back`] holds (off by default: measured, it lost more
+/// cases than it saved), a class whose choice does not clearly beat the filler best across
+/// the recording ([`recording_best`]) on its held-out groups
+/// ([`Validation::clearly_positive`]) takes that filler alone.
+fn classic_blend(draws: &[Pools<M>], v: &Validation) -> Option<Blend> {
     let classic = classic_fillers();
     let counts: [usize; Pool::COUNT] =
         std::array::from_fn(|c| draws.iter().map(|f| f[c].len()).sum());
     // The draws in which each pool has a validation entry.
     let drawn: [usize; Pool::COUNT] =
         std::array::from_fn(|c| draws.iter().filter(|f| !f[c].is_empty()).count());
+    let best = recording_best(draws, classic);
     let solved = |pool: Pool| {
-        let (w, beat) = solve(draws, pool, classic, groups);
-        (PerFiller(w), beat)
+        let s = solve_judged(draws, pool, classic, v.cross_fit_groups);
+        let costs = s.chosen_costs();
+        let gains: Vec<f64> = s
+            .groups
+            .iter()
+            .zip(&costs)
+            .map(|((_, alone), chosen)| alone[best] - chosen)
+            .collect();
+        if v.fall_back && s.weights != one_hot::<M>(best) && !v.clearly_positive(&gains) {
+            (PerFiller(one_hot::<M>(best)), false)
+        } else {
+            (PerFiller(s.weights), s.beat)
+        }
     };
     let (short, long) = (Pool::Class(GapClass::Short), Pool::AllLong);
     let mut weights = [Weights::only(Filler::FieldFill); 2];
@@ -175,4 +191,80 @@ fn classic_blend(draws: &[Pools<M>], groups: usize) -> Option<Blend> {
         field_validated: 0,
         leans: Vec::new(),
     })
+}
+
+/// The classic filler (of `allowed`) with the least cost over every validation entry of
+/// `draws`, each counted once (the short gaps and the long ones pooled); ties go to the
+/// earlier.
+fn recording_best(draws: &[Pools<M>], allowed: u32) -> usize {
+    let every = || {
+        draws.iter().flat_map(|d| {
+            [Pool::Class(GapClass::Short), Pool::AllLong]
+                .into_iter()
+                .flat_map(move |p| d[p.index()].iter().map(|r| &**r))
+        })
+    };
+    (0..M)
+        .filter(|&k| allowed & (1 << k) != 0)
+        .map(|k| (cost(every(), &one_hot::<M>(k)), k))
+        .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)))
+        .map_or(0, |(_, k)| k)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gaps::blend::residual::Residual;
+
+    /// A validation entry of track 0 in a gap of `len` frames where `spline` and `chain`
+    /// err by these (1-D) and every other filler far off.
+    fn entry(len: usize, spline: f32, chain: f32) -> Arc<Residual<M>> {
+        Arc::new(Residual {
+            errors: std::array::from_fn(|m| match Filler::ALL[m] {
+                Filler::Spline => [spline, 0.0, 0.0],
+                Filler::Chain => [chain, 0.0, 0.0],
+                _ => [1e3, 0.0, 0.0],
+            }),
+            len,
+            track: 0,
+            depth: 1,
+        })
+    }
+
+    /// Six draws: on the short gaps the spline wins some draws and loses others by as much
+    /// (no clear gain over the chain fill); on the long gaps, and so across the recording,
+    /// the chain fill is far better. With `fall_back` the short gaps take the chain fill;
+    /// without, the short gaps' own choice leans on the spline.
+    #[test]
+    fn a_class_that_cannot_tell_the_parts_apart_falls_back_to_the_recording_s_best() {
+        let spline_short = [0.5, 1.5, 0.5, 1.5, 0.5, 0.2];
+        let draws: Vec<Pools<M>> = spline_short
+            .iter()
+            .map(|&s| {
+                let mut pools = empty_pools();
+                for _ in 0..4 {
+                    pools[Pool::Class(GapClass::Short).index()].push(entry(1, s, 1.0));
+                    let long = entry(20, 5.0, 0.1);
+                    pools[Pool::Class(GapClass::of(20)).index()].push(Arc::clone(&long));
+                    pools[Pool::AllLong.index()].push(long);
+                }
+                pools
+            })
+            .collect();
+        assert_eq!(
+            recording_best(&draws, classic_fillers()),
+            Filler::Chain.index()
+        );
+        let on = Validation {
+            fall_back: true,
+            ..Validation::default()
+        };
+        let with = classic_blend(&draws, &on).unwrap();
+        assert_eq!(with.short, Weights::only(Filler::Chain));
+        let without = classic_blend(&draws, &Validation::default()).unwrap();
+        assert!(without.short[Filler::Spline] > 0.5, "{:?}", without.short);
+        // The long gaps choose the chain fill either way.
+        assert_eq!(with.long, Weights::only(Filler::Chain));
+        assert_eq!(without.long, Weights::only(Filler::Chain));
+    }
 }

@@ -1,11 +1,11 @@
-//! Stage 2 of a blend's learning: the field's two fills weighed against stage 1's blend
+//! Stage 2 of a blend's learning: the field's fills weighed against stage 1's blend
 //! (and the leans) on the blind spans, observations the field was fitted without
 //! ([`super::blind_spans`]), and kept only where they gain clearly.
 //!
 //! The field was fitted to every other observation, so judged on a validation span of
 //! stage 1 it would be judged where it has seen the answer; there it looks far better than
-//! inside a gap. Per class, stage 1's blend and the field's two fills are blended again,
-//! three weights learned and cross-fitted the same way on the blind spans. Without blind
+//! inside a gap. Per class, stage 1's blend and the field's fills ([`Filler::FIELD`]) are blended again,
+//! the weights learned and cross-fitted the same way on the blind spans. Without blind
 //! spans the field's fills take no weight: nothing measured them as they fill a gap.
 
 use std::sync::Arc;
@@ -35,13 +35,13 @@ pub(super) fn stage_two(
     }
 }
 
-/// The candidates of stage 2: stage 1's blend, the field's fill with fixed lenders and
-/// with lenders chosen frame by frame.
-const STAGE_TWO: usize = 3;
+/// The candidates of stage 2: stage 1's blend, then each of the field's fills
+/// ([`Filler::FIELD`]).
+const STAGE_TWO: usize = 1 + Filler::FIELD.len();
 
 /// The blind spans' residuals for stage 2, split into `folds` folds span by span: stage
-/// 1's blend by `blend`'s weights for each entry's gap, and the field's two fills. Empty
-/// where `blind` holds no observed entry.
+/// 1's blend by `blend`'s weights for each entry's gap, and the field's fills. Empty where
+/// `blind` holds no observed entry.
 fn blind_residuals(
     tracks: &Marked,
     field: &FieldPrediction,
@@ -49,12 +49,10 @@ fn blind_residuals(
     blend: &Blend,
     folds: usize,
 ) -> Vec<Pools<STAGE_TWO>> {
-    let (fixed, framewise) = (
-        Filler::FieldFill.index(),
-        Filler::FieldFillFramewise.index(),
-    );
-    // Stage 1's fillers with a weight, and the field's two fills.
-    let fillers = blend.in_use() | Filler::FieldFill.bit() | Filler::FieldFillFramewise.bit();
+    // Stage 1's fillers with a weight, and the field's fills.
+    let fillers = Filler::FIELD
+        .iter()
+        .fold(blend.in_use(), |bits, f| bits | f.bit());
     let n = tracks.points;
     // One mask for every fold: the fold's spans hidden, then seen again.
     let mut left = tracks.observed.to_vec();
@@ -71,11 +69,10 @@ fn blind_residuals(
             for r in found.into_iter().flatten() {
                 // Stage 1's blend of the values, less the truth: its blend of the errors.
                 let three = Arc::new(Residual {
-                    errors: [
-                        blend.combine(r.len, r.track, &r.errors),
-                        r.errors[fixed],
-                        r.errors[framewise],
-                    ],
+                    errors: std::array::from_fn(|c| match c {
+                        0 => blend.combine(r.len, r.track, &r.errors),
+                        c => r.errors[Filler::FIELD[c - 1].index()],
+                    }),
                     len: r.len,
                     track: r.track,
                     depth: r.depth,
@@ -89,7 +86,7 @@ fn blind_residuals(
         .collect()
 }
 
-/// Each class's weights become the blend of its stage-1 weights and the field's two fills
+/// Each class's weights become the blend of its stage-1 weights and the field's fills
 /// learned on the blind spans (`folds`), where the class has blind entries in
 /// [`Validation::field_folds`] folds or more and that blend, cross-fitted, beats the first
 /// stage's clearly ([`Validation::clearly_positive`] of its gain per fold). A blind draw
@@ -132,11 +129,10 @@ fn judge_field(blend: &mut Blend, folds: &[Pools<STAGE_TWO>], v: &Validation) {
     let with_field = |classic: &Weights, s: [f64; STAGE_TWO]| -> Weights {
         PerFiller::from_fn(|f| {
             s[0] * classic[f]
-                + match f {
-                    Filler::FieldFill => s[1],
-                    Filler::FieldFillFramewise => s[2],
-                    _ => 0.0,
-                }
+                + Filler::FIELD
+                    .iter()
+                    .position(|&g| g == f)
+                    .map_or(0.0, |c| s[1 + c])
         })
     };
     if let Some(s) = share(Pool::Class(GapClass::Short)) {

@@ -43,6 +43,11 @@ pub struct Validation {
     /// (the field's share in stage 2, a track's lean): a share won by noise cost up to
     /// 1.45× the best filler on a short recording.
     pub standard_errors: f64,
+    /// Whether a class of gap length whose stage-1 choice does not clearly beat the filler
+    /// best across the recording takes that filler alone. Off: on the native-rate table it
+    /// met 43 of 48 cases where the per-class choice met 48 (docs/gap-filling.md, "What
+    /// was tried").
+    pub fall_back: bool,
 }
 
 impl Default for Validation {
@@ -59,6 +64,7 @@ impl Default for Validation {
             lean_draws: 3,
             lean_shares: vec![0.25, 0.5, 0.75, 1.0],
             standard_errors: 2.0,
+            fall_back: false,
         }
     }
 }

@@ -116,7 +116,7 @@ pub fn complete_without_fit(
     let filler = policy.method.unwrap_or(Filler::Chain);
     if filler.is_field() {
         return Err(DomaError::Usage(format!(
-            "--method {}: the field's fills need a fit (leave out --no-fit)",
+            "--method {}: the field's fills need a fit (`doma fill --fit`)",
             filler.name()
         )));
     }
@@ -140,7 +140,11 @@ pub fn complete_without_fit(
     let somewhere: Vec<bool> = (0..n).map(|i| (0..t).any(|k| seen[k * n + i])).collect();
     let (entries, left_long) = chosen(&tracks, &source_frames, policy, rate.map(f64::from), data)?;
     let entries: Vec<(usize, usize)> = entries.into_iter().filter(|&(_, i)| somewhere[i]).collect();
-    let values = filler.fill_observed(&tracks, &entries).unwrap_or_default();
+    let mut values = filler.fill_observed(&tracks, &entries).unwrap_or_default();
+    if policy.method.is_none() {
+        // doma's fill without a fit: a marker on a rigid cluster from its mates first.
+        crate::gaps::blend::clusters_first(&tracks, &entries, &mut values);
+    }
     let (entries, values): (Vec<_>, Vec<_>) = entries
         .into_iter()
         .zip(values)
