@@ -548,7 +548,9 @@ def fill(
     gaps with observations on both sides, of any length unless ``max_gap`` (frames, or
     ``"0.5s"`` at ``rate`` frames per second), and nothing before a track's first
     observation or after its last unless ``extrapolate``. ``tracks`` may be the
-    :class:`Tracks` that :func:`read_tracks` returns (its mask and rate are used).
+    :class:`Tracks` that :func:`read_tracks` returns (its mask and rate are used). It is one
+    filler: ``doma fill`` (and :func:`fill_file`) also fill a marker on a moving rigid
+    cluster from its mates first.
 
     Methods (:data:`FILLERS`, each described in docs/usage.md, "The fillers"): ``chain``
     (the default, doma's: the rigid-body fill with its donors passed on where they are

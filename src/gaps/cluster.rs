@@ -7,7 +7,8 @@
 //! ([`super::blend::doma_fill_at`]).
 //!
 //! A pair is rigid where the population deviation of its distance, over at least
-//! [`CLUSTER_FRAMES`] frames seen by both, is at most [`CLUSTER_TOLERANCE`] of its mean. A
+//! [`CLUSTER_FRAMES`] frames seen by both, is at most [`CLUSTER_TOLERANCE`] of its mean,
+//! while both markers move [`CLUSTER_MOTION`] times that deviation or more. A
 //! marker's cluster is its rigid partners that are rigid among themselves too, taken most
 //! rigid first; it is used where it holds at least [`CLUSTER_DONORS`] of them.
 
@@ -22,6 +23,13 @@ pub const CLUSTER_TOLERANCE: f64 = 0.005;
 
 /// The frames that must see both markers of a pair to judge it.
 pub const CLUSTER_FRAMES: usize = 20;
+
+/// How far both markers of a rigid pair must move (the norm of their positions' deviation)
+/// against the deviation of their distance: a still body's markers keep their distances
+/// too. On the shared knee recording, whose subject holds the upper body still, the pairs
+/// within [`CLUSTER_TOLERANCE`] moved 0.2–6.6 times their distance's deviation (10th to
+/// 90th percentile); the wands and plates of two other recordings, 340–3200 times.
+pub const CLUSTER_MOTION: f64 = 50.0;
 
 /// The mates a marker's cluster needs to carry it: three, a rigid body's least.
 pub const CLUSTER_DONORS: usize = 3;
@@ -52,10 +60,9 @@ impl RigidClusters {
                 if rigid.contains_key(&key) {
                     continue;
                 }
-                if let Some(spread) = pair_spread(tracks, i, j) {
-                    if spread <= CLUSTER_TOLERANCE {
-                        rigid.insert(key, spread);
-                    }
+                if let Some(spread) = pair_spread(tracks, i, j).filter(|&s| s <= CLUSTER_TOLERANCE)
+                {
+                    rigid.insert(key, spread);
                 }
             }
         }
@@ -125,12 +132,19 @@ fn candidates(tracks: &Marked) -> Vec<Vec<usize>> {
 }
 
 /// The population deviation of the distance between tracks `i` and `j` over the frames
-/// that see both, relative to its mean; `None` where fewer than [`CLUSTER_FRAMES`] do or
-/// the mean is 0.
+/// that see both, relative to its mean; `None` where fewer than [`CLUSTER_FRAMES`] do, the
+/// mean is 0, or either track moves less than [`CLUSTER_MOTION`] times that deviation.
 fn pair_spread(tracks: &Marked, i: usize, j: usize) -> Option<f64> {
-    let d: Vec<f64> = (0..tracks.frames)
+    let both: Vec<usize> = (0..tracks.frames)
         .filter(|&k| tracks.seen(k, i) && tracks.seen(k, j))
-        .map(|k| {
+        .collect();
+    if both.len() < CLUSTER_FRAMES {
+        return None;
+    }
+    let count = both.len() as f64;
+    let d: Vec<f64> = both
+        .iter()
+        .map(|&k| {
             let (p, q) = (tracks.at(k, i), tracks.at(k, j));
             (0..3)
                 .map(|c| (p[c] as f64 - q[c] as f64).powi(2))
@@ -138,12 +152,24 @@ fn pair_spread(tracks: &Marked, i: usize, j: usize) -> Option<f64> {
                 .sqrt()
         })
         .collect();
-    if d.len() < CLUSTER_FRAMES {
-        return None;
-    }
-    let mean = d.iter().sum::<f64>() / d.len() as f64;
-    let variance = d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / d.len() as f64;
-    (mean > 0.0).then(|| variance.sqrt() / mean)
+    let mean = d.iter().sum::<f64>() / count;
+    let deviation = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / count).sqrt();
+    // The norm of a track's positions' deviation over those frames.
+    let movement = |track: usize| {
+        (0..3)
+            .map(|c| {
+                let v: Vec<f64> = both
+                    .iter()
+                    .map(|&k| tracks.at(k, track)[c] as f64)
+                    .collect();
+                let m = v.iter().sum::<f64>() / count;
+                v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / count
+            })
+            .sum::<f64>()
+            .sqrt()
+    };
+    let moving = movement(i).min(movement(j)) >= CLUSTER_MOTION * deviation;
+    (mean > 0.0 && moving).then(|| deviation / mean)
 }
 
 impl Marked<'_> {
@@ -336,16 +362,27 @@ mod tests {
     }
 
     #[test]
-    fn a_hand_computed_pair_spread() {
-        // Two tracks 2 apart in 10 frames and 4 apart in 10: mean 3, deviation 1.
+    fn a_hand_computed_pair_spread_and_a_still_pair() {
+        // Two tracks 2 apart in 10 frames and 4 apart in 10 (mean 3, deviation 1), both
+        // carried 1000 along y and back (moving far more than 50 times the deviation).
         let (t, n) = (20, 2);
+        let y = |k: usize| if k.is_multiple_of(2) { 0.0 } else { 1000.0 };
         let positions: Vec<f32> = (0..t)
-            .flat_map(|k| [0.0, 0.0, 0.0, if k < 10 { 2.0 } else { 4.0 }, 0.0, 0.0])
+            .flat_map(|k| [0.0, y(k), 0.0, if k < 10 { 2.0 } else { 4.0 }, y(k), 0.0])
             .collect();
         let observed = vec![true; t * n];
         let tracks = Marked::new(t, n, &positions, &observed);
         assert!((pair_spread(&tracks, 0, 1).unwrap() - 1.0 / 3.0).abs() < 1e-12);
         let few = Marked::new(10, 2, &positions[..60], &observed[..20]);
         assert_eq!(pair_spread(&few, 0, 1), None);
+        // Held still, the same pair tells nothing of rigidity: its markers move 0 and 1
+        // (the second's deviation), under 50 times the distance's.
+        let still: Vec<f32> = (0..t)
+            .flat_map(|k| [0.0, 0.0, 0.0, if k < 10 { 2.0 } else { 4.0 }, 0.0, 0.0])
+            .collect();
+        assert_eq!(
+            pair_spread(&Marked::new(t, n, &still, &observed), 0, 1),
+            None
+        );
     }
 }

@@ -33,12 +33,12 @@ impl Marked<'_> {
             let [p0, p1, p2] = [0, 1, 2].map(|d| self.at64(f, gap.donors[d]));
             LocalFrame::of(p0, p1, p2)
         };
-        let local = |f: usize| frame(f).map(|l| l.to_local(self.at64(f, i)));
+        let local = |f: usize| frame(f).map(|l| l.local(self.at64(f, i)));
         match (local(a), local(b), frame(k)) {
             (Some(ra), Some(rb), Some(now)) => {
                 // gapfill's weights, in its order: (b − k)·r_a + (k − a)·r_b over b − a.
                 let (wa, wb) = ((b - k) as f64, (k - a) as f64);
-                now.to_world(std::array::from_fn(|c| {
+                now.world(std::array::from_fn(|c| {
                     (wa * ra[c] + wb * rb[c]) / (wb + wa)
                 }))
             }
@@ -76,13 +76,13 @@ impl LocalFrame {
     }
 
     /// `p`'s coordinates along the axes.
-    fn to_local(&self, p: [f64; 3]) -> [f64; 3] {
+    fn local(&self, p: [f64; 3]) -> [f64; 3] {
         let d: [f64; 3] = std::array::from_fn(|c| p[c] - self.origin[c]);
         self.axes.map(|axis| (0..3).map(|c| d[c] * axis[c]).sum())
     }
 
     /// The point whose coordinates along the axes are `r`.
-    fn to_world(&self, r: [f64; 3]) -> [f64; 3] {
+    fn world(&self, r: [f64; 3]) -> [f64; 3] {
         std::array::from_fn(|c| {
             self.origin[c] + (0..3).map(|j| self.axes[j][c] * r[j]).sum::<f64>()
         })
@@ -105,8 +105,8 @@ mod tests {
     fn a_frame_maps_a_point_to_its_coordinates_and_back() {
         let frame = LocalFrame::of([1.0, 2.0, 3.0], [3.0, 2.0, 3.0], [1.0, 5.0, 3.0]).unwrap();
         // x along +x, the plane is z = 3, z along +z (x × y), y along +y.
-        assert_eq!(frame.to_local([2.0, 4.0, 7.0]), [1.0, 2.0, 4.0]);
-        assert_eq!(frame.to_world([1.0, 2.0, 4.0]), [2.0, 4.0, 7.0]);
+        assert_eq!(frame.local([2.0, 4.0, 7.0]), [1.0, 2.0, 4.0]);
+        assert_eq!(frame.world([1.0, 2.0, 4.0]), [2.0, 4.0, 7.0]);
         assert!(LocalFrame::of([0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]).is_none());
         assert!(LocalFrame::of([0.0; 3], [0.0; 3], [0.0, 1.0, 0.0]).is_none());
     }
