@@ -38,45 +38,35 @@ def donors(tracks, observed, i, a, b, count):
     return candidates[:count]
 
 
-def test_rigid_body_fill_is_gapfill_s_to_float32_rounding():
+def assert_is_gapfill_s(method, recover):
+    """doma's `method` on the hidden gap equals gapfill's `recover` (named in its module)
+    given the same three donors in the same order (the nearest first: the rigid body's
+    first marker, the relational frame's origin), to one float32 ulp; observed entries
+    stay as given, and the fill is far closer to the truth than a line."""
     gapfill = pytest.importorskip("gapfill.gapfill")
     tracks, observed, i, a, b = hidden_gap()
-    ours = doma.fill(tracks, observed, "rigid_body")
+    ours = doma.fill(tracks, observed, method)
     target = tracks[:, i].astype(np.float64)
     target[~observed[:, i]] = np.nan
     cluster = np.stack([tracks[:, j].astype(np.float64) for j in donors(tracks, observed, i, a, b, 3)])
-    updated, _ = gapfill.fill_marker_gap_rbt(target, cluster)
+    updated, _ = getattr(gapfill, recover)(target, cluster)
     assert updated
     gap = slice(a + 1, b)
     np.testing.assert_array_max_ulp(ours[gap, i], target[gap].astype(np.float32), maxulp=1)
-    # Observed entries as given; the rigid-body fill is far closer to the truth than a line.
     assert np.array_equal(ours[observed], tracks[observed])
     truth = doma.read_tracks(RIGHT_KNEE).tracks[gap, i]
     linear = doma.fill(tracks, observed, "linear")[gap, i]
-    rigid_error = np.linalg.norm(ours[gap, i] - truth, axis=1).mean()
+    error = np.linalg.norm(ours[gap, i] - truth, axis=1).mean()
     linear_error = np.linalg.norm(linear - truth, axis=1).mean()
-    assert rigid_error < 0.5 * linear_error, (rigid_error, linear_error)
+    assert error < 0.5 * linear_error, (error, linear_error)
+
+
+def test_rigid_body_fill_is_gapfill_s_to_float32_rounding():
+    assert_is_gapfill_s("rigid_body", "fill_marker_gap_rbt")
 
 
 def test_relational_fill_is_gapfill_s_to_float32_rounding():
-    gapfill = pytest.importorskip("gapfill.gapfill")
-    tracks, observed, i, a, b = hidden_gap()
-    ours = doma.fill(tracks, observed, "relational")
-    target = tracks[:, i].astype(np.float64)
-    target[~observed[:, i]] = np.nan
-    # The same donors in the same order: the nearest is the frame's origin, the next its
-    # x axis, the third its xy plane.
-    cluster = np.stack([tracks[:, j].astype(np.float64) for j in donors(tracks, observed, i, a, b, 3)])
-    updated, _ = gapfill.recover_marker_rel(target, cluster)
-    assert updated
-    gap = slice(a + 1, b)
-    np.testing.assert_array_max_ulp(ours[gap, i], target[gap].astype(np.float32), maxulp=1)
-    assert np.array_equal(ours[observed], tracks[observed])
-    truth = doma.read_tracks(RIGHT_KNEE).tracks[gap, i]
-    linear = doma.fill(tracks, observed, "linear")[gap, i]
-    relational_error = np.linalg.norm(ours[gap, i] - truth, axis=1).mean()
-    linear_error = np.linalg.norm(linear - truth, axis=1).mean()
-    assert relational_error < 0.5 * linear_error, (relational_error, linear_error)
+    assert_is_gapfill_s("relational", "recover_marker_rel")
 
 
 def test_every_method_fills_every_gap_and_refuses_what_it_cannot_read():

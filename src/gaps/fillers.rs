@@ -5,7 +5,7 @@
 //! The classic fillers are in [`super::classic`], the field's fills in
 //! [`super::field_fill`]. Every filler sees only the observed entries (docs/design.md §7).
 
-use std::cell::OnceCell;
+use std::cell::{OnceCell, RefCell};
 use std::ops::{Index, IndexMut};
 use std::sync::OnceLock;
 
@@ -189,7 +189,7 @@ impl Filler {
     /// observations of `sources`. An entry of a track never observed is whatever the
     /// positions hold there (NaN for the neighbours' motion).
     pub fn fill_at(self, sources: &Sources, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
-        match (self.fill_observed(&sources.marked, entries), self) {
+        match (sources.observed_fill(self, entries), self) {
             (Some(values), _) => values,
             (None, Filler::FieldChain) => sources.field_beside(Filler::Chain, entries),
             (None, Filler::FieldSegment) => sources.field_beside(Filler::Segment, entries),
@@ -242,6 +242,9 @@ fn pick(whole: &[f32], entries: &[(usize, usize)], n: usize) -> Vec<[f32; 3]> {
         .collect()
 }
 
+/// A donor filler's values and the entries they were asked at.
+type DonorFill = (Filler, Vec<(usize, usize)>, Vec<[f32; 3]>);
+
 /// What every filler fills from: the masked tracks and the field's prediction of them, with
 /// the residual carry that both field's fills start from computed once.
 pub struct Sources<'a> {
@@ -250,6 +253,9 @@ pub struct Sources<'a> {
     /// The field's prediction of the tracks.
     pub field: &'a FieldPrediction<'a>,
     carried: OnceCell<Vec<f32>>,
+    /// The chain and segment fills of the observations, with the entries they were asked
+    /// at: the field's fills beside them ([`Sources::field_beside`]) read them again.
+    donor_fills: RefCell<Vec<DonorFill>>,
 }
 
 impl<'a> Sources<'a> {
@@ -259,7 +265,30 @@ impl<'a> Sources<'a> {
             marked,
             field,
             carried: OnceCell::new(),
+            donor_fills: RefCell::new(Vec::new()),
         }
+    }
+
+    /// [`Filler::fill_observed`] of the observations, computed once per filler and entries
+    /// for the donors the field's fills stand beside.
+    fn observed_fill(&self, filler: Filler, entries: &[(usize, usize)]) -> Option<Vec<[f32; 3]>> {
+        if !matches!(filler, Filler::Chain | Filler::Segment) {
+            return filler.fill_observed(&self.marked, entries);
+        }
+        let cached = self
+            .donor_fills
+            .borrow()
+            .iter()
+            .find_map(|(f, at, values)| {
+                (*f == filler && at.as_slice() == entries).then(|| values.clone())
+            });
+        if cached.is_some() {
+            return cached;
+        }
+        let values = filler.fill_observed(&self.marked, entries)?;
+        let entry = (filler, entries.to_vec(), values.clone());
+        self.donor_fills.borrow_mut().push(entry);
+        Some(values)
     }
 
     /// `donor`'s fill of the tracks at `entries` plus the field's motion away from what
@@ -269,6 +298,10 @@ impl<'a> Sources<'a> {
     /// exact it is the field; where the field moves as rigidly as the donors, it is `donor`.
     pub fn field_beside(&self, donor: Filler, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
         let predicted = self.field.predicted();
+        if predicted.len() != self.marked.positions.len() {
+            // No prediction of these tracks: no value, as a filler that cannot run.
+            return vec![[f32::NAN; 3]; entries.len()];
+        }
         let of_field = Marked::new(
             self.marked.frames,
             self.marked.points,
@@ -276,7 +309,7 @@ impl<'a> Sources<'a> {
             self.marked.observed,
         );
         let (y, f) = (
-            donor.fill_observed(&self.marked, entries),
+            self.observed_fill(donor, entries),
             donor.fill_observed(&of_field, entries),
         );
         let (Some(y), Some(f)) = (y, f) else {
