@@ -286,7 +286,7 @@ def summary(results):
     """The acceptance (below the best named filler at 0.5 s and beyond, within 5 % below),
     the ratios' worst and geometric mean; with a fit against fit-free on gaps of 1 s and
     longer; and doma's fill over the best of its parts measured here."""
-    ratios, met, long_fit, long_field, parts = [], 0, [], [], []
+    ratios, met, long_fit, long_field, parts, free = [], 0, [], [], [], []
     part_cols = ["field_fill"] + FIELD_DESIGNS + METHODS
     named_all = [m for m in NAMED]
     for r in results:
@@ -295,6 +295,7 @@ def summary(results):
             named = [c for c in named_all if c in case and runs(case, c)]
             ratio = case["doma"] / min(case[c] for c in named)
             ratios.append(ratio)
+            free.append(case["chain"] / min(case[c] for c in named))
             met += ratio < 1.0 if length >= 0.5 else ratio <= 1.05
             if length >= 1.0:
                 long_fit.append(case["doma"] / case["chain"])
@@ -304,7 +305,10 @@ def summary(results):
     geo = lambda v: float(np.exp(np.mean(np.log(v)))) if v else float("nan")
     worst_part = max(parts)
     return "\n".join([
-        f"met {met} of {len(ratios)}, worst {max(ratios):.2f}, geometric mean {geo(ratios):.2f} (against the best named filler)",
+        f"met {met} of {len(ratios)}, below the best named filler in {sum(r < 1 for r in ratios)}, "
+        f"{geo(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f}) in geometric mean (range)",
+        f"fit-free (the chain fill): below the best named filler in {sum(r < 1 for r in free)}, "
+        f"{geo(free):.2f} ({min(free):.2f}-{max(free):.2f})",
         f"gaps of 1 s and longer, {len(long_fit)} cases: with a fit / fit-free (chain) geometric mean {geo(long_fit):.3f}, "
         f"range {min(long_fit):.2f}-{max(long_fit):.2f}; alone / fit-free: "
         + ", ".join(f"{d} {geo([c[d] for c in long_field if d in c]):.2f}"
