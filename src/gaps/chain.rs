@@ -22,6 +22,11 @@
 //!    linearly in time, as the rigid-body fill blends its moves from both borders, so
 //!    that the fill meets both observations.
 //!
+//! Past a track's ends the transport runs from its one border alone: the first step
+//! carries the track from its last observation to the end of the recording (or from its
+//! first back to the start), as a tracked point that leaves the view keeps moving with the
+//! surface around it.
+//!
 //! Where fewer than three tracks are seen at a frame and the one before, the transported
 //! position is held there. It is what a motion field knows, that nearby markers move
 //! together, asked of the observations through the gap rather than of a fitted field;
@@ -40,15 +45,41 @@ pub const CHAIN_POOL: usize = 12;
 
 impl Marked<'_> {
     /// The chained rigid-body fill at each entry `(k, i)` (module docs): an interior gap
-    /// is transported once from each border; an entry past a track's ends takes the linear
-    /// fill (held), as the other donor fillers give, and an entry of a track never
-    /// observed is whatever its position holds.
+    /// is transported once from each border, an entry past a track's ends from its one
+    /// border ([`ChainGap::carry`]); an entry of a track never observed is whatever its
+    /// position holds.
     pub fn chain(&self, entries: &[(usize, usize)]) -> Vec<[f32; 3]> {
-        self.by_donors(
+        let mut fills = self.by_donors(
             entries,
             |i, a, b| Some((a, ChainGap::new(self, i, a, b).fill())),
             |(a, fill), k| fill[k - a - 1],
-        )
+        );
+        // Each run past an end is carried once, by its track, its border and its side (a
+        // track seen once has one border for both).
+        let mut carried: HashMap<(usize, usize, bool), Vec<[f64; 3]>> = HashMap::new();
+        for (v, &(k, i)) in fills.iter_mut().zip(entries) {
+            if self.seen(k, i) {
+                continue;
+            }
+            // (border, frames from it, whether the run follows it)
+            let past = match self.ends(i) {
+                Some((first, _)) if k < first => (first, first - 1 - k, false),
+                Some((_, last)) if k > last => (last, k - last - 1, true),
+                _ => continue,
+            };
+            let carry = carried
+                .entry((i, past.0, past.2))
+                .or_insert_with(|| ChainGap::open(self, i, past.0, past.2).carry(past.2));
+            *v = carry[past.1].map(|x| x as f32);
+        }
+        fills
+    }
+
+    /// Track `i`'s first and last observed frames (`None`: never observed).
+    pub(super) fn ends(&self, i: usize) -> Option<(usize, usize)> {
+        let first = (0..self.frames).find(|&k| self.seen(k, i))?;
+        let last = (first..self.frames).rev().find(|&k| self.seen(k, i))?;
+        Some((first, last))
     }
 }
 
@@ -73,6 +104,32 @@ impl<'t, 'a> ChainGap<'t, 'a> {
             .chain(b..=(b + w).min(tracks.frames - 1))
             .filter(|&f| tracks.seen(f, i))
             .collect();
+        Self::with_around(tracks, i, a, b, around)
+    }
+
+    /// Track `i`'s run past its end at `border`, its last observation (`forward`) or its
+    /// first: as a gap whose other border lies beyond the recording, judged on the
+    /// observations on `border`'s side alone.
+    fn open(tracks: &'t Marked<'a>, i: usize, border: usize, forward: bool) -> Self {
+        let t = tracks.frames;
+        let run = if forward { t - 1 - border } else { border };
+        let w = around(0, run + 1);
+        let frames = if forward {
+            border.saturating_sub(w)..=border
+        } else {
+            border..=(border + w).min(t - 1)
+        };
+        let around = frames.filter(|&f| tracks.seen(f, i)).collect();
+        Self::with_around(tracks, i, border, border, around)
+    }
+
+    fn with_around(
+        tracks: &'t Marked<'a>,
+        i: usize,
+        a: usize,
+        b: usize,
+        around: Vec<usize>,
+    ) -> Self {
         ChainGap {
             tracks,
             i,
@@ -87,8 +144,8 @@ impl<'t, 'a> ChainGap<'t, 'a> {
     /// Frames `a + 1..b`: the transports from both borders blended linearly in time.
     fn fill(mut self) -> Vec<[f64; 3]> {
         let (a, b) = (self.a, self.b);
-        let forward = self.transport(a, b);
-        let backward = self.transport(b, a);
+        let forward = self.transport(a, b - a - 1, true);
+        let backward = self.transport(b, b - a - 1, false);
         (a + 1..b)
             .map(|k| {
                 let (p, q) = (forward[k - a - 1], backward[b - 1 - k]);
@@ -98,17 +155,31 @@ impl<'t, 'a> ChainGap<'t, 'a> {
             .collect()
     }
 
-    /// The track transported from its observation at `from` towards `to` (exclusive), one
-    /// frame at a time: its position at each frame strictly between, nearest `from` first.
-    fn transport(&mut self, from: usize, to: usize) -> Vec<[f64; 3]> {
+    /// An open run's frames (made by [`ChainGap::open`]), nearest the border first: the
+    /// track transported from its one border on to the end of the recording (`forward`)
+    /// or back to its start.
+    fn carry(mut self, forward: bool) -> Vec<[f64; 3]> {
+        let a = self.a;
+        let steps = if forward {
+            self.tracks.frames - 1 - a
+        } else {
+            a
+        };
+        self.transport(a, steps, forward)
+    }
+
+    /// The track transported from its observation at `from`, `steps` frames on (`forward`)
+    /// or back, one frame at a time: its position at each, nearest `from` first.
+    fn transport(&mut self, from: usize, steps: usize, forward: bool) -> Vec<[f64; 3]> {
         let tracks = self.tracks;
-        let step = |f: usize| if to > from { f + 1 } else { f - 1 };
-        let mut transported = Vec::with_capacity(from.abs_diff(to).saturating_sub(1));
+        let step = |f: usize| if forward { f + 1 } else { f - 1 };
+        let mut transported = Vec::with_capacity(steps);
         // The donors and the frame they were taken up at, with the track's position there.
         let mut held: Option<([usize; RIGID_BODY_DONORS], usize, [f64; 3])> = None;
         let (mut previous, mut position) = (from, tracks.at64(from, self.i));
-        let mut k = step(from);
-        while k != to {
+        let mut k = from;
+        for _ in 0..steps {
+            k = step(k);
             let still = held.filter(|(donors, _, _)| donors.iter().all(|&j| tracks.seen(k, j)));
             let taken = still.or_else(|| {
                 self.hand_over(from, previous, k, position)
@@ -120,7 +191,7 @@ impl<'t, 'a> ChainGap<'t, 'a> {
             }
             held = taken;
             transported.push(position);
-            (previous, k) = (k, step(k));
+            previous = k;
         }
         transported
     }
@@ -333,15 +404,37 @@ mod tests {
     }
 
     #[test]
-    fn past_a_track_s_ends_the_linear_fill_held_and_observations_as_they_are() {
+    fn past_a_track_s_ends_the_rigid_body_carries_it_and_observations_stay() {
         let (t, n, positions, mut observed) = handed_over();
-        // Marker 0 unseen from frame 50 to the end.
-        for k in 50..t {
+        // Marker 0 unseen before frame 8 and from frame 50 to the end: the rigid body
+        // carries it there exactly, through the hand-overs of markers 4–6 (unseen 10..25).
+        for k in (0..8).chain(50..t) {
             observed[k * n] = false;
         }
         let tracks = Marked::new(t, n, &positions, &observed);
-        let got = tracks.chain(&[(55, 0), (5, 0)]);
-        assert_eq!(got[0], tracks.at(49, 0));
-        assert_eq!(got[1], tracks.at(5, 0));
+        let entries: Vec<(usize, usize)> = (0..8).chain(50..t).map(|k| (k, 0)).collect();
+        let chain = worst(&tracks, &entries, &tracks.chain(&entries));
+        assert!(chain < 1e-4, "{chain}");
+        assert_eq!(tracks.chain(&[(5, 1)]), [tracks.at(5, 1)]);
+    }
+
+    #[test]
+    fn past_a_track_s_ends_with_no_donors_the_border_is_held() {
+        let (t, n) = (30, 3);
+        let positions: Vec<f32> = (0..3 * t * n).map(|e| ((e as f32) * 0.37).sin()).collect();
+        let mut observed = vec![true; t * n];
+        for k in 20..t {
+            observed[k * n] = false;
+        }
+        let tracks = Marked::new(t, n, &positions, &observed);
+        assert_eq!(tracks.chain(&[(25, 0)]), [tracks.at(19, 0)]);
+        // Seen once: held on both sides.
+        let mut once = vec![true; t * n];
+        for k in (0..t).filter(|&k| k != 12) {
+            once[k * n] = false;
+        }
+        let tracks = Marked::new(t, n, &positions, &once);
+        let both = tracks.chain(&[(3, 0), (29, 0)]);
+        assert_eq!(both, [tracks.at(12, 0), tracks.at(12, 0)]);
     }
 }
