@@ -79,9 +79,10 @@ pub fn names_and_rate(input: &Path) -> Result<(Vec<String>, Option<f64>)> {
 
 /// What filled a completion's gaps: one filler's name, or `doma` (the blend).
 pub fn filled_by(c: &Completion) -> &'static str {
-    let only = crate::gaps::Filler::ALL
-        .into_iter()
-        .find(|&f| c.blend.short[f] == 1.0 && c.blend.long[f] == 1.0 && c.blend.leans.is_empty());
+    let only = crate::gaps::Filler::ALL.into_iter().find(|&f| {
+        let ends = c.blend.ends.is_none_or(|e| e.weights[f] == 1.0);
+        c.blend.short[f] == 1.0 && c.blend.long[f] == 1.0 && c.blend.leans.is_empty() && ends
+    });
     only.map_or("doma", crate::gaps::Filler::name)
 }
 

@@ -18,6 +18,8 @@
 //! 3. **Stage 2** (`stage_two.rs`): the field's two fills, on the blind spans, observations
 //!    the field was fitted without ([`blind_spans`]): stage 1's blend and the field's fills
 //!    are blended again per class, kept where the gain is clear.
+//! 4. **Beyond the ends** (`ends.rs`), where a fill reaches past a track's first or last
+//!    observation: the fillers that predict there, weighed on spans cut at track ends.
 //!
 //! What both stages share, the residuals and the objective, is `residual.rs`; how many
 //! spans, draws and folds, and how clear a gain must be, is [`Validation`]
@@ -38,6 +40,7 @@ use super::window::windowed;
 use serde::{Deserialize, Serialize};
 
 mod class;
+mod ends;
 mod lean;
 mod residual;
 mod stage_one;
@@ -45,6 +48,7 @@ mod stage_two;
 mod validation;
 
 pub use class::{GapClass, LENGTH_CLASSES, Pool};
+pub use ends::{EndBlend, predicts_beyond_ends};
 pub use lean::{TrackLean, lean_key};
 pub use validation::Validation;
 
@@ -61,8 +65,40 @@ pub fn blind_spans(tracks: &Marked, seed: u64, validation: &Validation) -> Vec<(
 }
 
 /// The weights (module docs): stage 1 on validation draws with `seed`, the leans, stage 2
-/// on the observed entries of `blind`, observations the field was fitted without.
+/// on the observed entries of `blind`, observations the field was fitted without, and the
+/// weights beyond the ends where `entries` reach past a track's ends.
 fn learn(
+    tracks: &Marked,
+    field: &FieldPrediction,
+    seed: u64,
+    blind: &[(usize, usize)],
+    entries: &[(usize, usize)],
+    validation: &Validation,
+) -> Blend {
+    let mut blend = learn_inside(tracks, field, seed, blind, validation);
+    let past = past_ends(tracks);
+    if tracks.frames >= 3 && entries.iter().any(|&(k, i)| past(k, i)) {
+        blend.ends = ends::end_blend(tracks, field, seed, validation);
+    }
+    blend
+}
+
+/// Whether an entry `(k, i)` lies before track `i`'s first observation or after its last
+/// (a track never observed has none).
+fn past_ends(tracks: &Marked) -> impl Fn(usize, usize) -> bool + use<> {
+    let mut ends: Vec<Option<(usize, usize)>> = vec![None; tracks.points];
+    for k in 0..tracks.frames {
+        for (i, end) in ends.iter_mut().enumerate() {
+            if tracks.seen(k, i) {
+                *end = Some(end.map_or((k, k), |(a, _)| (a, k)));
+            }
+        }
+    }
+    move |k, i| ends[i].is_some_and(|(a, b)| k < a || k > b)
+}
+
+/// [`learn`]'s weights inside the tracks' observations: stages 1 and 2 and the leans.
+fn learn_inside(
     tracks: &Marked,
     field: &FieldPrediction,
     seed: u64,
@@ -123,6 +159,11 @@ pub struct Blend {
     /// one filler, by track (empty: none, and in reports written before).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub leans: Vec<TrackLean>,
+    /// The weights beyond the tracks' ends (`None`: the fill reached no entry there, none
+    /// could be validated, or a report written before; those entries then take their
+    /// run's length class's weights).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ends: Option<EndBlend>,
 }
 
 fn is_zero(v: &usize) -> bool {
@@ -184,7 +225,7 @@ pub fn doma_fill_at(
     entries: &[(usize, usize)],
     validation: &Validation,
 ) -> (Vec<[f32; 3]>, Blend) {
-    let blend = learn(tracks, field, seed, blind, validation);
+    let blend = learn(tracks, field, seed, blind, entries, validation);
     let mut fills = if blend.is_field_only() {
         fill_with(tracks, field, Filler::FieldFill, entries)
     } else {
@@ -193,8 +234,47 @@ pub fn doma_fill_at(
             combined(&blend, &filler_values_in(s, local, used), local)
         })
     };
+    beyond_ends(tracks, field, &blend, entries, &mut fills);
     clusters_first(tracks, entries, &mut fills);
     (fills, blend)
+}
+
+/// `fills` at `entries` with every entry past a track's ends taken from the fillers that
+/// predict there, by `blend`'s weights beyond the ends ([`Blend::ends`]; kept as they are
+/// where it has none).
+fn beyond_ends(
+    tracks: &Marked,
+    field: &FieldPrediction,
+    blend: &Blend,
+    entries: &[(usize, usize)],
+    fills: &mut [[f32; 3]],
+) {
+    let Some(ends) = &blend.ends else {
+        return;
+    };
+    let past = past_ends(tracks);
+    let at: Vec<usize> = (0..entries.len())
+        .filter(|&e| past(entries[e].0, entries[e].1))
+        .collect();
+    let pairs: Vec<(usize, usize)> = at.iter().map(|&e| entries[e]).collect();
+    let used = Filler::ALL
+        .iter()
+        .filter(|&&f| ends.weights[f] > 0.0)
+        .fold(0, |bits, f| bits | f.bit());
+    let values = filler_values(
+        &Sources::new(*tracks, field),
+        &with_gap_lengths(tracks, &pairs),
+        used,
+    );
+    let w = ends.weights.0;
+    for (&e, p) in at.iter().zip(values) {
+        fills[e] = std::array::from_fn(|c| {
+            (0..M)
+                .filter(|&m| w[m] > 0.0)
+                .map(|m| w[m] * p[m][c] as f64)
+                .sum::<f64>() as f32
+        });
+    }
 }
 
 /// `fills` at `entries` with every entry of a track on a rigid cluster that its mates can
@@ -334,13 +414,14 @@ pub fn fills_at(
     entries: &[(usize, usize)],
     validation: &Validation,
 ) -> FillsAt {
-    let blend = learn(tracks, field, seed, blind, validation);
+    let blend = learn(tracks, field, seed, blind, entries, validation);
     let (doma, fillers) = blend_at(
         &Sources::new(*tracks, field),
         &blend,
         &with_gap_lengths(tracks, entries),
     );
     let mut doma = doma;
+    beyond_ends(tracks, field, &blend, entries, &mut doma);
     clusters_first(tracks, entries, &mut doma);
     FillsAt {
         blend,
@@ -362,6 +443,7 @@ impl Blend {
             by_length: Vec::new(),
             field_validated: 0,
             leans: Vec::new(),
+            ends: None,
         }
     }
 

@@ -190,6 +190,7 @@ fn classic_blend(draws: &[Pools<M>], v: &Validation) -> Option<Blend> {
         by_length,
         field_validated: 0,
         leans: Vec::new(),
+        ends: None,
     })
 }
 

@@ -328,3 +328,58 @@ fn nothing_to_fill_is_returned_as_given() {
     assert_eq!(filled, positions);
     assert_eq!(blend.validated, [0, 0]);
 }
+
+#[test]
+fn beyond_the_ends_the_fillers_that_carry_the_track_take_the_weight() {
+    // The camera-shake grid, 30 frames of 20 tracks: a quarter start late (frame 8) and a
+    // quarter are lost early (after frame 21), and each has a short interior gap. No value
+    // held at a border follows the shake; the other tracks' motion is exact here.
+    let (t, n) = (30usize, 20usize);
+    let truth = camera_shake(t, n);
+    let mut observed = vec![true; t * n];
+    for i in 0..n {
+        for k in 0..3 {
+            observed[(10 + (i % 7) + k) * n + i] = false;
+        }
+        let run = match i % 4 {
+            0 => 0..8,
+            1 => 22..t,
+            _ => 0..0,
+        };
+        for k in run {
+            observed[k * n + i] = false;
+        }
+    }
+    let tracks = Marked::new(t, n, &truth, &observed);
+    let predicted = vec![0f32; 3 * t * n];
+    let field = FieldPrediction::new(n, &predicted, &[f32::NAN; 3].repeat(n), &observed);
+    let (filled, blend) = doma_fill(&tracks, &field, 5, &[], &V);
+    let ends = blend.ends.expect("runs past the ends to weigh");
+    assert!(ends.validated > 0);
+    for f in Filler::ALL {
+        let carries = predicts_beyond_ends() & f.bit() != 0;
+        assert!(carries || ends.weights[f] == 0.0, "{f:?}: {ends:?}");
+    }
+    let past = past_ends(&tracks);
+    let (mut worst, mut held) = (0f32, 0f32);
+    for k in 0..t {
+        for i in (0..n).filter(|&i| past(k, i)) {
+            let e = 3 * (k * n + i);
+            let border = if k < 8 { 8 } else { 21 };
+            let b = 3 * (border * n + i);
+            for c in 0..3 {
+                worst = worst.max((filled[e + c] - truth[e + c]).abs());
+                held = held.max((truth[b + c] - truth[e + c]).abs());
+            }
+        }
+    }
+    assert!(worst < 1e-3, "{worst}");
+    assert!(held > 0.5, "{held}");
+    // Nothing past the ends to fill: no weights there.
+    let inside: Vec<(usize, usize)> = (0..t)
+        .flat_map(|k| (0..n).map(move |i| (k, i)))
+        .filter(|&(k, i)| !tracks.seen(k, i) && !past(k, i))
+        .collect();
+    let (_, blend) = doma_fill_at(&tracks, &field, 5, &[], &inside, &V);
+    assert_eq!(blend.ends, None);
+}
