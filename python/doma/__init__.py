@@ -335,13 +335,19 @@ class Field:
         return out[0] if one else out
 
     def complete(
-        self, *, max_gap: Union[None, int, str] = None, extrapolate: bool = False, method: Optional[str] = None
+        self,
+        *,
+        max_gap: Union[None, int, str] = None,
+        extrapolate: Optional[bool] = None,
+        method: Optional[str] = None,
     ) -> "Tracks":
         """Every track at every frame of the fitted clip, gaps filled: what ``doma complete``
         writes, to the last bit (with ``--max-gap`` and ``--extrapolate`` as given here).
 
-        By default every gap with observations on both sides is filled, and nothing before a
-        track's first observation or after its last (``extrapolate=True`` fills those).
+        By default every gap with observations on both sides is filled; before a track's
+        first observation and after its last, a tracker's output (a PointOdyssey or
+        TAPVid-3D file) is filled and a recording (.c3d, .trc) or other tracks are not
+        (``extrapolate=True`` or ``False`` says which).
         ``max_gap``: fill only gaps of at most that many frames of the input (an int), or
         seconds at a C3D input's rate (``"0.5s"``). An entry left unfilled is NaN.
         ``method``: fill with one filler alone instead of doma's blend: ``"field_fill"``
@@ -361,7 +367,8 @@ class Field:
         gap = None if max_gap is None else str(max_gap)
         if method is not None and not isinstance(method, str):
             raise ValueError(f"method must be a filler's name, not {method!r}")
-        positions, (t, n), observed, kept = self._native.complete(gap, bool(extrapolate), method)
+        ends = None if extrapolate is None else bool(extrapolate)
+        positions, (t, n), observed, kept = self._native.complete(gap, ends, method)
         return Tracks(
             tracks=np.frombuffer(positions, dtype=np.float32).reshape(t, n, 3),
             observed=np.frombuffer(observed, dtype=np.bool_).reshape(t, n),
@@ -596,7 +603,7 @@ def fill_file(
     *,
     fit: bool = False,
     max_gap: Union[None, int, str] = None,
-    extrapolate: bool = False,
+    extrapolate: Optional[bool] = None,
     method: Optional[str] = None,
     overwrite: bool = False,
     flag_above_mm: float = 5.0,
@@ -608,7 +615,9 @@ def fill_file(
     ``out``'s extension (a ``.c3d`` is the C3D input with only its gaps written; ``.trc``;
     ``.npz``), and the table of filled gaps written beside it (``NAME.gaps.csv``).
 
-    ``max_gap`` (frames, or ``"0.5s"``) and ``extrapolate`` as :func:`fill`'s. An existing
+    ``max_gap`` (frames, or ``"0.5s"``) as :func:`fill`'s; ``extrapolate`` as
+    :meth:`Field.complete`'s (by default a tracker's file is filled past the tracks' ends,
+    a recording is not). An existing
     ``out`` is refused (``FileExistsError``) unless ``overwrite``.
 
     Returns the report: ``markers``, ``frames``, ``filled``, ``extrapolated``,
@@ -625,7 +634,7 @@ def fill_file(
         os.fspath(out),
         bool(fit),
         None if max_gap is None else str(max_gap),
-        bool(extrapolate),
+        None if extrapolate is None else bool(extrapolate),
         None if method is None else str(method).lower(),
         bool(overwrite),
         float(flag_above_mm),

@@ -297,12 +297,12 @@ impl Field {
     /// [T, N], the input's index of each track or None)`; `method` fills with that filler
     /// alone instead of doma's blend.
     #[allow(clippy::type_complexity)]
-    #[pyo3(signature = (max_gap=None, extrapolate=false, method=None))]
+    #[pyo3(signature = (max_gap=None, extrapolate=None, method=None))]
     fn complete<'py>(
         &self,
         py: Python<'py>,
         max_gap: Option<String>,
-        extrapolate: bool,
+        extrapolate: Option<bool>,
         method: Option<String>,
     ) -> PyResult<(
         Bound<'py, pyo3::types::PyByteArray>,

@@ -85,7 +85,7 @@ pub fn fill_into(
 /// `unfilled`, `left_long`, `filled_by`, `gaps` (one row per filled gap, with its expected
 /// error and whether it passes `flag_above_mm`), `units`, `calibration` and `csv`.
 #[pyfunction]
-#[pyo3(signature = (path, out, fit=false, max_gap=None, extrapolate=false, method=None, overwrite=false, flag_above_mm=5.0))]
+#[pyo3(signature = (path, out, fit=false, max_gap=None, extrapolate=None, method=None, overwrite=false, flag_above_mm=5.0))]
 // The keywords of `doma.fill_file`, one argument each, as PyO3 takes them.
 #[allow(clippy::too_many_arguments)]
 pub fn fill_file(
@@ -94,7 +94,7 @@ pub fn fill_file(
     out: std::path::PathBuf,
     fit: bool,
     max_gap: Option<String>,
-    extrapolate: bool,
+    extrapolate: Option<bool>,
     method: Option<String>,
     overwrite: bool,
     flag_above_mm: f64,

@@ -307,10 +307,12 @@ pub struct FillPolicyArgs {
     /// .npz), and counted.
     #[arg(long, value_name = "N|Xs")]
     pub max_gap: Option<crate::run::MaxGap>,
-    /// Also fill before a track's first observation and after its last (by default only
-    /// gaps with observations on both sides are filled); the count is printed.
-    #[arg(long)]
-    pub extrapolate: bool,
+    /// Fill before a track's first observation and after its last too (`=false`: not); the
+    /// count is printed. By default a tracker's output (a PointOdyssey or TAPVid-3D .npz)
+    /// is filled at every point of every frame, and a motion-capture recording (.c3d,
+    /// .trc) or other tracks only in gaps with observations on both sides.
+    #[arg(long, num_args = 0..=1, default_missing_value = "true", require_equals = true, value_name = "BOOL")]
+    pub extrapolate: Option<bool>,
     /// Fill with one filler alone instead of doma's fill (the blend); `chain` is the
     /// default of `doma fill`, and the field's fills need a fit. The
     /// snake_case names of reports and Python are accepted too.

@@ -59,7 +59,9 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
         );
     }
     if c.unfilled > 0 {
-        let why = match (args.fill.max_gap, args.fill.extrapolate) {
+        // Past the ends were filled where asked, or by the input's default where any was.
+        let ends_filled = args.fill.extrapolate.unwrap_or(c.extrapolated > 0);
+        let why = match (args.fill.max_gap, ends_filled) {
             (Some(_), false) => {
                 "past --max-gap, or past a track's ends (--extrapolate fills those)"
             }
@@ -125,6 +127,12 @@ fn print_blend(b: &crate::gaps::blend::Blend) {
              filler, learned on its own validation spans: {}",
             b.leans.len(),
             listed.join(", ")
+        );
+    }
+    if let Some(ends) = &b.ends {
+        eprintln!(
+            "  beyond a track's ends{}",
+            weights(&ends.weights, ends.validated)
         );
     }
     if b.validated != [0, 0] {

@@ -60,6 +60,23 @@ impl Layout {
         }
     }
 
+    /// Whether this is a tracker's output (PointOdyssey's or TAPVid-3D's layout), used and
+    /// scored at every point of every frame.
+    pub fn is_tracker(self) -> bool {
+        matches!(self, Layout::PointOdyssey | Layout::TapVid3d)
+    }
+
+    /// The layout of the `.npz` at `path` as `file` reads it: its own, else detected from
+    /// the archive's keys (read from its directory alone).
+    pub fn of_npz(path: &Path, file: &TrackFile) -> Result<Layout> {
+        if let Some(layout) = file.layout {
+            return Ok(layout);
+        }
+        let source = FileSource::open(path).map_err(|e| DomaError::io(path, e))?;
+        let members = npz_members(&source).map_err(|reason| malformed(path, reason))?;
+        Ok(Layout::detect(members.iter().map(|m| m.name.as_str())))
+    }
+
     /// The keys of the tracks and the mask(s) this layout reads.
     fn keys(self) -> &'static [&'static str] {
         match self {

@@ -38,7 +38,8 @@ mod warp;
 pub use claim::Claim;
 pub use complete::{
     CompletedTracks, Completion, FillPolicy, FilledGap, MaxGap, OutputKind, complete_run,
-    complete_run_with, complete_tracks, complete_without_fit, output_kind_for,
+    complete_run_with, complete_tracks, complete_without_fit, extrapolates_by_default,
+    output_kind_for,
 };
 pub use eval::{eval_run, eval_run_as, evaluate};
 pub use fit::{FitOutcome, fit_run, fit_run_locked};

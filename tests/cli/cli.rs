@@ -1009,3 +1009,26 @@ fn every_filler_is_listed_in_the_help_and_the_docs() {
     ]);
     assert!(!err.contains("invalid value"), "{err}");
 }
+
+/// `--extrapolate` alone, `--extrapolate=false`, and what each input does without it, said
+/// in both commands' help; any other value is refused naming the flag.
+#[test]
+fn extrapolate_says_its_default_by_input_and_takes_a_boolean() {
+    for command in ["complete", "fill"] {
+        let (ok, out, err) = doma(&[command, "--help"]);
+        assert!(ok, "{err}");
+        let flag = out
+            .split("--extrapolate")
+            .nth(1)
+            .unwrap_or_else(|| panic!("{command} --help has no --extrapolate:\n{out}"));
+        let said = flag.split_whitespace().collect::<Vec<_>>().join(" ");
+        assert!(said.contains("PointOdyssey or TAPVid-3D"), "{said}");
+        assert!(said.contains("motion-capture recording"), "{said}");
+    }
+    for value in ["--extrapolate", "--extrapolate=false", "--extrapolate=true"] {
+        let (_, _, err) = doma(&["complete", "no-such-run", "--out", "x.npz", value]);
+        assert!(!err.contains("--extrapolate"), "{value}: {err}");
+    }
+    let (ok, _, err) = doma(&["complete", "no-such-run", "--out", "x.npz", "--extrapolate=maybe"]);
+    assert!(!ok && err.contains("--extrapolate"), "{err}");
+}

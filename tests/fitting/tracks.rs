@@ -232,12 +232,13 @@ fn blind_validation_spans_are_hidden_from_the_fit_and_validate_the_blend() {
 /// A completion of every unobserved entry, past the tracks' ends too.
 const EVERY_ENTRY: FillPolicy = FillPolicy {
     max_gap: None,
-    extrapolate: true,
+    extrapolate: Some(true),
     method: None,
 };
 
-/// By default a completion fills the gaps with observations on both sides and nothing past
-/// a track's ends; `max_gap` leaves longer gaps; seconds need a rate.
+/// A completion fills the gaps with observations on both sides, and past a track's ends
+/// where asked: by default for a tracker's file, never for a recording; `max_gap` leaves
+/// longer gaps; seconds need a rate.
 #[test]
 fn a_completion_fills_what_its_policy_asks_for() {
     let v = view();
@@ -274,7 +275,28 @@ fn a_completion_fills_what_its_policy_asks_for() {
         (done, tracks)
     };
     let (every, all) = read(EVERY_ENTRY);
-    let (inner, some) = read(FillPolicy::default());
+    let bounded = FillPolicy {
+        extrapolate: Some(false),
+        ..FillPolicy::default()
+    };
+    let (inner, some) = read(bounded);
+    // A tracker's file is filled at every point of every frame unless told otherwise.
+    let (default, _) = read(FillPolicy::default());
+    assert_eq!(
+        (default.filled, default.extrapolated, default.unfilled),
+        (every.filled, every.extrapolated, every.unfilled)
+    );
+    let by_default = |path: &Path, file: &TrackFile| {
+        doma::run::extrapolates_by_default(path, file).unwrap()
+    };
+    assert!(by_default(&npz, &TrackFile::default()));
+    let masked = TrackFile {
+        layout: Some(Layout::Masked),
+        ..TrackFile::default()
+    };
+    assert!(!by_default(&npz, &masked));
+    let recording = dir.join("walk.c3d");
+    assert!(!by_default(&recording, &TrackFile::default()));
     let (t, n) = (all.frames(), all.points());
     assert_eq!((inner.filled, inner.extrapolated), (every.filled, 0));
     assert_eq!(inner.unfilled, every.extrapolated);
@@ -295,13 +317,13 @@ fn a_completion_fills_what_its_policy_asks_for() {
     }
     let (none, _) = read(FillPolicy {
         max_gap: Some(MaxGap::Frames(0)),
-        extrapolate: false,
+        extrapolate: Some(false),
         method: None,
     });
     assert_eq!((none.filled, none.extrapolated), (0, 0));
     let seconds = FillPolicy {
         max_gap: Some(MaxGap::Seconds(0.5)),
-        extrapolate: false,
+        extrapolate: Some(false),
         method: None,
     };
     let refused = complete_run_with(&run, &dir.join("x.npz"), None, seconds, &Device::flex());

@@ -26,7 +26,7 @@ use combined::median_of;
 pub use output::{FilledGap, OutputKind, output_kind_for};
 use output::{checked_output, is_c3d, is_trc, write_completion};
 use policy::chosen;
-pub use policy::{FillPolicy, MaxGap};
+pub use policy::{FillPolicy, MaxGap, extrapolates_by_default};
 
 /// What [`complete_run`] wrote.
 #[derive(Clone, Debug, PartialEq)]
@@ -138,7 +138,14 @@ pub fn complete_without_fit(
     let tracks = Marked::new(t, n, &positions, &seen);
     let source_frames: Vec<usize> = (0..t).collect();
     let somewhere: Vec<bool> = (0..n).map(|i| (0..t).any(|k| seen[k * n + i])).collect();
-    let (entries, left_long) = chosen(&tracks, &source_frames, policy, rate.map(f64::from), data)?;
+    let (entries, left_long) = chosen(
+        &tracks,
+        &source_frames,
+        policy,
+        rate.map(f64::from),
+        data,
+        &config.tracks,
+    )?;
     let entries: Vec<(usize, usize)> = entries.into_iter().filter(|&(_, i)| somewhere[i]).collect();
     let mut values = filler.fill_observed(&tracks, &entries).unwrap_or_default();
     if policy.method.is_none() {
@@ -425,7 +432,14 @@ fn fill_one(
     let stride = config.stride.max(1);
     let source_frames: Vec<usize> = frame_range.step_by(stride).collect();
     let rate = rate.map(f64::from);
-    let (entries, left_long) = chosen(&tracks, &source_frames, policy, rate, &config.data)?;
+    let (entries, left_long) = chosen(
+        &tracks,
+        &source_frames,
+        policy,
+        rate,
+        &config.data,
+        &config.tracks,
+    )?;
     // The fill of the chosen entries alone: a long recording holds no second copy of itself.
     let (mut values, blend) = match policy.method {
         None => {
