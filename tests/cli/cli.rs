@@ -1029,6 +1029,12 @@ fn extrapolate_says_its_default_by_input_and_takes_a_boolean() {
         let (_, _, err) = doma(&["complete", "no-such-run", "--out", "x.npz", value]);
         assert!(!err.contains("--extrapolate"), "{value}: {err}");
     }
-    let (ok, _, err) = doma(&["complete", "no-such-run", "--out", "x.npz", "--extrapolate=maybe"]);
+    let (ok, _, err) = doma(&[
+        "complete",
+        "no-such-run",
+        "--out",
+        "x.npz",
+        "--extrapolate=maybe",
+    ]);
     assert!(!ok && err.contains("--extrapolate"), "{err}");
 }

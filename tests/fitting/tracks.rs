@@ -286,9 +286,8 @@ fn a_completion_fills_what_its_policy_asks_for() {
         (default.filled, default.extrapolated, default.unfilled),
         (every.filled, every.extrapolated, every.unfilled)
     );
-    let by_default = |path: &Path, file: &TrackFile| {
-        doma::run::extrapolates_by_default(path, file).unwrap()
-    };
+    let by_default =
+        |path: &Path, file: &TrackFile| doma::run::extrapolates_by_default(path, file).unwrap();
     assert!(by_default(&npz, &TrackFile::default()));
     let masked = TrackFile {
         layout: Some(Layout::Masked),

@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use super::class::Pool;
 use super::residual::{Pools, empty_pools, residuals, solve_judged};
 use super::validation::Validation;
-use super::{M, Weights};
+use super::{Blend, M, Weights, filler_values, with_gap_lengths};
 use crate::gaps::fillers::{Filler, PerFiller, Sources};
 use crate::gaps::marked::Marked;
 use crate::gaps::prediction::FieldPrediction;
@@ -119,6 +119,58 @@ pub(super) fn end_blend(
         validated,
         cross_fitted: solved.beat,
     })
+}
+
+/// Whether an entry `(k, i)` lies before track `i`'s first observation or after its last
+/// (a track never observed has none).
+pub(super) fn past_ends(tracks: &Marked) -> impl Fn(usize, usize) -> bool + use<> {
+    let mut ends: Vec<Option<(usize, usize)>> = vec![None; tracks.points];
+    for k in 0..tracks.frames {
+        for (i, end) in ends.iter_mut().enumerate() {
+            if tracks.seen(k, i) {
+                *end = Some(end.map_or((k, k), |(a, _)| (a, k)));
+            }
+        }
+    }
+    move |k, i| ends[i].is_some_and(|(a, b)| k < a || k > b)
+}
+
+/// `fills` at `entries` with every entry past a track's ends taken from the fillers that
+/// predict there, by `blend`'s weights beyond the ends ([`Blend::ends`]; kept as they are
+/// where it has none).
+pub(super) fn beyond_ends(
+    tracks: &Marked,
+    field: &FieldPrediction,
+    blend: &Blend,
+    entries: &[(usize, usize)],
+    fills: &mut [[f32; 3]],
+) {
+    let Some(ends) = &blend.ends else {
+        return;
+    };
+    let past = past_ends(tracks);
+    let at: Vec<usize> = (0..entries.len())
+        .filter(|&e| past(entries[e].0, entries[e].1))
+        .collect();
+    let pairs: Vec<(usize, usize)> = at.iter().map(|&e| entries[e]).collect();
+    let used = Filler::ALL
+        .iter()
+        .filter(|&&f| ends.weights[f] > 0.0)
+        .fold(0, |bits, f| bits | f.bit());
+    let values = filler_values(
+        &Sources::new(*tracks, field),
+        &with_gap_lengths(tracks, &pairs),
+        used,
+    );
+    let w = ends.weights.0;
+    for (&e, p) in at.iter().zip(values) {
+        fills[e] = std::array::from_fn(|c| {
+            (0..M)
+                .filter(|&m| w[m] > 0.0)
+                .map(|m| w[m] * p[m][c] as f64)
+                .sum::<f64>() as f32
+        });
+    }
 }
 
 /// Validation spans cut at track ends: about `fraction` of the tracks of `tracks` with at

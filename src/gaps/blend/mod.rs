@@ -76,25 +76,11 @@ fn learn(
     validation: &Validation,
 ) -> Blend {
     let mut blend = learn_inside(tracks, field, seed, blind, validation);
-    let past = past_ends(tracks);
+    let past = ends::past_ends(tracks);
     if tracks.frames >= 3 && entries.iter().any(|&(k, i)| past(k, i)) {
         blend.ends = ends::end_blend(tracks, field, seed, validation);
     }
     blend
-}
-
-/// Whether an entry `(k, i)` lies before track `i`'s first observation or after its last
-/// (a track never observed has none).
-fn past_ends(tracks: &Marked) -> impl Fn(usize, usize) -> bool + use<> {
-    let mut ends: Vec<Option<(usize, usize)>> = vec![None; tracks.points];
-    for k in 0..tracks.frames {
-        for (i, end) in ends.iter_mut().enumerate() {
-            if tracks.seen(k, i) {
-                *end = Some(end.map_or((k, k), |(a, _)| (a, k)));
-            }
-        }
-    }
-    move |k, i| ends[i].is_some_and(|(a, b)| k < a || k > b)
 }
 
 /// [`learn`]'s weights inside the tracks' observations: stages 1 and 2 and the leans.
@@ -234,47 +220,9 @@ pub fn doma_fill_at(
             combined(&blend, &filler_values_in(s, local, used), local)
         })
     };
-    beyond_ends(tracks, field, &blend, entries, &mut fills);
+    ends::beyond_ends(tracks, field, &blend, entries, &mut fills);
     clusters_first(tracks, entries, &mut fills);
     (fills, blend)
-}
-
-/// `fills` at `entries` with every entry past a track's ends taken from the fillers that
-/// predict there, by `blend`'s weights beyond the ends ([`Blend::ends`]; kept as they are
-/// where it has none).
-fn beyond_ends(
-    tracks: &Marked,
-    field: &FieldPrediction,
-    blend: &Blend,
-    entries: &[(usize, usize)],
-    fills: &mut [[f32; 3]],
-) {
-    let Some(ends) = &blend.ends else {
-        return;
-    };
-    let past = past_ends(tracks);
-    let at: Vec<usize> = (0..entries.len())
-        .filter(|&e| past(entries[e].0, entries[e].1))
-        .collect();
-    let pairs: Vec<(usize, usize)> = at.iter().map(|&e| entries[e]).collect();
-    let used = Filler::ALL
-        .iter()
-        .filter(|&&f| ends.weights[f] > 0.0)
-        .fold(0, |bits, f| bits | f.bit());
-    let values = filler_values(
-        &Sources::new(*tracks, field),
-        &with_gap_lengths(tracks, &pairs),
-        used,
-    );
-    let w = ends.weights.0;
-    for (&e, p) in at.iter().zip(values) {
-        fills[e] = std::array::from_fn(|c| {
-            (0..M)
-                .filter(|&m| w[m] > 0.0)
-                .map(|m| w[m] * p[m][c] as f64)
-                .sum::<f64>() as f32
-        });
-    }
 }
 
 /// `fills` at `entries` with every entry of a track on a rigid cluster that its mates can
@@ -421,7 +369,7 @@ pub fn fills_at(
         &with_gap_lengths(tracks, entries),
     );
     let mut doma = doma;
-    beyond_ends(tracks, field, &blend, entries, &mut doma);
+    ends::beyond_ends(tracks, field, &blend, entries, &mut doma);
     clusters_first(tracks, entries, &mut doma);
     FillsAt {
         blend,

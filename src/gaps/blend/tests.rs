@@ -360,7 +360,7 @@ fn beyond_the_ends_the_fillers_that_carry_the_track_take_the_weight() {
         let carries = predicts_beyond_ends() & f.bit() != 0;
         assert!(carries || ends.weights[f] == 0.0, "{f:?}: {ends:?}");
     }
-    let past = past_ends(&tracks);
+    let past = ends::past_ends(&tracks);
     let (mut worst, mut held) = (0f32, 0f32);
     for k in 0..t {
         for i in (0..n).filter(|&i| past(k, i)) {
