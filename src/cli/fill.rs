@@ -435,7 +435,7 @@ fn describe(job: &Job, outcome: &Outcome, max_gap: bool) -> String {
             }
             if c.unfilled > 0 && !max_gap {
                 line.push_str(&format!(
-                    ", {} entries past a marker's ends left",
+                    ", {} entries left (past a marker's ends, or of a marker never seen)",
                     c.unfilled
                 ));
             }
