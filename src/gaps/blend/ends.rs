@@ -135,23 +135,35 @@ pub(super) fn past_ends(tracks: &Marked) -> impl Fn(usize, usize) -> bool + use<
     move |k, i| ends[i].is_some_and(|(a, b)| k < a || k > b)
 }
 
-/// `fills` at `entries` with every entry past a track's ends taken from the fillers that
-/// predict there, by `blend`'s weights beyond the ends ([`Blend::ends`]; kept as they are
-/// where it has none).
+/// The indices of `entries` that `blend` fills inside the tracks' observations and of
+/// those it fills beyond their ends by its own weights ([`Blend::ends`]; none where it has
+/// none, and every entry is then inside).
+pub(super) fn split_beyond(
+    tracks: &Marked,
+    blend: &Blend,
+    entries: &[(usize, usize)],
+) -> (Vec<usize>, Vec<usize>) {
+    if blend.ends.is_none() {
+        return ((0..entries.len()).collect(), Vec::new());
+    }
+    let past = past_ends(tracks);
+    (0..entries.len()).partition(|&e| !past(entries[e].0, entries[e].1))
+}
+
+/// `fills` at the entries `at` of `entries`, past the tracks' ends ([`split_beyond`]),
+/// from the fillers that predict there, by `blend`'s weights beyond the ends
+/// ([`Blend::ends`]; kept as they are where it has none).
 pub(super) fn beyond_ends(
     tracks: &Marked,
     field: &FieldPrediction,
     blend: &Blend,
     entries: &[(usize, usize)],
+    at: &[usize],
     fills: &mut [[f32; 3]],
 ) {
     let Some(ends) = &blend.ends else {
         return;
     };
-    let past = past_ends(tracks);
-    let at: Vec<usize> = (0..entries.len())
-        .filter(|&e| past(entries[e].0, entries[e].1))
-        .collect();
     let pairs: Vec<(usize, usize)> = at.iter().map(|&e| entries[e]).collect();
     let used = Filler::ALL
         .iter()

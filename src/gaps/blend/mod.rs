@@ -212,15 +212,22 @@ pub fn doma_fill_at(
     validation: &Validation,
 ) -> (Vec<[f32; 3]>, Blend) {
     let blend = learn(tracks, field, seed, blind, entries, validation);
-    let mut fills = if blend.is_field_only() {
-        fill_with(tracks, field, Filler::FieldFill, entries)
+    // The entries past the ends take their own weights: not filled by the inside ones first.
+    let (inside_at, beyond_at) = ends::split_beyond(tracks, &blend, entries);
+    let inside: Vec<(usize, usize)> = inside_at.iter().map(|&e| entries[e]).collect();
+    let inside_fills = if blend.is_field_only() {
+        fill_with(tracks, field, Filler::FieldFill, &inside)
     } else {
-        let (entries, used) = (with_gap_lengths(tracks, entries), blend.in_use());
-        windowed(&Sources::new(*tracks, field), &entries, |s, local| {
+        let (inside, used) = (with_gap_lengths(tracks, &inside), blend.in_use());
+        windowed(&Sources::new(*tracks, field), &inside, |s, local| {
             combined(&blend, &filler_values_in(s, local, used), local)
         })
     };
-    ends::beyond_ends(tracks, field, &blend, entries, &mut fills);
+    let mut fills = vec![[f32::NAN; 3]; entries.len()];
+    for (&e, v) in inside_at.iter().zip(inside_fills) {
+        fills[e] = v;
+    }
+    ends::beyond_ends(tracks, field, &blend, entries, &beyond_at, &mut fills);
     clusters_first(tracks, entries, &mut fills);
     (fills, blend)
 }
@@ -369,7 +376,8 @@ pub fn fills_at(
         &with_gap_lengths(tracks, entries),
     );
     let mut doma = doma;
-    ends::beyond_ends(tracks, field, &blend, entries, &mut doma);
+    let (_, beyond_at) = ends::split_beyond(tracks, &blend, entries);
+    ends::beyond_ends(tracks, field, &blend, entries, &beyond_at, &mut doma);
     clusters_first(tracks, entries, &mut doma);
     FillsAt {
         blend,
