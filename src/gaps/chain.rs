@@ -57,12 +57,13 @@ impl Marked<'_> {
         // Each run past an end is carried once, by its track, its border and its side (a
         // track seen once has one border for both).
         let mut carried: HashMap<(usize, usize, bool), Vec<[f64; 3]>> = HashMap::new();
+        let ends = self.track_ends();
         for (v, &(k, i)) in fills.iter_mut().zip(entries) {
             if self.seen(k, i) {
                 continue;
             }
             // (border, frames from it, whether the run follows it)
-            let past = match self.ends(i) {
+            let past = match ends[i] {
                 Some((first, _)) if k < first => (first, first - 1 - k, false),
                 Some((_, last)) if k > last => (last, k - last - 1, true),
                 _ => continue,
@@ -73,13 +74,6 @@ impl Marked<'_> {
             *v = carry[past.1].map(|x| x as f32);
         }
         fills
-    }
-
-    /// Track `i`'s first and last observed frames (`None`: never observed).
-    pub(super) fn ends(&self, i: usize) -> Option<(usize, usize)> {
-        let first = (0..self.frames).find(|&k| self.seen(k, i))?;
-        let last = (first..self.frames).rev().find(|&k| self.seen(k, i))?;
-        Some((first, last))
     }
 }
 

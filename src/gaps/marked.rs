@@ -54,6 +54,20 @@ impl<'a> Marked<'a> {
             .collect()
     }
 
+    /// Each track's first and last observed frames (`None`: never observed), in one pass
+    /// over the mask: what tells an entry past a track's ends from one inside.
+    pub fn track_ends(&self) -> Vec<Option<(usize, usize)>> {
+        let mut ends: Vec<Option<(usize, usize)>> = vec![None; self.points];
+        for k in 0..self.frames {
+            for (i, end) in ends.iter_mut().enumerate() {
+                if self.seen(k, i) {
+                    *end = Some(end.map_or((k, k), |(a, _)| (a, k)));
+                }
+            }
+        }
+        ends
+    }
+
     /// Track `i`'s position at frame `k` (whatever it holds there).
     pub fn at(&self, k: usize, i: usize) -> [f32; 3] {
         let e = 3 * (k * self.points + i);

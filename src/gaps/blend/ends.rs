@@ -124,14 +124,7 @@ pub(super) fn end_blend(
 /// Whether an entry `(k, i)` lies before track `i`'s first observation or after its last
 /// (a track never observed has none).
 pub(super) fn past_ends(tracks: &Marked) -> impl Fn(usize, usize) -> bool + use<> {
-    let mut ends: Vec<Option<(usize, usize)>> = vec![None; tracks.points];
-    for k in 0..tracks.frames {
-        for (i, end) in ends.iter_mut().enumerate() {
-            if tracks.seen(k, i) {
-                *end = Some(end.map_or((k, k), |(a, _)| (a, k)));
-            }
-        }
-    }
+    let ends = tracks.track_ends();
     move |k, i| ends[i].is_some_and(|(a, b)| k < a || k > b)
 }
 
