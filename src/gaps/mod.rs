@@ -45,7 +45,8 @@
 //! |---|---|
 //! | `marked.rs` | [`Marked`], the view of masked tracks |
 //! | `fillers.rs` | [`Filler`] (one variant and one arm each), [`Sources`], [`PerFiller`] |
-//! | `classic.rs` | linear, spline, the neighbours' motion, iterative PCA: methods of [`Marked`] |
+//! | `classic.rs` | linear, spline, the neighbours' motion: methods of [`Marked`] |
+//! | `pca.rs` | the iterative PCA fill, its Gram matrix kept up to date round by round |
 //! | `kalman.rs` | Burke & Lasenby's Kalman smoother: a method of [`Marked`] |
 //! | `gloersen.rs` | Gløersen & Federolf's PCA fill (R2): a method of [`Marked`] |
 //! | `donors.rs` | pattern and rigid-body fill: methods of [`Marked`] |
@@ -79,6 +80,7 @@ pub mod fillers;
 pub mod gloersen;
 pub mod kalman;
 pub mod marked;
+pub mod pca;
 pub mod prediction;
 pub mod relational;
 pub mod segment;

@@ -82,6 +82,98 @@ fn gram_block<R: AsRef<[f64]>>(g: &mut [f64], block: &[R], d: usize) {
     }
 }
 
+/// The column Gram matrix of a tall matrix `[t, d]` whose entries change in place, kept
+/// up to date change by change: `S = Σ (x − o)(x − o)ᵀ` about a fixed origin `o` (the
+/// first column means, so that nothing large cancels) and `Σ (x − o)`. The centred Gram
+/// `Σ (x − m)(x − m)ᵀ = S − t (m − o)(m − o)ᵀ` then costs `d²` where a fresh one costs
+/// `t d²`: a round of the iterative PCA changes a few columns of some rows.
+pub struct MovingGram {
+    origin: Vec<f64>,
+    gram: Vec<f64>,
+    /// `Σ δ zᵀ` over the rows changed since [`MovingGram::centred`] last folded it into
+    /// `gram` (as `C + Cᵀ`): each change adds one row of it per changed column, in order.
+    changes: Vec<f64>,
+    sum: Vec<f64>,
+    rows: usize,
+    /// The changed row's `z`, kept to spare an allocation per row.
+    midpoint: Vec<f64>,
+}
+
+impl MovingGram {
+    /// The Gram matrix of `x` (`[t, d]`, row-major).
+    pub fn new(x: &[f64], d: usize) -> MovingGram {
+        let rows = x.len() / d.max(1);
+        let mut origin = vec![0f64; d];
+        for row in x.chunks(d) {
+            for (o, v) in origin.iter_mut().zip(row) {
+                *o += v / rows as f64;
+            }
+        }
+        let shifted =
+            |row: &[f64]| -> Vec<f64> { row.iter().zip(&origin).map(|(v, o)| v - o).collect() };
+        let gram = column_gram(x.chunks(d).map(shifted), d);
+        let mut sum = vec![0f64; d];
+        for row in x.chunks(d) {
+            for ((s, v), o) in sum.iter_mut().zip(row).zip(&origin) {
+                *s += v - o;
+            }
+        }
+        MovingGram {
+            origin,
+            gram,
+            changes: vec![0f64; d * d],
+            sum,
+            rows,
+            midpoint: Vec::with_capacity(d),
+        }
+    }
+
+    /// A row changes from `old` to `new` (each `d` long), in the columns of `changed` only
+    /// (each named once).
+    /// With `δ = new − old` and the midpoint `z = (old + new) / 2 − o`,
+    /// `(new − o)(new − o)ᵀ − (old − o)(old − o)ᵀ = δ zᵀ + z δᵀ`: only the rows of `δ zᵀ`
+    /// at the changed columns are added now, each a contiguous row.
+    pub fn change_row(&mut self, old: &[f64], new: &[f64], changed: &[usize]) {
+        let d = self.origin.len();
+        self.midpoint.clear();
+        self.midpoint.extend(
+            old.iter()
+                .zip(new)
+                .zip(&self.origin)
+                .map(|((x, y), o)| 0.5 * (x + y) - o),
+        );
+        for &a in changed {
+            let delta = new[a] - old[a];
+            let row = &mut self.changes[a * d..(a + 1) * d];
+            for (c, z) in row.iter_mut().zip(&self.midpoint) {
+                *c += delta * z;
+            }
+            self.sum[a] += delta;
+        }
+    }
+
+    /// The column means and the centred Gram matrix `[d, d]`.
+    pub fn centred(&mut self) -> (Vec<f64>, Vec<f64>) {
+        let d = self.origin.len();
+        for a in 0..d {
+            for b in 0..d {
+                self.gram[a * d + b] += self.changes[a * d + b] + self.changes[b * d + a];
+            }
+        }
+        self.changes.fill(0.0);
+        let t = self.rows.max(1) as f64;
+        let shift: Vec<f64> = self.sum.iter().map(|s| s / t).collect();
+        let mean = self.origin.iter().zip(&shift).map(|(o, s)| o + s).collect();
+        let mut g = self.gram.clone();
+        for a in 0..d {
+            for b in 0..d {
+                g[a * d + b] -= t * shift[a] * shift[b];
+            }
+        }
+        (mean, g)
+    }
+}
+
 /// The second derivatives of the natural cubic spline through `(x, y)` (0 at both ends),
 /// by the tridiagonal (Thomas) solve.
 pub fn natural_second_derivatives(x: &[f64], y: &[f64]) -> Vec<f64> {
@@ -215,6 +307,55 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// After rounds of changes to a few entries of some rows (large offsets, as marker
+    /// coordinates in millimetres carry), the moving Gram matrix and means are a fresh
+    /// centred Gram matrix's to round-off.
+    #[test]
+    fn a_moving_gram_matrix_is_the_fresh_one_after_rows_change() {
+        let (t, d) = (40, 7);
+        let mut x: Vec<f64> = (0..t * d)
+            .map(|v| 1000.0 * (v % d) as f64 + ((v * 7919 + 13) % 101) as f64 / 7.0)
+            .collect();
+        let mut moving = MovingGram::new(&x, d);
+        for round in 0..5 {
+            for k in (round..t).step_by(3) {
+                let changed = [(k + round) % d, (k + round + 3) % d];
+                let old = x[k * d..(k + 1) * d].to_vec();
+                let mut new = old.clone();
+                for &a in &changed {
+                    new[a] += ((k * 31 + a * 17 + round) % 13) as f64 - 6.0;
+                }
+                moving.change_row(&old, &new, &changed);
+                x[k * d..(k + 1) * d].copy_from_slice(&new);
+            }
+            // The changes are folded in between rounds, as the iterative PCA reads them.
+            if round % 2 == 1 {
+                moving.centred();
+            }
+        }
+        let mean: Vec<f64> = (0..d)
+            .map(|a| (0..t).map(|k| x[k * d + a]).sum::<f64>() / t as f64)
+            .collect();
+        let centred =
+            |row: &[f64]| -> Vec<f64> { row.iter().zip(&mean).map(|(v, m)| v - m).collect() };
+        let fresh = column_gram(x.chunks(d).map(centred), d);
+        let (m, g) = moving.centred();
+        // Folding the changes in twice changes nothing.
+        assert_eq!(moving.centred().1, g);
+        for a in 0..d {
+            assert!(
+                (m[a] - mean[a]).abs() < 1e-9,
+                "{a}: {} vs {}",
+                m[a],
+                mean[a]
+            );
+        }
+        let scale = fresh.iter().fold(0f64, |s, v| s.max(v.abs()));
+        for (e, (p, q)) in g.iter().zip(&fresh).enumerate() {
+            assert!((p - q).abs() < 1e-10 * scale, "{e}: {p} vs {q}");
         }
     }
 
