@@ -149,6 +149,8 @@ pub(super) struct Solved<const K: usize> {
     /// Per held-out group with entries: the cross-fitted blend's cost there and each
     /// candidate's alone.
     pub groups: Vec<(f64, [f64; K])>,
+    /// The group (`draw % groups`) each of `groups` holds out, in its order.
+    pub held: Vec<usize>,
 }
 
 impl<const K: usize> Solved<K> {
@@ -198,12 +200,13 @@ pub(super) fn solve_judged<const K: usize>(
             .collect()
     };
     let (mut blended, mut alone) = (0f64, [0f64; K]);
-    let mut per_group = Vec::new();
+    let (mut per_group, mut held) = (Vec::new(), Vec::new());
     for group in 0..groups {
         let (rest, judged) = (of(Some(group), false), of(Some(group), true));
         if rest.is_empty() || judged.is_empty() {
             continue;
         }
+        held.push(group);
         let b = cost(judged.iter().copied(), &mean_distance(&rest, allowed));
         let a: [f64; K] = std::array::from_fn(|k| cost(judged.iter().copied(), &one_hot::<K>(k)));
         blended += b;
@@ -226,7 +229,37 @@ pub(super) fn solve_judged<const K: usize>(
         weights,
         beat,
         groups: per_group,
+        held,
     }
+}
+
+/// The cost on `pool`'s entries of each group of `held` (as [`Solved::held`] numbers them,
+/// of `groups` groups) of the weights that `wider` (a pool holding `pool`'s entries and
+/// more) learns on the other groups' entries: the cross-fitted cost of taking the wider
+/// pool's weights there instead of the pool's own.
+pub(super) fn wider_costs<const K: usize>(
+    draws: &[Pools<K>],
+    pool: Pool,
+    wider: Pool,
+    allowed: u32,
+    groups: usize,
+    held: &[usize],
+) -> Vec<f64> {
+    let groups = draws.len().min(groups);
+    let of = |class: usize, group: usize, inside: bool| -> Vec<&Residual<K>> {
+        draws
+            .iter()
+            .enumerate()
+            .filter(|&(d, _)| (d % groups == group) == inside)
+            .flat_map(|(_, f)| f[class].iter().map(|r| &**r))
+            .collect()
+    };
+    held.iter()
+        .map(|&g| {
+            let w = mean_distance(&of(wider.index(), g, false), allowed);
+            cost(of(pool.index(), g, true).into_iter(), &w)
+        })
+        .collect()
 }
 
 /// Every filler's error at `hidden` `(frame, track)`, entries observed in `tracks` that

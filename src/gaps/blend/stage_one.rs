@@ -15,7 +15,9 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::class::{GapClass, LENGTH_CLASSES, Pool};
-use super::residual::{Hidden, Pools, cost, empty_pools, one_hot, residuals, solve_judged};
+use super::residual::{
+    Hidden, Pools, cost, empty_pools, one_hot, residuals, solve_judged, wider_costs,
+};
 use super::validation::Validation;
 use super::{Blend, LengthBlend, M, Weights, classic_fillers};
 use crate::gaps::fillers::{Filler, PerFiller, Sources};
@@ -129,7 +131,8 @@ fn classic_blend(draws: &[Pools<M>], v: &Validation) -> Option<Blend> {
     let drawn: [usize; Pool::COUNT] =
         std::array::from_fn(|c| draws.iter().filter(|f| !f[c].is_empty()).count());
     let best = recording_best(draws, classic);
-    let solved = |pool: Pool| {
+    // A pool's choice, and its cost on each held-out group (`Solved::held`).
+    let judged = |pool: Pool| {
         let s = solve_judged(draws, pool, classic, v.cross_fit_groups);
         let costs = s.chosen_costs();
         let gains: Vec<f64> = s
@@ -139,10 +142,15 @@ fn classic_blend(draws: &[Pools<M>], v: &Validation) -> Option<Blend> {
             .map(|((_, alone), chosen)| alone[best] - chosen)
             .collect();
         if v.fall_back && s.weights != one_hot::<M>(best) && !v.clearly_positive(&gains) {
-            (PerFiller(one_hot::<M>(best)), false)
+            let alone = s.groups.iter().map(|(_, alone)| alone[best]).collect();
+            (PerFiller(one_hot::<M>(best)), false, alone, s.held)
         } else {
-            (PerFiller(s.weights), s.beat)
+            (PerFiller(s.weights), s.beat, costs, s.held)
         }
+    };
+    let solved = |pool: Pool| {
+        let (w, beat, _, _) = judged(pool);
+        (w, beat)
     };
     let (short, long) = (Pool::Class(GapClass::Short), Pool::AllLong);
     let mut weights = [Weights::only(Filler::FieldFill); 2];
@@ -166,12 +174,22 @@ fn classic_blend(draws: &[Pools<M>], v: &Validation) -> Option<Blend> {
             .map(|c| {
                 let class = GapClass::Long(c);
                 let pool = Pool::Class(class);
-                let own = drawn[pool.index()] >= 2;
-                let (w, beat) = if own {
-                    solved(pool)
-                } else {
-                    (weights[1], false)
-                };
+                // A class's own weights are kept where they clearly beat the pooled
+                // long gaps' on its held-out groups: a class of a few spans cannot tell
+                // its parts apart, and its noisiest choice was the one kept.
+                let own = (drawn[pool.index()] >= 2).then(|| judged(pool)).filter(
+                    |(w, _, costs, held)| {
+                        *w == weights[1] || {
+                            let g = v.cross_fit_groups;
+                            let pooled = wider_costs(draws, pool, long, classic, g, held);
+                            let gains: Vec<f64> =
+                                pooled.iter().zip(costs).map(|(p, c)| p - c).collect();
+                            v.clearly_positive(&gains)
+                        }
+                    },
+                );
+                let (w, beat) = own.as_ref().map_or((weights[1], false), |o| (o.0, o.1));
+                let own = own.is_some();
                 LengthBlend {
                     longest: class.longest(),
                     weights: w,
@@ -230,6 +248,44 @@ mod tests {
             track: 0,
             depth: 1,
         })
+    }
+
+    /// Six draws of long gaps: 100-frame gaps where the chain fill is far better, and
+    /// 20-frame gaps where the spline beats it by `spline_20` in each draw. Where that gain
+    /// is steady the 20-frame class keeps its own choice (the spline); where it swings
+    /// from draw to draw (the validation cannot tell the two apart) the class takes the
+    /// pooled long gaps' weights.
+    #[test]
+    fn a_length_class_keeps_its_own_weights_only_where_they_clearly_beat_the_pooled_ones() {
+        let class_of = |spline_20: [f32; 6]| {
+            let draws: Vec<Pools<M>> = spline_20
+                .iter()
+                .map(|&s| {
+                    let mut pools = empty_pools();
+                    for (len, spline, chain) in [(20, s, 1.0), (100, 5.0, 0.1)] {
+                        for _ in 0..4 {
+                            let long = entry(len, spline, chain);
+                            pools[Pool::Class(GapClass::of(len)).index()].push(Arc::clone(&long));
+                            pools[Pool::AllLong.index()].push(long);
+                        }
+                    }
+                    pools
+                })
+                .collect();
+            let blend = classic_blend(&draws, &Validation::default()).unwrap();
+            let GapClass::Long(c) = GapClass::of(20) else {
+                unreachable!("a long gap")
+            };
+            (blend.by_length[c], blend.long)
+        };
+        let (steady, _) = class_of([0.5; 6]);
+        assert!(
+            steady.own && steady.weights == Weights::only(Filler::Spline),
+            "{steady:?}"
+        );
+        let (swinging, pooled) = class_of([0.2, 1.8, 0.2, 1.8, 0.2, 1.8]);
+        assert!(!swinging.own, "{swinging:?}");
+        assert_eq!(swinging.weights, pooled);
     }
 
     /// Six draws: on the short gaps the spline wins some draws and loses others by as much
