@@ -166,7 +166,8 @@ pub struct LengthBlend {
     /// The validation entries of the class, over the draws.
     pub validated: usize,
     /// Whether the weights are the class's own: it had validation entries in at least
-    /// two draws (else it takes the pooled long weights).
+    /// two draws and its choice clearly beat the pooled long weights on its held-out
+    /// draws (else it takes the pooled long weights).
     pub own: bool,
     /// Whether its own blend beat every filler alone cross-fitted (else its own weights
     /// are all on the filler that did best alone).

@@ -6,8 +6,10 @@
 //! fillers see nothing but the observations left, so a span hidden from them is a gap to
 //! them. The draws go on until each class of gap length with a gap to fill holds its
 //! spans ([`draws`]). Then, per [`GapClass`], the convex combination with the least mean
-//! distance, kept where it beats every filler alone cross-fitted ([`solve`]); a class
-//! whose entries are in fewer than two draws takes the pooled long gaps' weights.
+//! distance, kept where it beats every filler alone cross-fitted ([`solve`]); a class of
+//! long gaps whose entries are in fewer than two draws, or whose choice does not clearly
+//! beat the pooled long gaps' weights on its held-out draws ([`wider_costs`]), takes the
+//! pooled weights.
 
 use std::ops::Range;
 use std::sync::Arc;
@@ -176,7 +178,8 @@ fn classic_blend(draws: &[Pools<M>], v: &Validation) -> Option<Blend> {
                 let pool = Pool::Class(class);
                 // A class's own weights are kept where they clearly beat the pooled
                 // long gaps' on its held-out groups: a class of a few spans cannot tell
-                // its parts apart, and its noisiest choice was the one kept.
+                // its parts apart, and a choice it cannot tell from the pooled one is
+                // the draws' noise.
                 let own = (drawn[pool.index()] >= 2).then(|| judged(pool)).filter(
                     |(w, _, costs, held)| {
                         *w == weights[1] || {
