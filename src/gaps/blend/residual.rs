@@ -190,15 +190,8 @@ pub(super) fn solve_judged<const K: usize>(
     allowed: u32,
     groups: usize,
 ) -> Solved<K> {
-    let (class, groups) = (pool.index(), draws.len().min(groups));
-    let of = |group: Option<usize>, held: bool| -> Vec<&Residual<K>> {
-        draws
-            .iter()
-            .enumerate()
-            .filter(|&(d, _)| group.is_none_or(|g| (d % groups == g) == held))
-            .flat_map(|(_, f)| f[class].iter().map(|r| &**r))
-            .collect()
-    };
+    let groups = draws.len().min(groups);
+    let of = |group: Option<usize>, held: bool| grouped(draws, pool, groups, group, held);
     let (mut blended, mut alone) = (0f64, [0f64; K]);
     let (mut per_group, mut held) = (Vec::new(), Vec::new());
     for group in 0..groups {
@@ -246,19 +239,29 @@ pub(super) fn wider_costs<const K: usize>(
     held: &[usize],
 ) -> Vec<f64> {
     let groups = draws.len().min(groups);
-    let of = |class: usize, group: usize, inside: bool| -> Vec<&Residual<K>> {
-        draws
-            .iter()
-            .enumerate()
-            .filter(|&(d, _)| (d % groups == group) == inside)
-            .flat_map(|(_, f)| f[class].iter().map(|r| &**r))
-            .collect()
-    };
     held.iter()
         .map(|&g| {
-            let w = mean_distance(&of(wider.index(), g, false), allowed);
-            cost(of(pool.index(), g, true).into_iter(), &w)
+            let w = mean_distance(&grouped(draws, wider, groups, Some(g), false), allowed);
+            cost(grouped(draws, pool, groups, Some(g), true).into_iter(), &w)
         })
+        .collect()
+}
+
+/// `pool`'s entries, draw by draw in order, of the draws in group `group` (draw `d` is in
+/// group `d % groups`) where `held`, of the draws in every other group where not; of every
+/// draw where `group` is `None`.
+fn grouped<const K: usize>(
+    draws: &[Pools<K>],
+    pool: Pool,
+    groups: usize,
+    group: Option<usize>,
+    held: bool,
+) -> Vec<&Residual<K>> {
+    draws
+        .iter()
+        .enumerate()
+        .filter(|&(d, _)| group.is_none_or(|g| (d % groups == g) == held))
+        .flat_map(|(_, f)| f[pool.index()].iter().map(|r| &**r))
         .collect()
 }
 
