@@ -95,7 +95,7 @@ fn print_blend(b: &crate::gaps::blend::Blend) {
         let w = if k == 0 { &b.short } else { &b.long };
         match b.validated[k] {
             0 => eprintln!("  {name} gaps: the field's fill (nothing to validate)"),
-            count => eprintln!("  {name} gaps{}", weights(w, count)),
+            count => eprintln!("  {name} gaps{}{}", weights(w, count), held(&b.held_out[k])),
         }
     }
     let mut shortest = crate::gaps::SPLINE_CARRY_FRAMES + 1;
@@ -106,10 +106,16 @@ fn print_blend(b: &crate::gaps::blend::Blend) {
         };
         shortest = class.longest.map_or(shortest, |l| l + 1);
         let count = class.validated;
+        let judged = held(&class.held_out);
         if class.own {
-            eprintln!("    gaps of {lengths}{}", weights(&class.weights, count));
+            eprintln!(
+                "    gaps of {lengths}{}{judged}",
+                weights(&class.weights, count)
+            );
         } else {
-            eprintln!("    gaps of {lengths}: the long gaps' weights ({count} validation entries)");
+            eprintln!(
+                "    gaps of {lengths}: the long gaps' weights ({count} validation entries){judged}"
+            );
         }
     }
     if !b.leans.is_empty() {
@@ -148,6 +154,29 @@ fn print_blend(b: &crate::gaps::blend::Blend) {
     }
 }
 
+/// A class's held-out figures, as `; held out: 1.23 (chain fill alone 1.30)`, in the
+/// tracks' units; nothing where there are none.
+fn held(h: &Option<crate::gaps::blend::HeldOut>) -> String {
+    h.map_or(String::new(), |h| {
+        format!(
+            "; held out: {} ({} alone {})",
+            significant(h.chosen),
+            h.best.label(),
+            significant(h.best_alone)
+        )
+    })
+}
+
+/// `v` to three significant figures, without an exponent for the sizes fills have.
+fn significant(v: f64) -> String {
+    let digits = if v == 0.0 || !v.is_finite() {
+        0
+    } else {
+        (2 - v.abs().log10().floor() as i32).clamp(0, 9) as usize
+    };
+    format!("{v:.digits$}")
+}
+
 /// The label of the filler that holds the most weight (all of it, where it fills alone).
 fn alone(w: &crate::gaps::blend::Weights) -> &'static str {
     Filler::ALL
@@ -169,6 +198,27 @@ fn listed(w: &crate::gaps::blend::Weights) -> String {
 #[cfg(test)]
 mod tests {
     use clap::CommandFactory;
+
+    /// The held-out figures print to three significant figures, in the data's units.
+    #[test]
+    fn a_class_s_held_out_figures_print_to_three_significant_figures() {
+        assert_eq!(super::significant(12.345), "12.3");
+        assert_eq!(super::significant(0.015234), "0.0152");
+        assert_eq!(super::significant(7.0), "7.00");
+        assert_eq!(super::significant(1234.4), "1234");
+        assert_eq!(super::significant(0.0), "0");
+        let held = crate::gaps::blend::HeldOut {
+            chosen: 4.849,
+            best: crate::gaps::Filler::Pattern,
+            best_alone: 3.951,
+            spans: 20.0,
+        };
+        assert_eq!(
+            super::held(&Some(held)),
+            "; held out: 4.85 (pattern alone 3.95)"
+        );
+        assert_eq!(super::held(&None), "");
+    }
 
     /// `--method` offers every filler there is, by its command-line name, and reads the
     /// report name too.

@@ -390,6 +390,20 @@ impl<T: FillerValue> PerFiller<T> {
     }
 }
 
+impl Serialize for Filler {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+impl<'de> Deserialize<'de> for Filler {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        Filler::from_name(&name)
+            .ok_or_else(|| serde::de::Error::custom(format!("no filler named {name:?}")))
+    }
+}
+
 impl<T: FillerValue + Serialize> Serialize for PerFiller<T> {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         let present: Vec<(Filler, T)> = self.iter().filter(|(_, v)| !v.is_absent()).collect();

@@ -140,7 +140,7 @@ pub fn gap_report(
     };
     Ok(Some(GapReport {
         entries: entries.len(),
-        blend: Some(fills.blend),
+        blend: Some(fills.blend.in_units(scale)),
         epe_x1e4: errors(&l1),
         distance: errors(&euclid),
     }))

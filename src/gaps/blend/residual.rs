@@ -151,6 +151,9 @@ pub(super) struct Solved<const K: usize> {
     pub groups: Vec<(f64, [f64; K])>,
     /// The group (`draw % groups`) each of `groups` holds out, in its order.
     pub held: Vec<usize>,
+    /// The validation spans in the held-out groups: the sum of their entries'
+    /// [`Residual::weight`], what turns a cost into a mean distance per span.
+    pub spans: f64,
 }
 
 impl<const K: usize> Solved<K> {
@@ -165,6 +168,22 @@ impl<const K: usize> Solved<K> {
                 _ => *blended,
             })
             .collect()
+    }
+
+    /// The held-out figures of `costs` (one per held-out group, as [`Self::chosen_costs`]
+    /// gives them) beside the best of `allowed`'s candidates alone on the same spans;
+    /// `None` where no group was held out.
+    pub fn held_out(&self, costs: &[f64], allowed: u32) -> Option<(f64, usize, f64)> {
+        if self.groups.is_empty() || self.spans <= 0.0 {
+            return None;
+        }
+        let alone: [f64; K] =
+            std::array::from_fn(|k| self.groups.iter().map(|(_, a)| a[k]).sum::<f64>());
+        let best = (0..K)
+            .filter(|&k| allowed & (1 << k) != 0)
+            .min_by(|&x, &y| alone[x].total_cmp(&alone[y]).then(x.cmp(&y)))?;
+        let chosen: f64 = costs.iter().sum();
+        Some((chosen / self.spans, best, alone[best] / self.spans))
     }
 }
 
@@ -193,13 +212,14 @@ pub(super) fn solve_judged<const K: usize>(
     let groups = draws.len().min(groups);
     let of = |group: Option<usize>, held: bool| grouped(draws, pool, groups, group, held);
     let (mut blended, mut alone) = (0f64, [0f64; K]);
-    let (mut per_group, mut held) = (Vec::new(), Vec::new());
+    let (mut per_group, mut held, mut spans) = (Vec::new(), Vec::new(), 0f64);
     for group in 0..groups {
         let (rest, judged) = (of(Some(group), false), of(Some(group), true));
         if rest.is_empty() || judged.is_empty() {
             continue;
         }
         held.push(group);
+        spans += judged.iter().map(|r| r.weight()).sum::<f64>();
         let b = cost(judged.iter().copied(), &mean_distance(&rest, allowed));
         let a: [f64; K] = std::array::from_fn(|k| cost(judged.iter().copied(), &one_hot::<K>(k)));
         blended += b;
@@ -223,6 +243,7 @@ pub(super) fn solve_judged<const K: usize>(
         beat,
         groups: per_group,
         held,
+        spans,
     }
 }
 

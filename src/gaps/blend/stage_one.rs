@@ -18,10 +18,10 @@ use rayon::prelude::*;
 
 use super::class::{GapClass, LENGTH_CLASSES, Pool};
 use super::residual::{
-    Hidden, Pools, cost, empty_pools, one_hot, residuals, solve_judged, wider_costs,
+    Hidden, Pools, Solved, cost, empty_pools, one_hot, residuals, solve_judged, wider_costs,
 };
 use super::validation::Validation;
-use super::{Blend, LengthBlend, M, Weights, classic_fillers};
+use super::{Blend, HeldOut, LengthBlend, M, Weights, classic_fillers};
 use crate::gaps::fillers::{Filler, PerFiller, Sources};
 use crate::gaps::marked::Marked;
 use crate::gaps::prediction::FieldPrediction;
@@ -133,7 +133,16 @@ fn classic_blend(draws: &[Pools<M>], v: &Validation) -> Option<Blend> {
     let drawn: [usize; Pool::COUNT] =
         std::array::from_fn(|c| draws.iter().filter(|f| !f[c].is_empty()).count());
     let best = recording_best(draws, classic);
-    // A pool's choice, and its cost on each held-out group (`Solved::held`).
+    let held_out = |s: &Solved<M>, costs: &[f64]| {
+        s.held_out(costs, classic)
+            .map(|(chosen, k, best_alone)| HeldOut {
+                chosen,
+                best: Filler::ALL[k],
+                best_alone,
+                spans: s.spans,
+            })
+    };
+    // A pool's choice, its cost on each held-out group, and what it solved.
     let judged = |pool: Pool| {
         let s = solve_judged(draws, pool, classic, v.cross_fit_groups);
         let costs = s.chosen_costs();
@@ -145,21 +154,20 @@ fn classic_blend(draws: &[Pools<M>], v: &Validation) -> Option<Blend> {
             .collect();
         if v.fall_back && s.weights != one_hot::<M>(best) && !v.clearly_positive(&gains) {
             let alone = s.groups.iter().map(|(_, alone)| alone[best]).collect();
-            (PerFiller(one_hot::<M>(best)), false, alone, s.held)
+            (PerFiller(one_hot::<M>(best)), false, alone, s)
         } else {
-            (PerFiller(s.weights), s.beat, costs, s.held)
+            (PerFiller(s.weights), s.beat, costs, s)
         }
-    };
-    let solved = |pool: Pool| {
-        let (w, beat, _, _) = judged(pool);
-        (w, beat)
     };
     let (short, long) = (Pool::Class(GapClass::Short), Pool::AllLong);
     let mut weights = [Weights::only(Filler::FieldFill); 2];
     let mut cross_fitted = [false; 2];
+    let mut held = [None; 2];
     for (slot, pool) in [short, long].into_iter().enumerate() {
         if counts[pool.index()] > 0 {
-            (weights[slot], cross_fitted[slot]) = solved(pool);
+            let (w, beat, costs, s) = judged(pool);
+            (weights[slot], cross_fitted[slot]) = (w, beat);
+            held[slot] = held_out(&s, &costs);
         }
     }
     // A class with no validation entry takes the other's weights.
@@ -176,29 +184,40 @@ fn classic_blend(draws: &[Pools<M>], v: &Validation) -> Option<Blend> {
             .map(|c| {
                 let class = GapClass::Long(c);
                 let pool = Pool::Class(class);
+                let validated = counts[pool.index()];
+                if drawn[pool.index()] < 2 {
+                    return LengthBlend {
+                        longest: class.longest(),
+                        weights: weights[1],
+                        validated,
+                        own: false,
+                        cross_fitted: false,
+                        held_out: None,
+                    };
+                }
                 // A class's own weights are kept where they clearly beat the pooled
                 // long gaps' on its held-out groups: a class of a few spans cannot tell
                 // its parts apart, and a choice it cannot tell from the pooled one is
                 // the draws' noise.
-                let own = (drawn[pool.index()] >= 2).then(|| judged(pool)).filter(
-                    |(w, _, costs, held)| {
-                        *w == weights[1] || {
-                            let g = v.cross_fit_groups;
-                            let pooled = wider_costs(draws, pool, long, classic, g, held);
-                            let gains: Vec<f64> =
-                                pooled.iter().zip(costs).map(|(p, c)| p - c).collect();
-                            v.clearly_positive(&gains)
-                        }
-                    },
-                );
-                let (w, beat) = own.as_ref().map_or((weights[1], false), |o| (o.0, o.1));
-                let own = own.is_some();
+                let (w, beat, costs, s) = judged(pool);
+                let g = v.cross_fit_groups;
+                let pooled = wider_costs(draws, pool, long, classic, g, &s.held);
+                let own = w == weights[1] || {
+                    let gains: Vec<f64> = pooled.iter().zip(&costs).map(|(p, c)| p - c).collect();
+                    v.clearly_positive(&gains)
+                };
+                let (w, beat, costs) = if own {
+                    (w, beat, costs)
+                } else {
+                    (weights[1], false, pooled)
+                };
                 LengthBlend {
                     longest: class.longest(),
                     weights: w,
-                    validated: counts[pool.index()],
+                    validated,
                     own,
                     cross_fitted: beat,
+                    held_out: held_out(&s, &costs),
                 }
             })
             .collect()
@@ -208,6 +227,7 @@ fn classic_blend(draws: &[Pools<M>], v: &Validation) -> Option<Blend> {
         long: weights[1],
         validated: [counts[short.index()], counts[long.index()]],
         cross_fitted,
+        held_out: held,
         by_length,
         field_validated: 0,
         leans: Vec::new(),
@@ -289,6 +309,72 @@ mod tests {
         let (swinging, pooled) = class_of([0.2, 1.8, 0.2, 1.8, 0.2, 1.8]);
         assert!(!swinging.own, "{swinging:?}");
         assert_eq!(swinging.weights, pooled);
+    }
+
+    /// The held-out figures by hand: every 20-frame span errs by 0.5 with the spline and
+    /// 1.0 with the chain fill, each 100-frame span by 5.0 and 0.1. The 20-frame class
+    /// fills with the spline (0.5 a span, as the spline alone); the pooled long gaps'
+    /// best filler alone is the chain fill (half the spans at 1.0, half at 0.1: 0.55 a
+    /// span), and their blend, cross-fitted, does no worse.
+    #[test]
+    fn the_held_out_figures_are_the_mean_distance_per_span() {
+        let draws: Vec<Pools<M>> = (0..6)
+            .map(|_| {
+                let mut pools = empty_pools();
+                for (len, spline, chain) in [(20, 0.5, 1.0), (100, 5.0, 0.1)] {
+                    for _ in 0..len {
+                        let long = entry(len, spline, chain);
+                        pools[Pool::Class(GapClass::of(len)).index()].push(Arc::clone(&long));
+                        pools[Pool::AllLong.index()].push(long);
+                    }
+                }
+                pools
+            })
+            .collect();
+        let blend = classic_blend(&draws, &Validation::default()).unwrap();
+        let GapClass::Long(c) = GapClass::of(20) else {
+            unreachable!("a long gap")
+        };
+        let held = blend.by_length[c].held_out.unwrap();
+        assert_eq!(held.best, Filler::Spline);
+        assert!((held.best_alone - 0.5).abs() < 1e-6, "{held:?}");
+        assert!((held.chosen - 0.5).abs() < 1e-6, "{held:?}");
+        // One span of each length a draw, every draw held out once.
+        assert!((held.spans - 6.0).abs() < 1e-9, "{held:?}");
+        let long = blend.held_out[1].unwrap();
+        assert_eq!(long.best, Filler::Chain);
+        assert!((long.best_alone - 0.55).abs() < 1e-6, "{long:?}");
+        assert!(long.chosen <= long.best_alone + 1e-9, "{long:?}");
+        assert!((long.spans - 12.0).abs() < 1e-9, "{long:?}");
+        // No short gap was validated.
+        assert_eq!(blend.held_out[0], None);
+        // In the data's units: every figure times the scale, the spans as they were.
+        let in_mm = blend.clone().in_units(1000.0);
+        let (class_mm, long_mm) = (
+            in_mm.by_length[c].held_out.unwrap(),
+            in_mm.held_out[1].unwrap(),
+        );
+        assert!((class_mm.chosen - 1000.0 * held.chosen).abs() < 1e-9);
+        assert!((long_mm.best_alone - 1000.0 * long.best_alone).abs() < 1e-9);
+        assert_eq!(class_mm.spans, held.spans);
+        // A report keeps them, the filler by its name; one written before reads without.
+        let json = serde_json::to_string(&blend).unwrap();
+        assert!(json.contains(r#""best":"chain""#), "{json}");
+        // (serde_json reads a float back to within an ulp.)
+        let read = serde_json::from_str::<Blend>(&json).unwrap().by_length[c].held_out;
+        let read = read.unwrap();
+        assert_eq!(read.best, held.best);
+        assert!(
+            (read.chosen - held.chosen).abs() < 1e-12 && (read.spans - held.spans).abs() < 1e-12
+        );
+        let before = serde_json::to_value(Blend {
+            held_out: [None, None],
+            ..blend.clone()
+        })
+        .unwrap();
+        assert!(before.get("held_out").is_none());
+        let read: Blend = serde_json::from_value(before).unwrap();
+        assert_eq!(read.held_out, [None, None]);
     }
 
     /// Six draws: on the short gaps the spline wins some draws and loses others by as much
