@@ -200,8 +200,13 @@ fn classic_blend(draws: &[Pools<M>], v: &Validation) -> Option<Blend> {
                 // its parts apart, and a choice it cannot tell from the pooled one is
                 // the draws' noise.
                 let (w, beat, costs, s) = judged(pool);
-                let g = v.cross_fit_groups;
-                let pooled = wider_costs(draws, pool, long, classic, g, &s.held);
+                // The pooled weights as the long gaps use them: one filler alone judged
+                // alone, a blend cross-fitted (a blend learned on the other groups can
+                // lean on a filler that the weights learned on every draw do not use).
+                let pooled = match single(&weights[1]) {
+                    Some(k) => s.groups.iter().map(|(_, alone)| alone[k]).collect(),
+                    None => wider_costs(draws, pool, long, classic, v.cross_fit_groups, &s.held),
+                };
                 let own = w == weights[1] || {
                     let gains: Vec<f64> = pooled.iter().zip(&costs).map(|(p, c)| p - c).collect();
                     v.clearly_positive(&gains)
@@ -233,6 +238,11 @@ fn classic_blend(draws: &[Pools<M>], v: &Validation) -> Option<Blend> {
         leans: Vec::new(),
         ends: None,
     })
+}
+
+/// The filler that holds the whole of `w`, if one does.
+fn single(w: &Weights) -> Option<usize> {
+    (0..M).find(|&k| w.0[k] == 1.0)
 }
 
 /// The classic filler (of `allowed`) with the least cost over every validation entry of
@@ -309,6 +319,65 @@ mod tests {
         let (swinging, pooled) = class_of([0.2, 1.8, 0.2, 1.8, 0.2, 1.8]);
         assert!(!swinging.own, "{swinging:?}");
         assert_eq!(swinging.weights, pooled);
+    }
+
+    /// The pooled long gaps' weights are judged on a class as the long gaps use them. On
+    /// clean draws a half-and-half blend of the chain fill (+1) and the Kalman smoother
+    /// (−1) is exact, but the smoother misses one 20-frame span by 1000: learned on every
+    /// draw, the long gaps take the chain fill alone. The 20-frame class, whose spline
+    /// swings around the chain fill's 1.05, takes those weights; on its held-out draws
+    /// they give the chain fill's 1.05 a span, not what blends learned on the other draws
+    /// give.
+    #[test]
+    fn a_class_is_judged_against_the_pooled_weights_as_the_long_gaps_use_them() {
+        let with = |len: usize, errors: &[(Filler, f32)]| {
+            Arc::new(Residual {
+                errors: std::array::from_fn(|m| {
+                    let e = errors.iter().find(|(f, _)| *f == Filler::ALL[m]);
+                    [e.map_or(1e3, |(_, e)| *e), 0.0, 0.0]
+                }),
+                len,
+                track: 0,
+                depth: 1,
+            })
+        };
+        let draws: Vec<Pools<M>> = (0..6)
+            .map(|d| {
+                let mut pools = empty_pools();
+                let spline = if d % 2 == 0 { 0.2 } else { 1.8 };
+                let kalman = if d == 5 { 1000.0 } else { -1.0 };
+                let spans = [
+                    (100, vec![(Filler::Chain, 1.0), (Filler::Kalman, -1.0)]),
+                    (
+                        20,
+                        vec![
+                            (Filler::Spline, spline),
+                            (Filler::Chain, 1.05),
+                            (Filler::Kalman, kalman),
+                        ],
+                    ),
+                ];
+                for (len, errors) in spans {
+                    for _ in 0..len {
+                        let long = with(len, &errors);
+                        pools[Pool::Class(GapClass::of(len)).index()].push(Arc::clone(&long));
+                        pools[Pool::AllLong.index()].push(long);
+                    }
+                }
+                pools
+            })
+            .collect();
+        let blend = classic_blend(&draws, &Validation::default()).unwrap();
+        assert_eq!(blend.long, Weights::only(Filler::Chain));
+        let GapClass::Long(c) = GapClass::of(20) else {
+            unreachable!("a long gap")
+        };
+        let class = blend.by_length[c];
+        assert!(!class.own, "{class:?}");
+        let held = class.held_out.unwrap();
+        assert!((held.chosen - 1.05).abs() < 1e-6, "{held:?}");
+        assert_eq!(held.best, Filler::Spline);
+        assert!((held.best_alone - 1.0).abs() < 1e-6, "{held:?}");
     }
 
     /// The held-out figures by hand: every 20-frame span errs by 0.5 with the spline and
