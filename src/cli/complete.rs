@@ -28,6 +28,11 @@ pub struct CompleteArgs {
     /// Which gaps are filled, and by what.
     #[command(flatten)]
     pub fill: crate::cli::FillPolicyArgs,
+    /// Also write the weights the fill used, per class of gap, with what each class's
+    /// weights gave on its held-out validation spans beside the best filler alone there
+    /// (JSON, in the data's units): what the printout says, for a script.
+    #[arg(long, value_name = "FILE.json")]
+    pub blend: Option<PathBuf>,
     /// The device.
     #[command(flatten)]
     pub device: DeviceArgs,
@@ -78,6 +83,9 @@ pub fn run(args: &CompleteArgs) -> Result<()> {
         );
     }
     print_blend(&c.blend);
+    if let Some(path) = &args.blend {
+        crate::io::save_json(&c.blend, path)?;
+    }
     Ok(())
 }
 

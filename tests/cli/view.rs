@@ -215,3 +215,42 @@ fn the_viewer_shows_the_filled_points_of_tracks_with_gaps_in_their_own_colour() 
         .count();
     assert!(magenta > 100, "{magenta} filled-colour pixels");
 }
+
+/// `doma complete --blend FILE` writes the weights it prints, with each class's held-out
+/// figures: a choice never worse there than the best filler alone, as printed.
+#[test]
+fn complete_writes_the_blend_it_prints() {
+    let dir = temp("blend");
+    let run = masked_run(&dir);
+    let (out, blend) = (dir.join("filled.npz"), dir.join("blend.json"));
+    let output = Command::new(env!("CARGO_BIN_EXE_doma"))
+        .args(["complete", run.to_str().unwrap(), "--out"])
+        .args([out.as_os_str(), "--blend".as_ref(), blend.as_os_str()])
+        .output()
+        .unwrap();
+    let printed = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{printed}");
+    let text = std::fs::read_to_string(&blend).unwrap();
+    let b: doma::gaps::blend::Blend = serde_json::from_str(&text).unwrap();
+    assert!(b.validated.iter().sum::<usize>() > 0, "{text}");
+    // Short and pooled long gaps, and a class on its own weights, never worse held out
+    // than their best filler alone; a class on the pooled weights may be.
+    let own = b.by_length.iter().filter(|c| c.own).map(|c| &c.held_out);
+    let bounded: Vec<_> = b.held_out.iter().chain(own).flatten().collect();
+    assert!(!bounded.is_empty(), "{text}");
+    for h in bounded {
+        assert!(h.chosen <= h.best_alone * (1.0 + 1e-9), "{h:?}");
+    }
+    let every = b
+        .held_out
+        .iter()
+        .chain(b.by_length.iter().map(|c| &c.held_out));
+    for h in every.flatten() {
+        assert!(
+            h.chosen.is_finite() && h.best_alone >= 0.0 && h.spans > 0.0,
+            "{h:?}"
+        );
+        let line = format!("({} alone ", h.best.label());
+        assert!(printed.contains(&line), "{printed}");
+    }
+}

@@ -156,6 +156,13 @@ fn held_out_observations_are_reported_beside_every_baseline_and_eval_repeats_the
         assert!(w.0.iter().all(|&v| v >= 0.0), "{blend:?}");
         assert!((w.0.iter().sum::<f64>() - 1.0).abs() < 1e-9, "{blend:?}");
     }
+    // Held out of their choice, the short and the pooled long gaps' weights never do worse
+    // than their best filler alone.
+    let held: Vec<_> = blend.held_out.iter().flatten().collect();
+    assert!(!held.is_empty(), "{blend:?}");
+    for h in held {
+        assert!(h.chosen <= h.best_alone * (1.0 + 1e-9), "{h:?}");
+    }
     let again = eval_run(&run, None, &Device::flex()).unwrap();
     assert_eq!(again.held_out_observations, Some(gaps));
     assert_eq!(again.epe_x1e4.to_bits(), report.epe_x1e4.to_bits());
