@@ -359,8 +359,10 @@ class Field:
         and by the track's own residual carried across the gap, blended with the classic
         fillers (:data:`FILLERS`) by weights learned
         on this data's own observations, as ``doma complete`` prints them), ``observed`` the
-        input's mask, and ``kept`` the input's index of each track when the fit dropped
-        tracks never observed (else None).
+        input's mask, ``kept`` the input's index of each track when the fit dropped
+        tracks never observed (else None), and ``blend`` the weights the fill used per
+        class of gap with each class's held-out figures (as ``doma complete --blend``
+        writes them).
         """
         if max_gap is not None and not isinstance(max_gap, (int, str)):
             raise ValueError(f"max_gap must be frames (an int) or seconds ('0.5s'), not {max_gap!r}")
@@ -368,13 +370,14 @@ class Field:
         if method is not None and not isinstance(method, str):
             raise ValueError(f"method must be a filler's name, not {method!r}")
         ends = None if extrapolate is None else bool(extrapolate)
-        positions, (t, n), observed, kept = self._native.complete(gap, ends, method)
+        positions, (t, n), observed, kept, blend = self._native.complete(gap, ends, method)
         return Tracks(
             tracks=np.frombuffer(positions, dtype=np.float32).reshape(t, n, 3),
             observed=np.frombuffer(observed, dtype=np.bool_).reshape(t, n),
             faces=None,
             weights=None,
             kept=None if kept is None else np.asarray(kept, dtype=np.int64),
+            blend=json.loads(blend),
         )
 
     @property
@@ -796,6 +799,12 @@ class Tracks:
     rate: Optional[float] = None
     #: The units of the coordinates of a .c3d or .trc file ("mm", "m", ...); else None.
     units: Optional[str] = None
+    #: From :meth:`Field.complete`: the weights of each filler per class of gap
+    #: (``short``, ``long``, ``by_length``), and what each class's weights gave on the
+    #: validation spans held out of their choice beside the best filler alone there
+    #: (``held_out``: ``chosen``, ``best``, ``best_alone`` in the data's units, ``spans``);
+    #: else None.
+    blend: Optional[dict] = None
 
 
 def read_tracks(

@@ -294,8 +294,9 @@ impl Field {
     /// Every track at every frame of the clip, as `doma complete` writes it with
     /// `--max-gap` (`N` frames or `Xs` seconds) and `--extrapolate`: `(tracks bytes
     /// [T, N, 3] f32 in the input's units, NaN where left unfilled, [T, N], observed bytes
-    /// [T, N], the input's index of each track or None)`; `method` fills with that filler
-    /// alone instead of doma's blend.
+    /// [T, N], the input's index of each track or None, the weights the fill used and
+    /// their held-out figures as JSON)`; `method` fills with that filler alone instead of
+    /// doma's blend.
     #[allow(clippy::type_complexity)]
     #[pyo3(signature = (max_gap=None, extrapolate=None, method=None))]
     fn complete<'py>(
@@ -309,6 +310,7 @@ impl Field {
         (usize, usize),
         Bound<'py, pyo3::types::PyByteArray>,
         Option<Vec<usize>>,
+        String,
     )> {
         guarded("Field.complete", self.run_dir().as_deref(), || {
             let max_gap = max_gap
@@ -328,11 +330,14 @@ impl Field {
                 .detach(|| doma::run::complete_tracks(&self.run, policy, &self.device))
                 .py()?;
             let observed: Vec<u8> = done.observed.iter().map(|&o| o as u8).collect();
+            let blend = serde_json::to_string(&done.blend)
+                .map_err(|e| PyValueError::new_err(format!("the blend: {e}")))?;
             Ok((
                 to_bytearray(py, &done.tracks),
                 (done.frames, done.points),
                 to_bytearray(py, &observed),
                 done.kept,
+                blend,
             ))
         })
     }

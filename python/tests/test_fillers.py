@@ -118,6 +118,18 @@ def test_a_blind_validation_fit_completes_with_every_observation_as_given(tmp_pa
     assert np.array_equal(done.tracks[observed], tracks[observed])
     gap = ~observed & observed.any(axis=0)
     assert np.isfinite(done.tracks[gap]).all()
+    # The weights it used, each class's summing to 1, and what the short and the pooled
+    # long gaps' weights gave held out of their choice: never worse than their best
+    # filler alone there.
+    blend = done.blend
+    for weights in [blend["short"], blend["long"]] + [c["weights"] for c in blend.get("by_length", [])]:
+        assert abs(sum(weights.values()) - 1.0) < 1e-9, blend
+    held = [h for h in blend.get("held_out", []) if h is not None]
+    assert held and sum(blend["validated"]) > 0, blend
+    for h in held:
+        assert h["best"] in doma.FILLERS and h["chosen"] <= h["best_alone"] * (1 + 1e-9), h
+    alone = field.complete(method="spline").blend
+    assert alone["short"]["spline"] == 1.0 and "held_out" not in alone, alone
     with pytest.raises(TypeError, match="blind_validation"):
         doma.fit(tracks, observed, iters=2, progress=False, blind_validation=0.5)
 
