@@ -41,6 +41,7 @@ use serde::{Deserialize, Serialize};
 
 mod class;
 mod ends;
+mod held_out;
 mod lean;
 mod residual;
 mod stage_one;
@@ -49,6 +50,7 @@ mod validation;
 
 pub use class::{GapClass, LENGTH_CLASSES, Pool};
 pub use ends::{EndBlend, predicts_beyond_ends};
+pub use held_out::HeldOut;
 pub use lean::{TrackLean, lean_key};
 pub use validation::Validation;
 
@@ -134,7 +136,7 @@ pub struct Blend {
     pub cross_fitted: [bool; 2],
     /// What `short` and `long` gave on stage 1's held-out draws, beside the best classic
     /// filler alone there (`None`: not cross-fitted, or a report written before).
-    #[serde(default, skip_serializing_if = "no_held_out")]
+    #[serde(default, skip_serializing_if = "held_out::none")]
     pub held_out: [Option<HeldOut>; 2],
     /// The long gaps by length, one per [`GapClass::Long`] ([`LENGTH_CLASSES`]; empty
     /// where there was no long validation entry, and in reports written before).
@@ -158,36 +160,6 @@ pub struct Blend {
 
 fn is_zero(v: &usize) -> bool {
     *v == 0
-}
-
-fn no_held_out(v: &[Option<HeldOut>; 2]) -> bool {
-    v.iter().all(Option::is_none)
-}
-
-/// How a class's weights did on the validation that chose them: stage 1's draws in
-/// groups, each group's spans filled with the weights learned on the other groups
-/// (cross-fitted), beside the classic filler that did best alone on the same spans. Mean
-/// distances per validation span (each span's mean over its entries), in the units of the
-/// tracks the blend was learned on ([`Blend::in_units`] takes them to the data's own). The blend never does worse than its best part here by more than the draws'
-/// noise: a blend is kept only where it beats every filler alone this way, a length
-/// class's own weights only where they clearly beat the pooled ones.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
-pub struct HeldOut {
-    /// The class's weights' mean distance, cross-fitted.
-    pub chosen: f64,
-    /// The classic filler with the least mean distance alone on the same spans.
-    pub best: Filler,
-    /// That filler's mean distance alone.
-    pub best_alone: f64,
-    /// The validation spans judged (the sum of one over each entry's gap length).
-    pub spans: f64,
-}
-
-impl HeldOut {
-    /// `chosen` over `best_alone`: 1 where the class fills with its best filler alone.
-    pub fn ratio(&self) -> f64 {
-        self.chosen / self.best_alone
-    }
 }
 
 /// The weights of one length class of long gaps ([`GapClass::Long`]).
@@ -442,20 +414,6 @@ impl Blend {
             leans: Vec::new(),
             ends: None,
         }
-    }
-
-    /// The held-out figures ([`HeldOut`]) multiplied by `scale`: learned on tracks
-    /// normalised by `scale`, in the data's own units.
-    pub fn in_units(mut self, scale: f64) -> Blend {
-        let classes = self.held_out.iter_mut();
-        for h in classes
-            .chain(self.by_length.iter_mut().map(|c| &mut c.held_out))
-            .flatten()
-        {
-            h.chosen *= scale;
-            h.best_alone *= scale;
-        }
-        self
     }
 
     /// The bits ([`Filler::bit`]) of the fillers with a weight in some class: the others'

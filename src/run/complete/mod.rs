@@ -464,7 +464,6 @@ fn fill_one(
         return Err(e);
     }
     // Back in the input's units.
-    let blend = blend.in_units(f64::from(s));
     for v in &mut values {
         for d in 0..3 {
             v[d] = v[d] * s + c[d];
@@ -478,7 +477,7 @@ fn fill_one(
         values,
         kept,
         source_frames,
-        blend,
+        blend: blend.in_units(f64::from(s)),
         left_long,
     })
 }
