@@ -162,8 +162,8 @@ fn print_blend(b: &crate::gaps::blend::Blend) {
     }
 }
 
-/// A class's held-out figures, as `; held out: 1.23 (chain fill alone 1.30)`, in the
-/// tracks' units; nothing where there are none.
+/// A class's held-out figures, as `; held out: 4.85 (pattern alone 3.95)`, in the units
+/// the blend carries (the data's, from a run); nothing where there are none.
 fn held(h: &Option<crate::gaps::blend::HeldOut>) -> String {
     h.map_or(String::new(), |h| {
         format!(

@@ -33,13 +33,6 @@ pub struct HeldOut {
     pub spans: f64,
 }
 
-impl HeldOut {
-    /// `chosen` over `best_alone`: 1 where the class fills with its best filler alone.
-    pub fn ratio(&self) -> f64 {
-        self.chosen / self.best_alone
-    }
-}
-
 impl Blend {
     /// The held-out figures ([`HeldOut`]) multiplied by `scale`: learned on tracks
     /// normalised by `scale`, in the data's own units.

@@ -135,6 +135,18 @@ fn mean_distance<const K: usize>(all: &[&Residual<K>], allowed: u32) -> [f64; K]
     best.0
 }
 
+/// The candidate of `allowed` with the least of `costs`; ties go to the earlier.
+fn least<const K: usize>(costs: &[f64; K], allowed: u32) -> Option<usize> {
+    (0..K)
+        .filter(|&k| allowed & (1 << k) != 0)
+        .min_by(|&x, &y| costs[x].total_cmp(&costs[y]).then(x.cmp(&y)))
+}
+
+/// The candidate that holds the whole of `w`, if one does.
+pub(super) fn single<const K: usize>(w: &[f64; K]) -> Option<usize> {
+    (0..K).find(|&k| w[k] == 1.0)
+}
+
 /// The whole weight on candidate `k`.
 pub(super) fn one_hot<const K: usize>(k: usize) -> [f64; K] {
     std::array::from_fn(|m| if m == k { 1.0 } else { 0.0 })
@@ -160,7 +172,7 @@ impl<const K: usize> Solved<K> {
     /// The cost of the choice on each held-out group: the cross-fitted blend's where the
     /// blend was chosen, the chosen candidate's alone otherwise.
     pub fn chosen_costs(&self) -> Vec<f64> {
-        let single = (0..K).find(|&k| self.weights[k] == 1.0);
+        let single = single(&self.weights);
         self.groups
             .iter()
             .map(|(blended, alone)| match (self.beat, single) {
@@ -179,9 +191,7 @@ impl<const K: usize> Solved<K> {
         }
         let alone: [f64; K] =
             std::array::from_fn(|k| self.groups.iter().map(|(_, a)| a[k]).sum::<f64>());
-        let best = (0..K)
-            .filter(|&k| allowed & (1 << k) != 0)
-            .min_by(|&x, &y| alone[x].total_cmp(&alone[y]).then(x.cmp(&y)))?;
+        let best = least(&alone, allowed)?;
         let chosen: f64 = costs.iter().sum();
         Some((chosen / self.spans, best, alone[best] / self.spans))
     }
@@ -228,11 +238,7 @@ pub(super) fn solve_judged<const K: usize>(
         }
         per_group.push((b, a));
     }
-    // Ties go to the earlier candidate.
-    let single = (0..K)
-        .filter(|&k| allowed & (1 << k) != 0)
-        .min_by(|&x, &y| alone[x].total_cmp(&alone[y]).then(x.cmp(&y)))
-        .unwrap_or(0);
+    let single = least(&alone, allowed).unwrap_or(0);
     let (weights, beat) = if blended < alone[single] {
         (mean_distance(&of(None, true), allowed), true)
     } else {

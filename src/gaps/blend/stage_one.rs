@@ -18,7 +18,7 @@ use rayon::prelude::*;
 
 use super::class::{GapClass, LENGTH_CLASSES, Pool};
 use super::residual::{
-    Hidden, Pools, Solved, cost, empty_pools, one_hot, residuals, solve_judged, wider_costs,
+    Hidden, Pools, Solved, cost, empty_pools, one_hot, residuals, single, solve_judged, wider_costs,
 };
 use super::validation::Validation;
 use super::{Blend, HeldOut, LengthBlend, M, Weights, classic_fillers};
@@ -264,7 +264,7 @@ impl Judge<'_> {
         // blend cross-fitted (a blend learned on the other groups can lean on a filler
         // that the weights learned on every draw do not use).
         let groups = self.v.cross_fit_groups;
-        let pooled_costs: Vec<f64> = match single(&pooled) {
+        let pooled_costs: Vec<f64> = match single(&pooled.0) {
             Some(k) => j.solved.groups.iter().map(|(_, alone)| alone[k]).collect(),
             None => wider_costs(
                 self.draws,
@@ -291,11 +291,6 @@ impl Judge<'_> {
         }
         out
     }
-}
-
-/// The filler that holds the whole of `w`, if one does.
-fn single(w: &Weights) -> Option<usize> {
-    (0..M).find(|&k| w.0[k] == 1.0)
 }
 
 /// The classic filler (of `allowed`) with the least cost over every validation entry of
